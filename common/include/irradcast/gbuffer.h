@@ -1,0 +1,43 @@
+// The texel G-buffer ("global G-buffer" of seed 001): per lightmap texel the world position,
+// normal and albedo of the surface point it stands for. Texels whose centre lies in a triangle
+// sample that point; texels a triangle only partly covers sample the triangle's point closest to
+// the texel centre (so bilinear lookups at chart borders read real surface values); the rest
+// (gutters, unused space) are empty and filled by dilation of the lightmap values.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "irradcast/atlas.h"
+#include "irradcast/world.h"
+
+namespace irradcast {
+
+enum class TexelKind : std::uint8_t { Empty = 0, Covered = 1, Conservative = 2 };
+
+struct TexelGBuffer {
+  int width = 0;
+  int height = 0;
+  std::vector<glm::vec3> position;  // world space
+  std::vector<glm::vec3> normal;    // unit, world space (shading normal)
+  std::vector<glm::vec3> albedo;    // linear
+  std::vector<std::int32_t> triangle;  // -1 for empty texels
+  std::vector<TexelKind> kind;
+
+  std::size_t size() const { return kind.size(); }
+  bool valid(std::size_t i) const { return kind[i] != TexelKind::Empty; }
+  std::size_t valid_count() const;
+};
+
+std::vector<TexelGBuffer> rasterize_gbuffer(const World& world, const Atlas& atlas);
+
+// Fills the empty texels of a lightmap from their valid neighbours, ring by ring (each pass
+// averages the already-filled 8-neighbours), so bilinear lookups never read unfilled texels.
+// `valid` marks the texels holding real values; `rings` bounds the number of passes (-1 = until
+// every texel reachable is filled).
+void dilate(std::vector<glm::vec3>& texels, int width, int height,
+            const std::vector<TexelKind>& valid, int rings = -1);
+
+}  // namespace irradcast
