@@ -16,18 +16,27 @@ std::mutex g_mutex;
 
 const char* name(Level l) {
   switch (l) {
-    case Level::Debug: return "DEBUG";
-    case Level::Info: return "INFO ";
-    case Level::Warn: return "WARN ";
-    case Level::Error: return "ERROR";
-    case Level::Off: break;
+    case Level::Debug:
+      return "DEBUG";
+    case Level::Info:
+      return "INFO ";
+    case Level::Warn:
+      return "WARN ";
+    case Level::Error:
+      return "ERROR";
+    case Level::Off:
+      break;
   }
   return "?";
 }
 }  // namespace
 
-void set_level(Level level) { g_level = static_cast<int>(level); }
-Level level() { return static_cast<Level>(g_level.load()); }
+void set_level(Level level) {
+  g_level = static_cast<int>(level);
+}
+Level level() {
+  return static_cast<Level>(g_level.load());
+}
 
 Level parse_level(std::string_view s) {
   if (s == "debug") return Level::Debug;
@@ -35,7 +44,8 @@ Level parse_level(std::string_view s) {
   if (s == "warn") return Level::Warn;
   if (s == "error") return Level::Error;
   if (s == "off") return Level::Off;
-  throw Error("unknown log level '" + std::string(s) + "' (expected debug, info, warn, error, off)");
+  throw Error("unknown log level '" + std::string(s) +
+              "' (expected debug, info, warn, error, off)");
 }
 
 void write(Level lvl, std::string_view component, std::string_view message) {

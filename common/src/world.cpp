@@ -8,7 +8,8 @@ namespace irradcast {
 
 glm::vec3 WorldObject::geometric_normal(std::uint32_t t) const {
   const glm::uvec3& tri = source->triangles[t];
-  glm::vec3 n = glm::cross(positions[tri.y] - positions[tri.x], positions[tri.z] - positions[tri.x]);
+  glm::vec3 n =
+      glm::cross(positions[tri.y] - positions[tri.x], positions[tri.z] - positions[tri.x]);
   float len = glm::length(n);
   return len > 0.0f ? n / len : glm::vec3(0.0f, 0.0f, 1.0f);
 }

@@ -20,9 +20,9 @@ enum class TexelKind : std::uint8_t { Empty = 0, Covered = 1, Conservative = 2 }
 struct TexelGBuffer {
   int width = 0;
   int height = 0;
-  std::vector<glm::vec3> position;  // world space
-  std::vector<glm::vec3> normal;    // unit, world space (shading normal)
-  std::vector<glm::vec3> albedo;    // linear
+  std::vector<glm::vec3> position;     // world space
+  std::vector<glm::vec3> normal;       // unit, world space (shading normal)
+  std::vector<glm::vec3> albedo;       // linear
   std::vector<std::int32_t> triangle;  // -1 for empty texels
   std::vector<TexelKind> kind;
 
@@ -31,6 +31,12 @@ struct TexelGBuffer {
   std::size_t valid_count() const;
 };
 
+// Per object: a texel whose centre lies in a triangle (inclusive; the lowest triangle index wins
+// on shared edges) is Covered and samples that point; a texel a triangle's footprint overlaps
+// (with positive area) but no triangle's interior contains the centre is Conservative and samples
+// the closest point, in lightmap space, of the nearest such triangle; the texel holding a
+// triangle's lightmap centroid is always valid (zero-area triangles get just that one).
+// Parallel over objects and bands of rows; deterministic.
 std::vector<TexelGBuffer> rasterize_gbuffer(const World& world, const Atlas& atlas);
 
 // Fills the empty texels of a lightmap from their valid neighbours, ring by ring (each pass

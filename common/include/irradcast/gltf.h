@@ -12,13 +12,25 @@ struct LoadReport {
   std::vector<std::string> warnings;  // e.g. skipped line / point primitives
 };
 
-// Loads a glTF 2.0 file. Throws irradcast::Error with a one-line message naming the file and the
-// problem for any bad input (missing file, broken JSON, missing or short buffer, index out of
-// range, non-finite positions, ...). Warnings are logged and returned in *report if given.
+// Loads a glTF 2.0 file (.gltf with external or data-URI buffers, or .glb, told apart by content).
+// Throws irradcast::Error with a one-line message "PATH: problem" for any bad input (missing file,
+// broken JSON, missing or short buffer, accessor past its bufferView, index out of range,
+// non-finite positions, bad component types, ...). Warnings (skipped line / point primitives,
+// orthographic cameras, undecodable images) are logged and returned in *report if given.
+//
+// Mapping: Scene::nodes and Scene::meshes are index for index the glTF nodes and meshes (a mesh
+// that ends up with no triangles is kept, but nodes drop their reference to it); the roots are
+// the default scene's nodes. Scene::materials are the glTF materials in order, plus one default
+// material (base colour 1) appended if a primitive has none. Scene::textures holds each used glTF
+// image once, as RGBA8. Lights and cameras keep glTF order minus the skipped ones.
 Scene load_gltf(const std::string& path, LoadReport* report = nullptr);
 
 // Writes the scene as valid glTF 2.0: .glb (binary) or .gltf (JSON with the buffer embedded as a
-// data URI), chosen by the extension. Throws irradcast::Error if the file cannot be written.
+// data URI), chosen by the extension. Node matrices, one primitive per material, PNG textures,
+// KHR_lights_punctual, KHR_materials_emissive_strength (emission brighter than glTF's [0, 1]
+// emissiveFactor moves into the strength), perspective cameras. Meshes without triangles are not
+// written. Throws irradcast::Error on another extension, invalid scene data (non-finite values,
+// triangle index out of range) or if the file cannot be written.
 void save_gltf(const Scene& scene, const std::string& path);
 
 }  // namespace irradcast

@@ -1,0 +1,41 @@
+// Linear RGB float images and their files: OpenEXR (float32, linear) and PNG (8-bit sRGB).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+namespace irradcast {
+
+struct ImageRGB {
+  int width = 0;
+  int height = 0;
+  std::vector<glm::vec3> pixels;  // row-major, row 0 at the top
+
+  ImageRGB() = default;
+  ImageRGB(int w, int h, glm::vec3 fill = glm::vec3(0.0f))
+      : width(w), height(h), pixels(static_cast<std::size_t>(w) * h, fill) {}
+  glm::vec3& at(int x, int y) { return pixels[static_cast<std::size_t>(y) * width + x]; }
+  const glm::vec3& at(int x, int y) const {
+    return pixels[static_cast<std::size_t>(y) * width + x];
+  }
+};
+
+// Throws irradcast::Error naming the file on failure.
+void write_exr(const std::string& path, const ImageRGB& image);
+ImageRGB read_exr(const std::string& path);
+// rgb8: width * height * 3 bytes, sRGB encoded.
+void write_png(const std::string& path, int width, int height,
+               const std::vector<std::uint8_t>& rgb8);
+
+// Error of `image` against `reference` (same size), over all pixels and channels:
+// rmse = sqrt(mean((x - r)^2)); relative MSE = mean((x - r)^2 / (r^2 + 0.01)).
+struct ImageError {
+  double rmse = 0.0;
+  double rel_mse = 0.0;
+};
+ImageError compare(const ImageRGB& image, const ImageRGB& reference);
+
+}  // namespace irradcast

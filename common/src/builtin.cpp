@@ -1,0 +1,35 @@
+#include <cmath>
+#include <string>
+
+#include "irradcast/builtin.h"
+#include "irradcast/error.h"
+#include "irradcast/gltf.h"
+
+namespace irradcast {
+
+Scene load_scene(const std::string& spec, float detail) {
+  if (spec.empty()) throw Error("empty scene spec (expected cornell, rooms:N or a glTF file)");
+  if (spec == "cornell") return make_cornell_box();
+  if (spec.rfind("rooms:", 0) == 0) {
+    std::string n = spec.substr(6);
+    int count = 0;
+    try {
+      std::size_t used = 0;
+      count = std::stoi(n, &used);
+      if (used != n.size()) throw std::invalid_argument(n);
+    } catch (const std::exception&) {
+      throw Error("scene spec '" + spec + "': N must be a whole number, as in rooms:4");
+    }
+    if (count < 1 || count > 64)
+      throw Error("scene spec '" + spec + "': N must be between 1 and 64");
+    if (!(detail > 0.0f) || !std::isfinite(detail) || detail > 1000.0f)
+      throw Error("--detail must be a number in (0, 1000]");
+    RoomsOptions o;
+    o.n = count;
+    o.detail = detail;
+    return make_rooms(o);
+  }
+  return load_gltf(spec);
+}
+
+}  // namespace irradcast

@@ -1,0 +1,125 @@
+#include "irradcast/lights.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "irradcast/sampling.h"
+
+namespace irradcast {
+
+LightSampler::LightSampler(const World& world) : world_(&world) {
+  std::vector<float> power;
+  for (const WorldObject& o : world.objects) {
+    const auto& tris = o.triangles();
+    for (std::uint32_t t = 0; t < tris.size(); ++t) {
+      const Material& m = world.material(o.object, t);
+      if (!m.is_emissive()) continue;
+      EmissiveTriangle e;
+      e.object = o.object;
+      e.triangle = t;
+      e.p0 = o.positions[tris[t].x];
+      e.e1 = o.positions[tris[t].y] - e.p0;
+      e.e2 = o.positions[tris[t].z] - e.p0;
+      e.area = o.area(t);
+      if (!(e.area > 0.0f)) continue;
+      e.normal = o.geometric_normal(t);
+      e.double_sided = m.double_sided;
+      // Power ~ radiance x area (x2 for two-sided); textures are evaluated per sample.
+      float p = luminance(m.emission()) * e.area * (e.double_sided ? 2.0f : 1.0f);
+      if (!(p > 0.0f)) continue;
+      triangles_.push_back(e);
+      power.push_back(p);
+    }
+  }
+  double total = 0.0;
+  for (float p : power) total += p;
+  total_power_ = static_cast<float>(total);
+  cdf_.resize(power.size());
+  pick_pdf_.resize(power.size());
+  double run = 0.0;
+  for (std::size_t i = 0; i < power.size(); ++i) {
+    run += power[i];
+    cdf_[i] = static_cast<float>(run / total);
+    pick_pdf_[i] = static_cast<float>(power[i] / total);
+  }
+  if (!cdf_.empty()) cdf_.back() = 1.0f;
+}
+
+glm::vec3 LightSampler::triangle_irradiance(const RayScene& rays, std::size_t index, glm::vec3 p,
+                                            glm::vec3 n, glm::vec3 ng, glm::vec2 u) const {
+  const EmissiveTriangle& e = triangles_[index];
+  glm::vec2 b = uniform_triangle(u);
+  glm::vec3 y = e.p0 + b.x * e.e1 + b.y * e.e2;
+  glm::vec3 d = y - p;
+  float dist2 = glm::dot(d, d);
+  if (!(dist2 > 0.0f)) return glm::vec3(0.0f);
+  float dist = std::sqrt(dist2);
+  glm::vec3 wi = d / dist;
+  float cos_x = glm::dot(n, wi);
+  if (cos_x <= 0.0f) return glm::vec3(0.0f);
+  float cos_y = -glm::dot(e.normal, wi);
+  if (e.double_sided) cos_y = std::fabs(cos_y);
+  if (cos_y <= 0.0f) return glm::vec3(0.0f);
+  // The shadow ray runs from the offset origin to the light point itself (not along wi from the
+  // offset origin, which would cross the light's plane before tmax at grazing angles).
+  Ray shadow;
+  shadow.origin = rays.offset(p, ng, wi);
+  glm::vec3 to_light = y - shadow.origin;
+  float len = glm::length(to_light);
+  shadow.direction = to_light / len;
+  shadow.tmax = len - rays.epsilon();
+  if (shadow.tmax > 0.0f && rays.occluded(shadow)) return glm::vec3(0.0f);
+  // barycentrics of y for the emission lookup: y = (1-u-v) v0 + u v1 + v v2 with u = b.x, v = b.y
+  glm::vec3 le = world_->emission(e.object, e.triangle, b.x, b.y);
+  return le * (cos_x * cos_y * e.area / dist2);
+}
+
+glm::vec3 LightSampler::area_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n,
+                                        glm::vec3 ng, glm::vec3 u) const {
+  if (triangles_.empty()) return glm::vec3(0.0f);
+  auto it = std::upper_bound(cdf_.begin(), cdf_.end(), u.x);
+  std::size_t i =
+      std::min<std::size_t>(static_cast<std::size_t>(it - cdf_.begin()), triangles_.size() - 1);
+  return triangle_irradiance(rays, i, p, n, ng, glm::vec2(u.y, u.z)) / pick_pdf_[i];
+}
+
+glm::vec3 LightSampler::punctual_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n,
+                                            glm::vec3 ng) const {
+  glm::vec3 sum(0.0f);
+  for (const WorldLight& l : world_->lights) {
+    glm::vec3 wi;
+    float dist = 3.4e38f;
+    float falloff = 1.0f;
+    if (l.type == Light::Type::Directional) {
+      wi = -l.direction;
+    } else {
+      glm::vec3 d = l.position - p;
+      float dist2 = glm::dot(d, d);
+      if (!(dist2 > 0.0f)) continue;
+      dist = std::sqrt(dist2);
+      wi = d / dist;
+      falloff = 1.0f / dist2;
+      if (l.range > 0.0f) {  // KHR_lights_punctual recommended range window
+        float r = dist / l.range;
+        falloff *= glm::clamp(1.0f - r * r * r * r, 0.0f, 1.0f);
+      }
+      if (l.type == Light::Type::Spot) {
+        float cd = glm::dot(l.direction, -wi);
+        float denom = std::max(1e-4f, l.cos_inner - l.cos_outer);
+        float t = glm::clamp((cd - l.cos_outer) / denom, 0.0f, 1.0f);
+        falloff *= t * t;
+      }
+    }
+    float cos_x = glm::dot(n, wi);
+    if (cos_x <= 0.0f || falloff <= 0.0f) continue;
+    Ray shadow;
+    shadow.origin = rays.offset(p, ng, wi);
+    shadow.direction = wi;
+    shadow.tmax = l.type == Light::Type::Directional ? 3.4e38f : dist - rays.epsilon();
+    if (rays.occluded(shadow)) continue;
+    sum += l.intensity * (cos_x * falloff);
+  }
+  return sum;
+}
+
+}  // namespace irradcast

@@ -1,0 +1,151 @@
+#include "irradcast/ray_scene.h"
+
+#include <embree3/rtcore.h>
+
+#include <cstring>
+#include <string>
+
+#include "irradcast/error.h"
+#include "irradcast/log.h"
+
+namespace irradcast {
+namespace {
+
+void embree_error(void*, RTCError code, const char* str) {
+  if (code == RTC_ERROR_NONE) return;
+  log::error("embree", "error " + std::to_string(static_cast<int>(code)) + ": " + (str ? str : ""));
+}
+
+RTCDevice shared_device() {
+  static RTCDevice device = [] {
+    RTCDevice d = rtcNewDevice(nullptr);
+    if (!d)
+      throw Error("cannot create an Embree device (error " +
+                  std::to_string(static_cast<int>(rtcGetDeviceError(nullptr))) + ")");
+    rtcSetDeviceErrorFunction(d, embree_error, nullptr);
+    return d;
+  }();
+  return device;
+}
+
+Hit to_hit(const RTCRayHit& rh) {
+  Hit h;
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return h;
+  h.object = static_cast<int>(rh.hit.geomID);
+  h.triangle = rh.hit.primID;
+  h.u = rh.hit.u;
+  h.v = rh.hit.v;
+  h.t = rh.ray.tfar;
+  return h;
+}
+
+void fill_ray(RTCRay& r, const Ray& ray) {
+  r.org_x = ray.origin.x;
+  r.org_y = ray.origin.y;
+  r.org_z = ray.origin.z;
+  r.dir_x = ray.direction.x;
+  r.dir_y = ray.direction.y;
+  r.dir_z = ray.direction.z;
+  r.tnear = ray.tmin;
+  r.tfar = ray.tmax;
+  r.time = 0.0f;
+  r.mask = 0xFFFFFFFFu;
+  r.id = 0;
+  r.flags = 0;
+}
+
+}  // namespace
+
+struct RayScene::Impl {
+  RTCScene scene = nullptr;
+};
+
+RayScene::RayScene(const World& world) : impl_(std::make_unique<Impl>()), world_(&world) {
+  float extent = world.bounds.max_extent();
+  epsilon_ = 1e-4f * (extent > 0.0f ? extent : 1.0f);
+  RTCDevice device = shared_device();
+  impl_->scene = rtcNewScene(device);
+  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);
+  rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
+  for (const WorldObject& o : world.objects) {
+    RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
+        geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), o.positions.size()));
+    const auto& tris = o.triangles();
+    auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+        geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), tris.size()));
+    if (!vb || !ib) {
+      rtcReleaseGeometry(geom);
+      throw Error("Embree could not allocate buffers for object " + std::to_string(o.object));
+    }
+    std::memcpy(vb, o.positions.data(), o.positions.size() * sizeof(glm::vec3));
+    std::memcpy(ib, tris.data(), tris.size() * sizeof(glm::uvec3));
+    rtcCommitGeometry(geom);
+    rtcAttachGeometryByID(impl_->scene, geom, static_cast<unsigned>(o.object));
+    rtcReleaseGeometry(geom);
+  }
+  rtcCommitScene(impl_->scene);
+}
+
+RayScene::~RayScene() {
+  if (impl_ && impl_->scene) rtcReleaseScene(impl_->scene);
+}
+
+Hit RayScene::intersect(const Ray& ray) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  RTCRayHit rh;
+  fill_ray(rh.ray, ray);
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(impl_->scene, &ctx, &rh);
+  return to_hit(rh);
+}
+
+bool RayScene::occluded(const Ray& ray) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  RTCRay r;
+  fill_ray(r, ray);
+  rtcOccluded1(impl_->scene, &ctx, &r);
+  return r.tfar < 0.0f;  // Embree sets tfar to -inf on a hit
+}
+
+void RayScene::intersect8(const Ray* rays, int count, Hit* hits) const {
+  alignas(32) int valid[8];
+  alignas(32) RTCRayHit8 rh;
+  for (int i = 0; i < 8; ++i) {
+    const Ray& r = rays[i < count ? i : 0];
+    valid[i] = i < count ? -1 : 0;
+    rh.ray.org_x[i] = r.origin.x;
+    rh.ray.org_y[i] = r.origin.y;
+    rh.ray.org_z[i] = r.origin.z;
+    rh.ray.dir_x[i] = r.direction.x;
+    rh.ray.dir_y[i] = r.direction.y;
+    rh.ray.dir_z[i] = r.direction.z;
+    rh.ray.tnear[i] = r.tmin;
+    rh.ray.tfar[i] = r.tmax;
+    rh.ray.time[i] = 0.0f;
+    rh.ray.mask[i] = 0xFFFFFFFFu;
+    rh.ray.id[i] = static_cast<unsigned>(i);
+    rh.ray.flags[i] = 0;
+    rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+  }
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  rtcIntersect8(valid, impl_->scene, &ctx, &rh);
+  for (int i = 0; i < count; ++i) {
+    Hit& h = hits[i];
+    h = Hit{};
+    if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+    h.object = static_cast<int>(rh.hit.geomID[i]);
+    h.triangle = rh.hit.primID[i];
+    h.u = rh.hit.u[i];
+    h.v = rh.hit.v[i];
+    h.t = rh.ray.tfar[i];
+  }
+}
+
+}  // namespace irradcast

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Installs every Debian 12 package irradcast needs to build, run and test. Idempotent and
+# non-interactive: when everything is present it changes nothing and does not touch the network.
+set -euo pipefail
+
+PACKAGES=(
+  # toolchain
+  build-essential cmake ninja-build pkg-config git
+  # libraries
+  libembree-dev libtbb-dev libopenexr-dev libtinygltf-dev libstb-dev nlohmann-json3-dev
+  libglm-dev libasio-dev libprotobuf-dev protobuf-compiler libzstd-dev libcli11-dev
+  # Vulkan compute backend: loader, lavapipe, shader compiler, validation layers
+  libvulkan-dev mesa-vulkan-drivers glslang-tools glslang-dev spirv-tools vulkan-validationlayers
+  # tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PACKAGES[@]} packages present"
+  exit 0
+fi
+
+echo "install-deps: installing ${missing[*]}"
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+echo "install-deps: done"

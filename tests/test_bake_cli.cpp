@@ -1,0 +1,109 @@
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "irradcast/image.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Result {
+  int status = -1;
+  std::string output;  // stdout and stderr together
+};
+
+Result run_bake(const std::string& args) {
+  std::string cmd = std::string(IRRADCAST_BAKE_EXE) + " " + args + " 2>&1";
+  Result r;
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return r;
+  std::array<char, 4096> buf{};
+  while (std::fgets(buf.data(), buf.size(), p)) r.output += buf.data();
+  int status = pclose(p);
+  r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+fs::path temp_dir(const std::string& name) {
+  fs::path d = fs::temp_directory_path() / ("irradcast_cli_" + name);
+  fs::remove_all(d);
+  return d;
+}
+
+}  // namespace
+
+TEST(BakeCli, WritesEveryFileAndAReport) {
+  fs::path out = temp_dir("cornell");
+  Result r = run_bake("--scene cornell --out " + out.string() +
+                      " --reference 8 --width 48 --height 40 --lightmap-spp 4"
+                      " --texels-per-scene 48 --quiet");
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* f : {"view.exr", "view.png", "reference.exr", "reference.png",
+                        "view_vs_reference.png", "report.json"})
+    EXPECT_TRUE(fs::exists(out / f)) << f;
+  int lightmaps = 0;
+  for (const auto& e : fs::directory_iterator(out / "lightmaps"))
+    lightmaps += e.path().extension() == ".exr";
+  EXPECT_EQ(lightmaps, 8);  // one per Cornell box object
+  irradcast::ImageRGB view = irradcast::read_exr((out / "view.exr").string());
+  EXPECT_EQ(view.width, 48);
+  EXPECT_EQ(view.height, 40);
+  std::ifstream f(out / "report.json");
+  nlohmann::json report = nlohmann::json::parse(f);
+  EXPECT_EQ(report["scene"]["objects"], 8);
+  EXPECT_GT(report["atlas"]["texels"].get<double>(), 0.0);
+  EXPECT_GT(report["rays"]["reference"].get<double>(), 48.0 * 40 * 8);
+  EXPECT_GT(report["rays_per_s"]["lightmaps"].get<double>(), 0.0);
+  for (const char* stage : {"load", "atlas", "gbuffer", "lightmaps", "compose", "reference"})
+    EXPECT_TRUE(report["timings_s"].contains(stage)) << stage;
+  double rel = report["error"]["rel_mse"].get<double>();
+  EXPECT_GT(rel, 0.0);
+  EXPECT_LT(rel, 1.0);
+  fs::remove_all(out);
+}
+
+TEST(BakeCli, ExportsTheSceneAsGltf) {
+  fs::path out = temp_dir("export");
+  fs::create_directories(out);
+  Result r = run_bake("--scene cornell --export-gltf " + (out / "cb.glb").string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_GT(fs::file_size(out / "cb.glb"), 1000u);
+  // The exported file loads back as a scene.
+  Result again = run_bake("--scene " + (out / "cb.glb").string() + " --export-gltf " +
+                          (out / "again.gltf").string());
+  EXPECT_EQ(again.status, 0) << again.output;
+  fs::remove_all(out);
+}
+
+TEST(BakeCli, BadInputGetsAClearErrorAndNonZeroExit) {
+  struct Case {
+    std::string args, expect;
+  };
+  for (const Case& c : std::vector<Case>{
+           {"--scene /nonexistent/scene.gltf --out /tmp/x", "/nonexistent/scene.gltf"},
+           {"--scene rooms:abc --out /tmp/x", "rooms:abc"},
+           {"--scene cornell --out /tmp/x --camera eye=1,2", "camera spec"},
+           {"--scene cornell --out /tmp/x --tonemap sepia", "sepia"},
+           {"--scene cornell --width 0 --out /tmp/x", "--width"},
+           {"--bogus-flag", "bogus"},
+           {"--scene cornell", "--out"},
+       }) {
+    Result r = run_bake(c.args);
+    EXPECT_NE(r.status, 0) << c.args;
+    EXPECT_NE(r.output.find(c.expect), std::string::npos) << c.args << "\n" << r.output;
+  }
+}
+
+TEST(BakeCli, HelpListsTheOptions) {
+  Result r = run_bake("--help");
+  EXPECT_EQ(r.status, 0);
+  for (const char* opt :
+       {"--scene", "--out", "--reference", "--camera", "--export-gltf", "--width"})
+    EXPECT_NE(r.output.find(opt), std::string::npos) << opt;
+}
