@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 bash deploy/install-deps.sh
 bash deploy/build.sh build
 out=out/cornell
-./build/server/irradcast-bake --scene cornell --out "$out" --reference 64 --lightmap-spp 32 "$@"
+./build/server/irradcast-bake --scene cornell --out "$out" --updates 8 --reference 64 "$@"
 echo
 echo "demo: wrote $out/view.png (composed from the lightmaps), $out/reference.png (path traced),"
 echo "      $out/view.exr, $out/reference.exr, $out/lightmaps/*.exr and $out/report.json"

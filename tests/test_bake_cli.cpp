@@ -41,7 +41,7 @@ fs::path temp_dir(const std::string& name) {
 TEST(BakeCli, WritesEveryFileAndAReport) {
   fs::path out = temp_dir("cornell");
   Result r = run_bake("--scene cornell --out " + out.string() +
-                      " --reference 8 --width 48 --height 40 --lightmap-spp 4"
+                      " --reference 8 --width 48 --height 40 --updates 2"
                       " --texels-per-scene 48 --quiet");
   ASSERT_EQ(r.status, 0) << r.output;
   for (const char* f : {"view.exr", "view.png", "reference.exr", "reference.png",

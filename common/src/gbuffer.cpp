@@ -73,6 +73,12 @@ bool overlaps_texel(const glm::dvec2* c, int x, int y) {
 constexpr int kBand = 16;  // rows per parallel band
 
 TexelGBuffer rasterize_object(const World& world, std::size_t oi, const ObjectLightmap& lm) {
+  // Inset of sample points into their triangle: a quarter texel, and at least twice the ray
+  // offset RayScene uses (1e-4 of the scene size). Off the edge, a sample neither lies in the
+  // plane of the neighbouring face nor sits where light sampling of an adjacent emitter has an
+  // unbounded 1/d^2 integrand.
+  const float inset = std::max(lm.texels_per_unit > 0.0f ? 0.25f / lm.texels_per_unit : 0.0f,
+                               2e-4f * std::max(world.bounds.max_extent(), 1e-6f));
   TexelGBuffer g;
   g.width = std::max(0, lm.width);
   g.height = std::max(0, lm.height);
@@ -186,6 +192,16 @@ TexelGBuffer rasterize_object(const World& world, std::size_t oi, const ObjectLi
       if (g.kind[i] == TexelKind::Empty) continue;
       auto t = static_cast<std::uint32_t>(g.triangle[i]);
       float u = bary[i].x, v = bary[i].y;
+      // Pull the sample a hair toward the triangle's centroid: points exactly on an edge (chart
+      // borders put texel centres there) lie in the plane of the neighbouring face too, and rays
+      // leaving them would hit that face at t = 0.
+      glm::vec3 p = wo.position(t, u, v);
+      float to_centroid = glm::length(wo.position(t, 1.0f / 3.0f, 1.0f / 3.0f) - p);
+      if (to_centroid > 0.0f) {
+        float s = std::min(0.5f, inset / to_centroid);
+        u += s * (1.0f / 3.0f - u);
+        v += s * (1.0f / 3.0f - v);
+      }
       g.position[i] = wo.position(t, u, v);
       g.normal[i] = wo.shading_normal(t, u, v);
       g.albedo[i] = world.albedo(static_cast<int>(oi), t, u, v);

@@ -17,6 +17,8 @@
 #include "irradcast/builtin.h"
 #include "irradcast/camera.h"
 #include "irradcast/compositor.h"
+#include "irradcast/embree_backend.h"
+#include "irradcast/engine.h"
 #include "irradcast/error.h"
 #include "irradcast/gbuffer.h"
 #include "irradcast/gltf.h"
@@ -45,8 +47,19 @@ struct Options {
   int height = 512;
   std::string camera;
   std::string export_gltf;
+  std::string method = "engine";
+  int updates = 8;
   int lightmap_spp = 64;
   int bounces = 2;
+  float cell_size = 0.25f;
+  std::string tracing_range = "0.3";
+  int direct_samples = 8;
+  int indirect_samples = 10;
+  int probe_resolution = 8;
+  std::string dispatch = "cell";
+  std::string distant_point = "project";
+  bool no_probe_relocation = false;
+  bool no_probe_visibility = false;
   float texels_per_scene = 256.0f;
   int max_lightmap_size = 1024;
   std::uint64_t seed = 1;
@@ -97,6 +110,21 @@ int run(const Options& o) {
       throw Error("--exposure must be 'auto' or a number of stops, not '" + o.exposure + "'");
     }
   }
+  if (o.method != "engine" && o.method != "reference")
+    throw Error("unknown --method '" + o.method + "' (expected engine or reference)");
+  EngineParams ep;
+  ep.cell_size = o.cell_size;
+  ep.tracing_range = parse_tracing_range(o.tracing_range);
+  ep.direct_samples = o.direct_samples;
+  ep.indirect_samples = o.indirect_samples;
+  ep.indirect_bounces = o.bounces;
+  ep.probe_resolution = o.probe_resolution;
+  ep.dispatch = parse_dispatch(o.dispatch);
+  ep.distant_point = parse_distant_point(o.distant_point);
+  ep.relocate_probes = !o.no_probe_relocation;
+  ep.probe_visibility = !o.no_probe_visibility;
+  ep.seed = o.seed;
+  ep.validate();
   std::unique_ptr<tbb::global_control> threads;
   if (o.threads > 0)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -149,10 +177,70 @@ int run(const Options& o) {
   pto.indirect_bounces = o.bounces;
   pto.seed = o.seed;
   PathTracer tracer(world, rays, lights, pto);
-  ReferenceLightmapStats lm_stats;
-  std::vector<Lightmap> maps =
-      reference_lightmaps(world, tracer, gbuffers, o.lightmap_spp, &lm_stats);
-  timings["lightmaps"] = sw.lap();
+  std::vector<Lightmap> maps;
+  std::uint64_t lightmap_rays = 0;
+  double lightmap_seconds = 0.0;
+  if (o.method == "reference") {
+    ReferenceLightmapStats lm_stats;
+    maps = reference_lightmaps(world, tracer, gbuffers, o.lightmap_spp, &lm_stats);
+    lightmap_rays = lm_stats.rays;
+    lightmap_seconds = lm_stats.seconds;
+    timings["lightmaps"] = sw.lap();
+  } else {
+    Engine engine(world, atlas, gbuffers, rays, std::make_unique<EmbreeBackend>(rays, lights), ep);
+    timings["engine_setup"] = sw.lap();
+    const ProbeStats& ps = engine.probe_stats();
+    if (!ep.unbiased())
+      log::info("bake", std::to_string(ps.probes) + " probes (" + std::to_string(ps.relocated) +
+                            " moved out of geometry, " + std::to_string(ps.unusable) +
+                            " unusable)");
+    Progress progress("engine", static_cast<std::uint64_t>(o.updates), "updates");
+    PassTiming direct;
+    std::vector<PassTiming> probes(o.bounces), scatter(o.bounces);
+    for (int u = 0; u < o.updates; ++u) {
+      UpdateStats us = engine.update();
+      direct.seconds += us.direct.seconds;
+      direct.rays += us.direct.rays;
+      for (int b = 0; b < o.bounces; ++b) {
+        probes[b].seconds += us.probes[b].seconds;
+        probes[b].rays += us.probes[b].rays;
+        scatter[b].seconds += us.scatter[b].seconds;
+        scatter[b].rays += us.scatter[b].rays;
+      }
+      lightmap_rays += us.total_rays();
+      lightmap_seconds += us.total_seconds;
+      progress.advance(1);
+    }
+    progress.finish();
+    maps = engine.lightmaps();
+    timings["lightmaps"] = sw.lap();
+    auto pass = [](const std::string& name, const PassTiming& t) {
+      return json{{"pass", name},
+                  {"seconds", t.seconds},
+                  {"rays", t.rays},
+                  {"rays_per_s", t.rays / std::max(1e-9, t.seconds)}};
+    };
+    json passes = json::array({pass("direct", direct)});
+    for (int b = 0; b < o.bounces; ++b) {
+      if (!ep.unbiased()) passes.push_back(pass("probes_" + std::to_string(b + 1), probes[b]));
+      passes.push_back(pass("scatter_" + std::to_string(b + 1), scatter[b]));
+    }
+    report["engine"] = {
+        {"backend", engine.backend().name()},
+        {"updates", engine.updates()},
+        {"texels", engine.texel_count()},
+        {"cell_size", ep.cell_size},
+        {"tracing_range", ep.unbiased() ? json("inf") : json(ep.tracing_range)},
+        {"direct_samples", ep.direct_samples},
+        {"indirect_samples", ep.indirect_samples},
+        {"indirect_bounces", ep.indirect_bounces},
+        {"probe_resolution", ep.probe_resolution},
+        {"dispatch", o.dispatch},
+        {"distant_point", o.distant_point},
+        {"probes", {{"count", ps.probes}, {"relocated", ps.relocated}, {"unusable", ps.unusable}}},
+        {"mean_relative_error", engine.mean_relative_error()},
+        {"passes", passes}};
+  }
 
   json lightmaps = json::array();
   for (std::size_t i = 0; i < maps.size(); ++i) {
@@ -179,8 +267,8 @@ int run(const Options& o) {
   write_png_tonemapped((fs::path(o.out) / "view.png").string(), view, tm);
   log::info("bake", "wrote " + (fs::path(o.out) / "view.exr").string() + " and view.png");
 
-  json rays_json = {{"lightmaps", lm_stats.rays}, {"compose", cs.rays}};
-  json rate = {{"lightmaps", lm_stats.rays / std::max(1e-9, lm_stats.seconds)},
+  json rays_json = {{"lightmaps", lightmap_rays}, {"compose", cs.rays}};
+  json rate = {{"lightmaps", lightmap_rays / std::max(1e-9, lightmap_seconds)},
                {"compose", cs.rays / std::max(1e-9, cs.seconds)}};
   if (o.reference_spp > 0) {
     Progress progress("reference", static_cast<std::uint64_t>(o.reference_spp), "spp");
@@ -229,7 +317,7 @@ int run(const Options& o) {
       {"seed", o.seed},
       {"threads",
        o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency())},
-      {"lightmap_method", "reference path tracer per texel"}};
+      {"method", o.method}};
   report["atlas"] = {
       {"texels", atlas.texel_count()}, {"valid_texels", valid}, {"lightmaps", lightmaps}};
   report["timings_s"] = timings;
@@ -267,9 +355,31 @@ int main(int argc, char** argv) {
   app.add_option("--camera", o.camera,
                  "override the camera: eye=x,y,z:target=x,y,z:fov=deg[:up=x,y,z]");
   app.add_option("--export-gltf", o.export_gltf, "write the loaded scene as glTF (.gltf or .glb)");
-  app.add_option("--lightmap-spp", o.lightmap_spp, "irradiance samples per lightmap texel")
+  app.add_option(
+      "--method", o.method,
+      "engine (radiance cells, probes, tracing range) | reference (path tracer per texel)");
+  app.add_option("--updates", o.updates, "engine: progressive updates to run")
       ->check(CLI::Range(1, 1 << 20));
-  app.add_option("--bounces", o.bounces, "indirect bounces K (paths: 1 direct + K indirect)")
+  app.add_option("--cell-size", o.cell_size, "engine: radiance cell size (fraction of the scene)");
+  app.add_option("--tracing-range", o.tracing_range,
+                 "engine: hemisphere ray length (fraction of the scene), or inf (unbiased)");
+  app.add_option("--direct-samples", o.direct_samples,
+                 "engine: light samples per texel per update");
+  app.add_option("--indirect-samples", o.indirect_samples,
+                 "engine: hemisphere rays per texel per bounce per update");
+  app.add_option("--probe-resolution", o.probe_resolution, "engine: octahedral probe map side");
+  app.add_option("--dispatch", o.dispatch, "engine: work units, cell | object");
+  app.add_option("--distant-point", o.distant_point,
+                 "engine: probe direction for rays beyond the range: project (onto the scene "
+                 "bounds) | fixed (fixed distance 1, seed 001 section 4.3.3)");
+  app.add_flag("--no-probe-relocation", o.no_probe_relocation,
+               "engine: keep probes at cell centres even inside geometry (seed 001 behaviour)");
+  app.add_flag("--no-probe-visibility", o.no_probe_visibility,
+               "engine: texels use their neighbour probes without a visibility test");
+  app.add_option("--lightmap-spp", o.lightmap_spp, "reference method: samples per texel")
+      ->check(CLI::Range(1, 1 << 20));
+  app.add_option("--bounces,--indirect-bounces", o.bounces,
+                 "indirect bounces K (1 direct + K indirect)")
       ->check(CLI::Range(0, 64));
   app.add_option("--texels-per-scene", o.texels_per_scene,
                  "lightmap density: texels across the scene's largest extent")

@@ -1,0 +1,329 @@
+#include "irradcast/engine.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "irradcast/error.h"
+#include "irradcast/log.h"
+#include "irradcast/sampling.h"
+
+namespace irradcast {
+namespace {
+
+// Unit directions spread evenly over the sphere (spherical Fibonacci).
+std::vector<glm::vec3> sphere_directions(int n) {
+  std::vector<glm::vec3> dirs;
+  const float golden = kPi * (3.0f - std::sqrt(5.0f));
+  for (int i = 0; i < n; ++i) {
+    float z = 1.0f - (2.0f * static_cast<float>(i) + 1.0f) / static_cast<float>(n);
+    float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+    float phi = golden * static_cast<float>(i);
+    dirs.emplace_back(r * std::cos(phi), r * std::sin(phi), z);
+  }
+  return dirs;
+}
+
+struct Spot {
+  float backface = 1.0f;  // fraction of rays that hit the back of a surface
+  float nearest = 0.0f;   // distance to the nearest surface
+};
+
+Spot probe_spot(const RayScene& rays, const World& world, glm::vec3 p,
+                const std::vector<glm::vec3>& dirs) {
+  int back = 0;
+  float nearest = 3.4e38f;
+  for (const glm::vec3& d : dirs) {
+    Ray r;
+    r.origin = p;
+    r.direction = d;
+    Hit h = rays.intersect(r);
+    if (!h.valid()) continue;
+    nearest = std::min(nearest, h.t);
+    if (glm::dot(world.objects[h.object].geometric_normal(h.triangle), d) > 0.0f) ++back;
+  }
+  return {static_cast<float>(back) / static_cast<float>(dirs.size()), nearest};
+}
+
+}  // namespace
+
+std::uint64_t UpdateStats::total_rays() const {
+  std::uint64_t n = direct.rays;
+  for (const auto& p : probes) n += p.rays;
+  for (const auto& s : scatter) n += s.rays;
+  return n;
+}
+
+Engine::Engine(const World& world, const Atlas& atlas, const std::vector<TexelGBuffer>& gbuffers,
+               const RayScene& rays, std::unique_ptr<TraceBackend> backend, EngineParams params)
+    : world_(&world),
+      atlas_(&atlas),
+      gbuffers_(&gbuffers),
+      rays_(&rays),
+      backend_(std::move(backend)),
+      params_(params) {
+  params_.validate();
+  if (gbuffers.size() != world.objects.size() || atlas.objects.size() != world.objects.size())
+    throw Error("engine: atlas and G-buffers do not match the scene's objects");
+  build_texels(gbuffers);
+  build_probes();
+  build_dispatch();
+  const int k = params_.indirect_bounces;
+  mean_.assign(k + 1, std::vector<glm::vec3>(texels_.size(), glm::vec3(0.0f)));
+  probe_mean_.assign(k + 1, std::vector<glm::vec3>());
+  total_mean_.assign(texels_.size(), 0.0);
+  total_m2_.assign(texels_.size(), 0.0);
+}
+
+Engine::~Engine() = default;
+
+void Engine::build_texels(const std::vector<TexelGBuffer>& gbuffers) {
+  std::size_t total = 0;
+  for (const auto& g : gbuffers) total += g.valid_count();
+  texels_.position.reserve(total);
+  for (std::size_t o = 0; o < gbuffers.size(); ++o) {
+    const TexelGBuffer& g = gbuffers[o];
+    const WorldObject& obj = world_->objects[o];
+    for (std::size_t i = 0; i < g.size(); ++i) {
+      if (!g.valid(i)) continue;
+      glm::vec3 n = g.normal[i];
+      glm::vec3 ng = obj.geometric_normal(static_cast<std::uint32_t>(g.triangle[i]));
+      if (glm::dot(ng, n) < 0.0f) ng = -ng;
+      texels_.position.push_back(g.position[i]);
+      texels_.normal.push_back(n);
+      texels_.geo_normal.push_back(ng);
+      texels_.albedo.push_back(g.albedo[i]);
+      texels_.object.push_back(static_cast<std::uint32_t>(o));
+      texels_.texel.push_back(static_cast<std::uint32_t>(i));
+    }
+  }
+}
+
+void Engine::build_probes() {
+  const Bounds& b = world_->bounds;
+  const float extent = std::max(b.max_extent(), 1e-6f);
+  const int per_axis = static_cast<int>(std::ceil(1.0f / params_.cell_size));
+  // Cells are cubes of cell_size x extent; axes shorter than the largest get fewer cells
+  // (seed 001 grids the normalised cube; cells outside the bounds would hold nothing).
+  probes_.cell = extent / static_cast<float>(per_axis);
+  probes_.origin = b.lo;
+  glm::vec3 e = b.extent();
+  for (int a = 0; a < 3; ++a)
+    probes_.dims[a] =
+        std::clamp(static_cast<int>(std::ceil(e[a] / probes_.cell - 1e-4f)), 1, per_axis);
+  probes_.resolution = params_.probe_resolution;
+  const std::size_t count =
+      static_cast<std::size_t>(probes_.dims.x) * probes_.dims.y * probes_.dims.z;
+  probes_.position.resize(count);
+  probes_.usable.assign(count, 1);
+  for (int z = 0; z < probes_.dims.z; ++z)
+    for (int y = 0; y < probes_.dims.y; ++y)
+      for (int x = 0; x < probes_.dims.x; ++x)
+        probes_.position[(z * probes_.dims.y + y) * probes_.dims.x + x] =
+            probes_.origin + (glm::vec3(x, y, z) + 0.5f) * probes_.cell;
+  for (std::size_t i = 0; i < texels_.size(); ++i)
+    texels_.cell.push_back(static_cast<std::uint32_t>(probes_.cell_index(texels_.position[i])));
+  probe_stats_.probes = count;
+  if (params_.unbiased()) return;
+
+  // Probe placement: a probe inside geometry (many rays see back faces) or hugging a surface
+  // sees the wrong light; move it to the free spot of its cell farthest from any surface.
+  if (params_.relocate_probes) {
+    const auto dirs = sphere_directions(64);
+    const float too_close = 0.15f * probes_.cell;
+    std::vector<std::uint8_t> moved(count, 0);
+    tbb::parallel_for(std::size_t(0), count, [&](std::size_t i) {
+      Spot here = probe_spot(*rays_, *world_, probes_.position[i], dirs);
+      if (here.backface < 0.05f && here.nearest >= too_close) return;
+      glm::vec3 centre = probes_.position[i];
+      glm::vec3 best = centre;
+      Spot best_spot = here;
+      const int steps = 4;  // candidates on a 9 x 9 x 9 lattice inside the cell
+      for (int z = -steps; z <= steps; ++z)
+        for (int y = -steps; y <= steps; ++y)
+          for (int x = -steps; x <= steps; ++x) {
+            glm::vec3 c = centre + glm::vec3(x, y, z) * (0.45f * probes_.cell / steps);
+            Spot s = probe_spot(*rays_, *world_, c, dirs);
+            bool better =
+                s.backface < best_spot.backface - 1e-6f ||
+                (s.backface <= best_spot.backface + 1e-6f && s.nearest > best_spot.nearest);
+            if (better) {
+              best = c;
+              best_spot = s;
+            }
+          }
+      probes_.position[i] = best;
+      moved[i] = best != centre;
+      if (best_spot.backface >= 0.05f) probes_.usable[i] = 0;
+    });
+    for (std::size_t i = 0; i < count; ++i) {
+      probe_stats_.relocated += moved[i];
+      probe_stats_.unusable += probes_.usable[i] == 0;
+    }
+  }
+
+  // Probe weights per texel: trilinear over the 8 surrounding probes, keeping only usable probes
+  // the texel can see (a wall between them means the probe sees another room's light).
+  probe_weights_.resize(texels_.size());
+  tbb::parallel_for(std::size_t(0), texels_.size(), [&](std::size_t t) {
+    const glm::vec3 p = texels_.position[t];
+    glm::vec3 f = (p - probes_.origin) / probes_.cell - 0.5f;
+    glm::ivec3 base = glm::ivec3(glm::floor(f));
+    glm::vec3 frac = f - glm::vec3(base);
+    ProbeWeights w;
+    float sum = 0.0f;
+    for (int c = 0; c < 8; ++c) {
+      glm::ivec3 o(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+      glm::ivec3 cell = base + o;
+      if (glm::any(glm::lessThan(cell, glm::ivec3(0))) ||
+          glm::any(glm::greaterThanEqual(cell, probes_.dims)))
+        continue;
+      auto index =
+          static_cast<std::uint32_t>((cell.z * probes_.dims.y + cell.y) * probes_.dims.x + cell.x);
+      if (!probes_.usable[index]) continue;
+      glm::vec3 tw = glm::mix(1.0f - frac, frac, glm::vec3(o));
+      float weight = glm::max(tw.x, 0.0f) * glm::max(tw.y, 0.0f) * glm::max(tw.z, 0.0f);
+      glm::vec3 to = probes_.position[index] - p;
+      float dist = glm::length(to);
+      if (params_.probe_visibility && dist > 0.0f) {
+        Ray r;
+        r.direction = to / dist;
+        r.origin = rays_->offset(p, texels_.geo_normal[t], r.direction);
+        r.tmax = glm::length(probes_.position[index] - r.origin);
+        if (rays_->occluded(r)) continue;
+      }
+      weight = std::max(weight, 1e-4f);
+      w.probe[w.count] = index;
+      w.weight[w.count] = weight;
+      ++w.count;
+      sum += weight;
+    }
+    if (w.count == 0) {
+      // No visible usable neighbour: fall back to the texel's own cell probe.
+      w.probe[0] = texels_.cell[t];
+      w.weight[0] = 1.0f;
+      w.count = 1;
+      sum = 1.0f;
+    }
+    for (int k = 0; k < w.count; ++k) w.weight[k] /= sum;
+    probe_weights_[t] = w;
+  });
+}
+
+void Engine::build_dispatch() {
+  unit_texels_.clear();
+  unit_offsets_.assign(1, 0);
+  const std::size_t n = texels_.size();
+  if (params_.dispatch == Dispatch::PerObject) {
+    for (std::size_t i = 0; i < n; ++i) {
+      if (i > 0 && texels_.object[i] != texels_.object[i - 1])
+        unit_offsets_.push_back(static_cast<std::uint32_t>(i));
+      unit_texels_.push_back(static_cast<std::uint32_t>(i));
+    }
+    unit_offsets_.push_back(static_cast<std::uint32_t>(n));
+    return;
+  }
+  // Per cell: a counting sort of the texels by cell, one work unit per non-empty cell.
+  std::vector<std::uint32_t> counts(probes_.count() + 1, 0);
+  for (std::uint32_t c : texels_.cell) ++counts[c + 1];
+  for (std::size_t c = 1; c < counts.size(); ++c) counts[c] += counts[c - 1];
+  unit_texels_.resize(n);
+  std::vector<std::uint32_t> fill(counts.begin(), counts.end() - 1);
+  for (std::size_t i = 0; i < n; ++i)
+    unit_texels_[fill[texels_.cell[i]]++] = static_cast<std::uint32_t>(i);
+  for (std::size_t c = 1; c < counts.size(); ++c)
+    if (counts[c] > counts[c - 1]) unit_offsets_.push_back(counts[c]);
+}
+
+std::vector<Lightmap> Engine::to_lightmaps(const std::vector<glm::vec3>& values) const {
+  std::vector<Lightmap> maps(world_->objects.size());
+  for (std::size_t o = 0; o < maps.size(); ++o)
+    maps[o] = Lightmap((*gbuffers_)[o].width, (*gbuffers_)[o].height);
+  for (std::size_t i = 0; i < texels_.size(); ++i)
+    maps[texels_.object[i]].texels[texels_.texel[i]] = values[i];
+  tbb::parallel_for(std::size_t(0), maps.size(), [&](std::size_t o) {
+    dilate(maps[o].texels, maps[o].width, maps[o].height, (*gbuffers_)[o].kind);
+  });
+  return maps;
+}
+
+UpdateStats Engine::update() {
+  auto start = std::chrono::steady_clock::now();
+  UpdateStats stats;
+  const int k = params_.indirect_bounces;
+  PassInput in{*world_, *atlas_,      texels_,       probe_weights_, probes_,
+               params_, unit_texels_, unit_offsets_, updates_,       0};
+  const double n = static_cast<double>(updates_) + 1.0;
+  auto accumulate = [&](std::vector<glm::vec3>& mean, const std::vector<glm::vec3>& est) {
+    if (mean.size() != est.size()) mean.assign(est.size(), glm::vec3(0.0f));
+    tbb::parallel_for(std::size_t(0), est.size(), [&](std::size_t i) {
+      mean[i] += (est[i] - mean[i]) * static_cast<float>(1.0 / n);
+    });
+  };
+  std::vector<glm::vec3> est, total;
+  PassResult r = backend_->direct(in, est);
+  stats.direct = {r.seconds, r.rays};
+  accumulate(mean_[0], est);
+  total = est;
+  std::vector<Lightmap> prev = to_lightmaps(mean_[0]);
+  for (int b = 1; b <= k; ++b) {
+    in.bounce = static_cast<std::uint32_t>(b);
+    RadianceField field{world_, atlas_, &prev};
+    PassTiming probe_time;
+    if (!params_.unbiased()) {
+      std::vector<glm::vec3> probe_est;
+      PassResult pr = backend_->gather_probes(in, field, probe_est);
+      probe_time = {pr.seconds, pr.rays};
+      accumulate(probe_mean_[b], probe_est);
+    }
+    stats.probes.push_back(probe_time);
+    PassResult sr = backend_->scatter(in, field, probe_mean_[b], est);
+    stats.scatter.push_back({sr.seconds, sr.rays});
+    accumulate(mean_[b], est);
+    for (std::size_t i = 0; i < est.size(); ++i) total[i] += est[i];
+    if (b < k) prev = to_lightmaps(mean_[b]);
+  }
+  // Welford statistics of each texel's total per-update estimate, for the convergence estimate.
+  for (std::size_t i = 0; i < total.size(); ++i) {
+    double x = luminance(total[i]);
+    double d = x - total_mean_[i];
+    total_mean_[i] += d / n;
+    total_m2_[i] += d * (x - total_mean_[i]);
+  }
+  ++updates_;
+  stats.total_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return stats;
+}
+
+std::vector<Lightmap> Engine::lightmaps() const {
+  std::vector<glm::vec3> sum(texels_.size(), glm::vec3(0.0f));
+  for (const auto& m : mean_)
+    for (std::size_t i = 0; i < sum.size(); ++i) sum[i] += m[i];
+  return to_lightmaps(sum);
+}
+
+std::vector<Lightmap> Engine::component(int bounce) const {
+  if (bounce < 0 || bounce >= static_cast<int>(mean_.size()))
+    throw Error("engine: no bounce " + std::to_string(bounce));
+  return to_lightmaps(mean_[bounce]);
+}
+
+double Engine::mean_relative_error() const {
+  if (updates_ < 2 || texels_.size() == 0) return 1.0;
+  double sum = 0.0;
+  std::size_t counted = 0;
+  for (std::size_t i = 0; i < texels_.size(); ++i) {
+    double mean = total_mean_[i];
+    if (!(mean > 1e-9)) continue;
+    double var = total_m2_[i] / (updates_ - 1);
+    sum += std::sqrt(var / updates_) / mean;
+    ++counted;
+  }
+  return counted ? sum / static_cast<double>(counted) : 0.0;
+}
+
+}  // namespace irradcast

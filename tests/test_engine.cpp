@@ -1,0 +1,202 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "irradcast/atlas.h"
+#include "irradcast/builtin.h"
+#include "irradcast/camera.h"
+#include "irradcast/compositor.h"
+#include "irradcast/embree_backend.h"
+#include "irradcast/engine.h"
+#include "irradcast/error.h"
+#include "irradcast/gbuffer.h"
+#include "irradcast/lights.h"
+#include "irradcast/path_tracer.h"
+#include "irradcast/progress.h"
+#include "scene_builders.h"
+
+using namespace irradcast;
+
+namespace {
+
+// A scene with everything the engine needs, at a low lightmap density so tests stay fast.
+struct EngineSetup {
+  EngineSetup(Scene s, float texels_per_scene)
+      : scene(std::move(s)), world(World::build(scene)), rays(world), lights(world) {
+    Progress::set_enabled(false);
+    AtlasOptions ao;
+    ao.texels_per_scene = texels_per_scene;
+    atlas = build_atlas(world, ao);
+    gbuffers = rasterize_gbuffer(world, atlas);
+  }
+  std::unique_ptr<Engine> engine(EngineParams p) const {
+    return std::make_unique<Engine>(world, atlas, gbuffers, rays,
+                                    std::make_unique<EmbreeBackend>(rays, lights), p);
+  }
+  Scene scene;
+  World world;
+  RayScene rays;
+  LightSampler lights;
+  Atlas atlas;
+  std::vector<TexelGBuffer> gbuffers;
+};
+
+// Mean over all valid texels of the luminance of a set of lightmaps.
+double mean_valid(const EngineSetup& s, const std::vector<Lightmap>& maps) {
+  double sum = 0.0;
+  std::size_t n = 0;
+  for (std::size_t o = 0; o < maps.size(); ++o)
+    for (std::size_t i = 0; i < maps[o].texels.size(); ++i)
+      if (s.gbuffers[o].valid(i)) {
+        const glm::vec3& e = maps[o].texels[i];
+        sum += (e.x + e.y + e.z) / 3.0;
+        ++n;
+      }
+  return sum / static_cast<double>(n);
+}
+
+}  // namespace
+
+class EngineFurnace : public ::testing::TestWithParam<std::tuple<float, float>> {};
+
+// Closed room, every surface emitting Le with albedo rho, 1 direct + K indirect bounces: the
+// irradiance everywhere is pi Le (1 - rho^(K+1)) / (1 - rho).
+TEST_P(EngineFurnace, LightmapsConvergeToTheAnalyticIrradiance) {
+  auto [rho, range] = GetParam();
+  const float le = 1.0f;
+  EngineSetup s(test::closed_box(glm::vec3(rho), glm::vec3(le)), 24.0f);
+  EngineParams p;
+  p.tracing_range = range;
+  p.indirect_bounces = 2;
+  auto engine = s.engine(p);
+  for (int u = 0; u < 4; ++u) engine->update();
+  double measured = mean_valid(s, engine->lightmaps());
+  double expected = kPi * le * (1.0 - std::pow(rho, 3.0)) / (1.0 - rho);
+  RecordProperty("relative_error", std::to_string(measured / expected - 1.0));
+  EXPECT_NEAR(measured, expected, 0.02 * expected) << "rho " << rho << " range " << range;
+}
+
+INSTANTIATE_TEST_SUITE_P(Engine, EngineFurnace,
+                         ::testing::Values(std::make_tuple(0.5f, 0.3f), std::make_tuple(0.8f, 0.3f),
+                                           std::make_tuple(0.5f, INFINITY),
+                                           std::make_tuple(0.8f, INFINITY)));
+
+TEST(Engine, FixedSeedGivesBitIdenticalLightmaps) {
+  EngineSetup s(make_cornell_box(), 32.0f);
+  EngineParams p;
+  p.seed = 11;
+  auto a = s.engine(p), b = s.engine(p);
+  a->update();
+  a->update();
+  b->update();
+  b->update();
+  auto la = a->lightmaps(), lb = b->lightmaps();
+  ASSERT_EQ(la.size(), lb.size());
+  for (std::size_t o = 0; o < la.size(); ++o) EXPECT_EQ(la[o].texels, lb[o].texels) << o;
+  p.seed = 12;
+  auto c = s.engine(p);
+  c->update();
+  c->update();
+  EXPECT_NE(c->lightmaps()[0].texels, la[0].texels);
+}
+
+// Random numbers are drawn per texel (seed, texel, update, pass), never per thread or per work
+// unit, so the dispatch order changes the memory access pattern but not one bit of the result.
+TEST(Engine, PerCellAndPerObjectDispatchGiveTheSameLightmaps) {
+  EngineSetup s(make_cornell_box(), 32.0f);
+  EngineParams cell, object;
+  cell.dispatch = Dispatch::PerCell;
+  object.dispatch = Dispatch::PerObject;
+  auto a = s.engine(cell), b = s.engine(object);
+  for (int u = 0; u < 2; ++u) {
+    a->update();
+    b->update();
+  }
+  auto la = a->lightmaps(), lb = b->lightmaps();
+  ASSERT_EQ(la.size(), lb.size());
+  std::size_t texels = 0;
+  for (std::size_t o = 0; o < la.size(); ++o) {
+    EXPECT_EQ(la[o].texels, lb[o].texels) << "object " << o;
+    texels += la[o].texels.size();
+  }
+  EXPECT_GT(texels, 1000u);
+}
+
+// The composed Cornell view against the reference path tracer at the same bounce count.
+// Bound: relative MSE below 0.01 at 16 updates. Justification: at this lightmap density
+// (64 texels across the box) the lightmaps carry residual Monte Carlo noise of a few percent per
+// texel, which alone gives a relative MSE of about 1e-3; the reference's own noise at 1024 spp
+// adds about 1e-3; the biased mode's probe approximation adds a few 1e-3 near corners. And the
+// error must fall as updates accumulate.
+class EngineCornell : public ::testing::TestWithParam<float> {};
+
+TEST_P(EngineCornell, ComposedViewMatchesTheReferenceAndImprovesWithSamples) {
+  const float range = GetParam();
+  EngineSetup s(make_cornell_box(), 64.0f);
+  CameraPose cam = default_camera(s.scene, s.world);
+  const int w = 48, h = 48;
+  PathTracer tracer(s.world, s.rays, s.lights, PathTracerOptions{2, true, 99});
+  ImageRGB ref = tracer.render(cam, w, h, 1024);
+  EngineParams p;
+  p.tracing_range = range;
+  auto engine = s.engine(p);
+  engine->update();
+  double first =
+      compare(compose(s.world, s.rays, s.atlas, engine->lightmaps(), cam, w, h), ref).rel_mse;
+  for (int u = 1; u < 16; ++u) engine->update();
+  double last =
+      compare(compose(s.world, s.rays, s.atlas, engine->lightmaps(), cam, w, h), ref).rel_mse;
+  RecordProperty("rel_mse_1_update", std::to_string(first));
+  RecordProperty("rel_mse_16_updates", std::to_string(last));
+  EXPECT_LT(last, 0.01);
+  EXPECT_LT(last, 0.7 * first) << "error must fall as samples accumulate";
+  EXPECT_LT(engine->mean_relative_error(), 0.1);
+}
+
+INSTANTIATE_TEST_SUITE_P(Engine, EngineCornell, ::testing::Values(0.3f, INFINITY));
+
+TEST(Engine, ProbesInsideGeometryAreMovedOut) {
+  // A solid block straddling the centre of the only cell: its probe starts inside it.
+  Scene s = test::closed_box(glm::vec3(0.5f), glm::vec3(0.0f));
+  std::uint32_t white = test::add_material(s, glm::vec3(0.5f));
+  const glm::vec3 lo(-0.3f), hi(0.3f);
+  // Six outward-facing faces of the block.
+  test::add_quad_object(s, "b-z", {lo.x, lo.y, lo.z}, {lo.x, hi.y, lo.z}, {hi.x, hi.y, lo.z},
+                        {hi.x, lo.y, lo.z}, white);
+  test::add_quad_object(s, "b+z", {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z},
+                        {lo.x, hi.y, hi.z}, white);
+  test::add_quad_object(s, "b-x", {lo.x, lo.y, lo.z}, {lo.x, lo.y, hi.z}, {lo.x, hi.y, hi.z},
+                        {lo.x, hi.y, lo.z}, white);
+  test::add_quad_object(s, "b+x", {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {hi.x, hi.y, hi.z},
+                        {hi.x, lo.y, hi.z}, white);
+  test::add_quad_object(s, "b-y", {lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, lo.y, hi.z},
+                        {lo.x, lo.y, hi.z}, white);
+  test::add_quad_object(s, "b+y", {lo.x, hi.y, lo.z}, {lo.x, hi.y, hi.z}, {hi.x, hi.y, hi.z},
+                        {hi.x, hi.y, lo.z}, white);
+  EngineSetup setup(std::move(s), 16.0f);
+  EngineParams p;
+  p.cell_size = 1.0f;  // one cell, its probe at the centre of the block
+  auto moved = setup.engine(p);
+  ASSERT_EQ(moved->probes().count(), 1u);
+  EXPECT_EQ(moved->probe_stats().relocated, 1u);
+  glm::vec3 q = moved->probes().position[0];
+  bool inside = glm::all(glm::greaterThan(q, lo)) && glm::all(glm::lessThan(q, hi));
+  EXPECT_FALSE(inside) << q.x << "," << q.y << "," << q.z;
+  p.relocate_probes = false;
+  auto kept = setup.engine(p);
+  EXPECT_EQ(kept->probe_stats().relocated, 0u);
+  EXPECT_EQ(kept->probes().position[0], glm::vec3(0.0f));
+}
+
+TEST(Engine, RejectsBadParameters) {
+  EngineSetup s(make_cornell_box(), 16.0f);
+  EngineParams p;
+  p.cell_size = 0.0f;
+  EXPECT_THROW(s.engine(p), Error);
+  p = EngineParams{};
+  p.indirect_samples = 0;
+  EXPECT_THROW(s.engine(p), Error);
+  EXPECT_THROW(parse_tracing_range("far"), Error);
+  EXPECT_TRUE(std::isinf(parse_tracing_range("inf")));
+  EXPECT_THROW(parse_dispatch("triangle"), Error);
+}
