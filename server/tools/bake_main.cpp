@@ -136,8 +136,9 @@ int run(const Options& o) {
 
   Scene scene = load_scene(o.scene, o.detail);
   timings["load"] = sw.lap();
-  log::info("bake", "scene '" + o.scene + "': " + std::to_string(scene.objects().size()) +
-                        " objects, " + std::to_string(scene.triangle_count()) + " triangles");
+  const std::vector<Object> objects = scene.objects();
+  log::info("bake", "scene '" + o.scene + "': " + std::to_string(objects.size()) + " objects, " +
+                        std::to_string(scene.triangle_count()) + " triangles");
   if (!o.export_gltf.empty()) {
     save_gltf(scene, o.export_gltf);
     log::info("bake", "exported the scene to " + o.export_gltf);
@@ -244,14 +245,15 @@ int run(const Options& o) {
 
   json lightmaps = json::array();
   for (std::size_t i = 0; i < maps.size(); ++i) {
-    std::string name = std::to_string(i) + "_" + file_safe(scene.objects()[i].name) + ".exr";
+    const std::string& object_name = objects[i].name;
+    std::string name = std::to_string(i) + "_" + file_safe(object_name) + ".exr";
     ImageRGB img;
     img.width = maps[i].width;
     img.height = maps[i].height;
     img.pixels = maps[i].texels;
     write_exr((fs::path(o.out) / "lightmaps" / name).string(), img);
     lightmaps.push_back({{"file", "lightmaps/" + name},
-                         {"object", scene.objects()[i].name},
+                         {"object", object_name},
                          {"width", maps[i].width},
                          {"height", maps[i].height},
                          {"charts", atlas.objects[i].chart_count},
