@@ -2,6 +2,7 @@
 #pragma once
 
 #include <array>
+#include <string>
 
 #include "irradcast/scene.h"
 
@@ -33,6 +34,24 @@ inline std::uint32_t add_material(Scene& s, glm::vec3 albedo, glm::vec3 emission
   m.emissive_strength = strength;
   s.materials.push_back(m);
   return static_cast<std::uint32_t>(s.materials.size() - 1);
+}
+
+// A closed axis-aligned block [lo, hi] whose six faces face outward.
+inline void add_block(Scene& s, const char* name, glm::vec3 lo, glm::vec3 hi,
+                      std::uint32_t material) {
+  const std::string n(name);
+  add_quad_object(s, (n + "-z").c_str(), {lo.x, lo.y, lo.z}, {lo.x, hi.y, lo.z}, {hi.x, hi.y, lo.z},
+                  {hi.x, lo.y, lo.z}, material);
+  add_quad_object(s, (n + "+z").c_str(), {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z},
+                  {lo.x, hi.y, hi.z}, material);
+  add_quad_object(s, (n + "-x").c_str(), {lo.x, lo.y, lo.z}, {lo.x, lo.y, hi.z}, {lo.x, hi.y, hi.z},
+                  {lo.x, hi.y, lo.z}, material);
+  add_quad_object(s, (n + "+x").c_str(), {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {hi.x, hi.y, hi.z},
+                  {hi.x, lo.y, hi.z}, material);
+  add_quad_object(s, (n + "-y").c_str(), {lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, lo.y, hi.z},
+                  {lo.x, lo.y, hi.z}, material);
+  add_quad_object(s, (n + "+y").c_str(), {lo.x, hi.y, lo.z}, {lo.x, hi.y, hi.z}, {hi.x, hi.y, hi.z},
+                  {hi.x, hi.y, lo.z}, material);
 }
 
 // A closed cube [-1,1]^3 whose six faces all face inward, every face with `material`.

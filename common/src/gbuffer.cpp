@@ -213,8 +213,7 @@ TexelGBuffer rasterize_object(const World& world, std::size_t oi, const ObjectLi
 }  // namespace
 
 std::size_t TexelGBuffer::valid_count() const {
-  return static_cast<std::size_t>(
-      std::count_if(kind.begin(), kind.end(), [](TexelKind k) { return k != TexelKind::Empty; }));
+  return static_cast<std::size_t>(std::count_if(kind.begin(), kind.end(), holds_estimate));
 }
 
 std::vector<TexelGBuffer> rasterize_gbuffer(const World& world, const Atlas& atlas) {
@@ -237,7 +236,7 @@ void dilate(std::vector<glm::vec3>& texels, int width, int height,
                 std::to_string(height) + " lightmap");
   if (size == 0 || rings == 0) return;
   std::vector<std::uint8_t> state(size, 0);  // 0 empty, 1 filled, 2 queued
-  for (std::size_t i = 0; i < size; ++i) state[i] = valid[i] != TexelKind::Empty ? 1 : 0;
+  for (std::size_t i = 0; i < size; ++i) state[i] = holds_estimate(valid[i]) ? 1 : 0;
   std::vector<std::uint32_t> frontier, next;
   auto push_neighbours = [&](int x, int y, std::vector<std::uint32_t>& out) {
     for (int dy = -1; dy <= 1; ++dy)

@@ -66,6 +66,13 @@ Engine::Engine(const World& world, const Atlas& atlas, const std::vector<TexelGB
       backend_(std::move(backend)),
       params_(params) {
   params_.validate();
+  // Seed 001 section 4.3.2 and our rooms test: probes stand in for everything beyond the range,
+  // so a range much shorter than a cell makes the probes' parallax dominate the error.
+  if (!params_.unbiased() && params_.tracing_range < 0.4f * params_.cell_size)
+    log::warn("engine", "tracing range " + std::to_string(params_.tracing_range) +
+                            " is short for cells of " + std::to_string(params_.cell_size) +
+                            ": expect probe error; use a cell size of at most " +
+                            std::to_string(2.5f * params_.tracing_range));
   if (gbuffers.size() != world.objects.size() || atlas.objects.size() != world.objects.size())
     throw Error("engine: atlas and G-buffers do not match the scene's objects");
   build_texels(gbuffers);

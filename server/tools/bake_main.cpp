@@ -29,6 +29,7 @@
 #include "irradcast/progress.h"
 #include "irradcast/ray_scene.h"
 #include "irradcast/reference_lightmaps.h"
+#include "irradcast/texel_validity.h"
 #include "irradcast/tonemap.h"
 #include "irradcast/world.h"
 
@@ -167,12 +168,13 @@ int run(const Options& o) {
   Atlas atlas = build_atlas(world, ao);
   timings["atlas"] = sw.lap();
   std::vector<TexelGBuffer> gbuffers = rasterize_gbuffer(world, atlas);
+  const std::size_t hidden = mark_hidden_texels(rays, gbuffers);
   timings["gbuffer"] = sw.lap();
   std::uint64_t valid = 0;
   for (const auto& g : gbuffers) valid += g.valid_count();
   log::info("bake", std::to_string(atlas.objects.size()) + " lightmaps, " +
                         std::to_string(atlas.texel_count()) + " texels (" + std::to_string(valid) +
-                        " on surfaces)");
+                        " on visible surfaces, " + std::to_string(hidden) + " inside geometry)");
 
   PathTracerOptions pto;
   pto.indirect_bounces = o.bounces;
@@ -320,8 +322,10 @@ int run(const Options& o) {
       {"threads",
        o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency())},
       {"method", o.method}};
-  report["atlas"] = {
-      {"texels", atlas.texel_count()}, {"valid_texels", valid}, {"lightmaps", lightmaps}};
+  report["atlas"] = {{"texels", atlas.texel_count()},
+                     {"valid_texels", valid},
+                     {"hidden_texels", hidden},
+                     {"lightmaps", lightmaps}};
   report["timings_s"] = timings;
   report["rays"] = rays_json;
   report["rays_per_s"] = rate;

@@ -15,7 +15,13 @@
 
 namespace irradcast {
 
-enum class TexelKind : std::uint8_t { Empty = 0, Covered = 1, Conservative = 2 };
+// Empty: no surface. Covered / Conservative: see rasterize_gbuffer. Hidden: a surface point
+// buried inside other geometry (see mark_hidden_texels); it holds no estimate of its own and is
+// filled from its visible neighbours like an empty texel.
+enum class TexelKind : std::uint8_t { Empty = 0, Covered = 1, Conservative = 2, Hidden = 3 };
+inline bool holds_estimate(TexelKind k) {
+  return k == TexelKind::Covered || k == TexelKind::Conservative;
+}
 
 struct TexelGBuffer {
   int width = 0;
@@ -27,7 +33,7 @@ struct TexelGBuffer {
   std::vector<TexelKind> kind;
 
   std::size_t size() const { return kind.size(); }
-  bool valid(std::size_t i) const { return kind[i] != TexelKind::Empty; }
+  bool valid(std::size_t i) const { return holds_estimate(kind[i]); }
   std::size_t valid_count() const;
 };
 
