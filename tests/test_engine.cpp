@@ -192,10 +192,10 @@ TEST(Engine, ProbesInsideGeometryAreMovedOut) {
 // i.e. 2 per room per axis): a range this short needs cells of a comparable size (with 0.25
 // cells the probe approximation alone is off by 30-50% in the dim rooms, leaks or not).
 // Bounds, with relocation and visibility: each unlit room's mean within 10% of the reference and
-// the texel-weighted mean absolute error of its groups below 12% of the mean (measured: 4-8% and
-// 6%). Group means average hundreds of texels, so Monte Carlo noise adds about 1% to either.
-// Without the fixes the same measures must show the seed's leaks (measured: walls shared with a
-// lit room at 2.6x the reference, group error 38%), so the test tells the two apart.
+// the texel-weighted mean absolute error of its groups below 12% of the mean (measured: 3%
+// and 8.5%, and 6%). Group means average hundreds of texels, so Monte Carlo noise adds about 1% to
+// either. Without the fixes the same measures must show the seed's leaks (measured: walls shared
+// with a lit room at 2.6x the reference, group error 38%), so the test tells the two apart.
 namespace {
 struct LeakErrors {
   double room[2][2] = {};     // engine room mean / reference room mean - 1

@@ -312,6 +312,7 @@ int run(const Options& o) {
                      {"emissive_triangles", lights.emissive_triangles().size()},
                      {"punctual_lights", world.lights.size()}};
   report["settings"] = {
+      {"exposure_ev", std::log2(exposure_scale(view, tm))},
       {"width", o.width},
       {"height", o.height},
       {"bounces", {{"direct", 1}, {"indirect", o.bounces}}},
