@@ -13,6 +13,7 @@
 #include <string>
 #include <thread>
 
+#include "engine_options.h"
 #include "irradcast/atlas.h"
 #include "irradcast/builtin.h"
 #include "irradcast/camera.h"
@@ -51,19 +52,7 @@ struct Options {
   std::string method = "engine";
   int updates = 8;
   int lightmap_spp = 64;
-  int bounces = 2;
-  float cell_size = 0.25f;
-  std::string tracing_range = "0.3";
-  int direct_samples = 8;
-  int indirect_samples = 10;
-  int probe_resolution = 8;
-  std::string dispatch = "cell";
-  std::string distant_point = "project";
-  bool no_probe_relocation = false;
-  bool no_probe_visibility = false;
-  float texels_per_scene = 256.0f;
-  int max_lightmap_size = 1024;
-  std::uint64_t seed = 1;
+  irradcast::tools::EngineOptions engine;
   std::string tonemap = "reinhard";
   std::string exposure = "auto";
   int threads = 0;
@@ -113,19 +102,7 @@ int run(const Options& o) {
   }
   if (o.method != "engine" && o.method != "reference")
     throw Error("unknown --method '" + o.method + "' (expected engine or reference)");
-  EngineParams ep;
-  ep.cell_size = o.cell_size;
-  ep.tracing_range = parse_tracing_range(o.tracing_range);
-  ep.direct_samples = o.direct_samples;
-  ep.indirect_samples = o.indirect_samples;
-  ep.indirect_bounces = o.bounces;
-  ep.probe_resolution = o.probe_resolution;
-  ep.dispatch = parse_dispatch(o.dispatch);
-  ep.distant_point = parse_distant_point(o.distant_point);
-  ep.relocate_probes = !o.no_probe_relocation;
-  ep.probe_visibility = !o.no_probe_visibility;
-  ep.seed = o.seed;
-  ep.validate();
+  const EngineParams ep = o.engine.params();
   std::unique_ptr<tbb::global_control> threads;
   if (o.threads > 0)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -162,9 +139,7 @@ int run(const Options& o) {
   timings["bvh"] = sw.lap();
   if (lights.empty()) log::warn("bake", "the scene has no lights: every image will be black");
 
-  AtlasOptions ao;
-  ao.texels_per_scene = o.texels_per_scene;
-  ao.max_lightmap_size = o.max_lightmap_size;
+  const AtlasOptions ao = o.engine.atlas();
   Atlas atlas = build_atlas(world, ao);
   timings["atlas"] = sw.lap();
   std::vector<TexelGBuffer> gbuffers = rasterize_gbuffer(world, atlas);
@@ -177,8 +152,8 @@ int run(const Options& o) {
                         " on visible surfaces, " + std::to_string(hidden) + " inside geometry)");
 
   PathTracerOptions pto;
-  pto.indirect_bounces = o.bounces;
-  pto.seed = o.seed;
+  pto.indirect_bounces = o.engine.bounces;
+  pto.seed = o.engine.seed;
   PathTracer tracer(world, rays, lights, pto);
   std::vector<Lightmap> maps;
   std::uint64_t lightmap_rays = 0;
@@ -199,12 +174,12 @@ int run(const Options& o) {
                             " unusable)");
     Progress progress("engine", static_cast<std::uint64_t>(o.updates), "updates");
     PassTiming direct;
-    std::vector<PassTiming> probes(o.bounces), scatter(o.bounces);
+    std::vector<PassTiming> probes(o.engine.bounces), scatter(o.engine.bounces);
     for (int u = 0; u < o.updates; ++u) {
       UpdateStats us = engine.update();
       direct.seconds += us.direct.seconds;
       direct.rays += us.direct.rays;
-      for (int b = 0; b < o.bounces; ++b) {
+      for (int b = 0; b < o.engine.bounces; ++b) {
         probes[b].seconds += us.probes[b].seconds;
         probes[b].rays += us.probes[b].rays;
         scatter[b].seconds += us.scatter[b].seconds;
@@ -224,7 +199,7 @@ int run(const Options& o) {
                   {"rays_per_s", t.rays / std::max(1e-9, t.seconds)}};
     };
     json passes = json::array({pass("direct", direct)});
-    for (int b = 0; b < o.bounces; ++b) {
+    for (int b = 0; b < o.engine.bounces; ++b) {
       if (!ep.unbiased()) passes.push_back(pass("probes_" + std::to_string(b + 1), probes[b]));
       passes.push_back(pass("scatter_" + std::to_string(b + 1), scatter[b]));
     }
@@ -238,8 +213,8 @@ int run(const Options& o) {
         {"indirect_samples", ep.indirect_samples},
         {"indirect_bounces", ep.indirect_bounces},
         {"probe_resolution", ep.probe_resolution},
-        {"dispatch", o.dispatch},
-        {"distant_point", o.distant_point},
+        {"dispatch", o.engine.dispatch},
+        {"distant_point", o.engine.distant_point},
         {"probes", {{"count", ps.probes}, {"relocated", ps.relocated}, {"unusable", ps.unusable}}},
         {"mean_relative_error", engine.mean_relative_error()},
         {"passes", passes}};
@@ -315,11 +290,11 @@ int run(const Options& o) {
       {"exposure_ev", std::log2(exposure_scale(view, tm))},
       {"width", o.width},
       {"height", o.height},
-      {"bounces", {{"direct", 1}, {"indirect", o.bounces}}},
+      {"bounces", {{"direct", 1}, {"indirect", o.engine.bounces}}},
       {"lightmap_spp", o.lightmap_spp},
-      {"texels_per_scene", o.texels_per_scene},
-      {"max_lightmap_size", o.max_lightmap_size},
-      {"seed", o.seed},
+      {"texels_per_scene", o.engine.texels_per_scene},
+      {"max_lightmap_size", o.engine.max_lightmap_size},
+      {"seed", o.engine.seed},
       {"threads",
        o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency())},
       {"method", o.method}};
@@ -367,33 +342,9 @@ int main(int argc, char** argv) {
       "engine (radiance cells, probes, tracing range) | reference (path tracer per texel)");
   app.add_option("--updates", o.updates, "engine: progressive updates to run")
       ->check(CLI::Range(1, 1 << 20));
-  app.add_option("--cell-size", o.cell_size, "engine: radiance cell size (fraction of the scene)");
-  app.add_option("--tracing-range", o.tracing_range,
-                 "engine: hemisphere ray length (fraction of the scene), or inf (unbiased)");
-  app.add_option("--direct-samples", o.direct_samples,
-                 "engine: light samples per texel per update");
-  app.add_option("--indirect-samples", o.indirect_samples,
-                 "engine: hemisphere rays per texel per bounce per update");
-  app.add_option("--probe-resolution", o.probe_resolution, "engine: octahedral probe map side");
-  app.add_option("--dispatch", o.dispatch, "engine: work units, cell | object");
-  app.add_option("--distant-point", o.distant_point,
-                 "engine: probe direction for rays beyond the range: project (onto the scene "
-                 "bounds) | fixed (fixed distance 1, seed 001 section 4.3.3)");
-  app.add_flag("--no-probe-relocation", o.no_probe_relocation,
-               "engine: keep probes at cell centres even inside geometry (seed 001 behaviour)");
-  app.add_flag("--no-probe-visibility", o.no_probe_visibility,
-               "engine: texels use their neighbour probes without a visibility test");
   app.add_option("--lightmap-spp", o.lightmap_spp, "reference method: samples per texel")
       ->check(CLI::Range(1, 1 << 20));
-  app.add_option("--bounces,--indirect-bounces", o.bounces,
-                 "indirect bounces K (1 direct + K indirect)")
-      ->check(CLI::Range(0, 64));
-  app.add_option("--texels-per-scene", o.texels_per_scene,
-                 "lightmap density: texels across the scene's largest extent")
-      ->check(CLI::Range(1.0f, 65536.0f));
-  app.add_option("--max-lightmap-size", o.max_lightmap_size, "per-object lightmap size cap")
-      ->check(CLI::Range(8, 16384));
-  app.add_option("--seed", o.seed, "random seed (same seed, same images)");
+  o.engine.add_to(app);
   app.add_option("--tonemap", o.tonemap, "reinhard | aces | clamp");
   app.add_option("--exposure", o.exposure, "auto (key 0.18) or exposure in stops");
   app.add_option("--threads", o.threads, "worker threads (0 = all cores)")

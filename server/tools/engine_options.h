@@ -1,0 +1,83 @@
+// The engine's command-line flags, shared by irradcast-bake and irradcast-server so that both
+// spell every parameter the same way.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <string>
+
+#include "irradcast/atlas.h"
+#include "irradcast/engine_params.h"
+
+namespace irradcast::tools {
+
+struct EngineOptions {
+  float cell_size = 0.25f;
+  std::string tracing_range = "0.3";
+  int direct_samples = 8;
+  int indirect_samples = 10;
+  int bounces = 2;
+  int probe_resolution = 8;
+  std::string dispatch = "cell";
+  std::string distant_point = "project";
+  bool no_probe_relocation = false;
+  bool no_probe_visibility = false;
+  float texels_per_scene = 256.0f;
+  int max_lightmap_size = 1024;
+  std::uint64_t seed = 1;
+
+  void add_to(CLI::App& app) {
+    app.add_option("--cell-size", cell_size, "engine: radiance cell size (fraction of the scene)");
+    app.add_option("--tracing-range", tracing_range,
+                   "engine: hemisphere ray length (fraction of the scene), or inf (unbiased)");
+    app.add_option("--direct-samples", direct_samples,
+                   "engine: light samples per texel per update");
+    app.add_option("--indirect-samples", indirect_samples,
+                   "engine: hemisphere rays per texel per bounce per update");
+    app.add_option("--probe-resolution", probe_resolution, "engine: octahedral probe map side");
+    app.add_option("--dispatch", dispatch, "engine: work units, cell | object");
+    app.add_option("--distant-point", distant_point,
+                   "engine: probe direction for rays beyond the range: project (onto the scene "
+                   "bounds) | fixed (fixed distance 1, seed 001 section 4.3.3)");
+    app.add_flag("--no-probe-relocation", no_probe_relocation,
+                 "engine: keep probes at cell centres even inside geometry (seed 001 behaviour)");
+    app.add_flag("--no-probe-visibility", no_probe_visibility,
+                 "engine: texels use their neighbour probes without a visibility test");
+    app.add_option("--bounces,--indirect-bounces", bounces,
+                   "indirect bounces K (1 direct + K indirect)")
+        ->check(CLI::Range(0, 64));
+    app.add_option("--texels-per-scene", texels_per_scene,
+                   "lightmap density: texels across the scene's largest extent")
+        ->check(CLI::Range(1.0f, 65536.0f));
+    app.add_option("--max-lightmap-size", max_lightmap_size, "per-object lightmap size cap")
+        ->check(CLI::Range(8, 16384));
+    app.add_option("--seed", seed, "random seed (same seed, same images)");
+  }
+
+  // Throws irradcast::Error naming a bad value.
+  EngineParams params() const {
+    EngineParams p;
+    p.cell_size = cell_size;
+    p.tracing_range = parse_tracing_range(tracing_range);
+    p.direct_samples = direct_samples;
+    p.indirect_samples = indirect_samples;
+    p.indirect_bounces = bounces;
+    p.probe_resolution = probe_resolution;
+    p.dispatch = parse_dispatch(dispatch);
+    p.distant_point = parse_distant_point(distant_point);
+    p.relocate_probes = !no_probe_relocation;
+    p.probe_visibility = !no_probe_visibility;
+    p.seed = seed;
+    p.validate();
+    return p;
+  }
+
+  AtlasOptions atlas() const {
+    AtlasOptions a;
+    a.texels_per_scene = texels_per_scene;
+    a.max_lightmap_size = max_lightmap_size;
+    return a;
+  }
+};
+
+}  // namespace irradcast::tools
