@@ -13,6 +13,8 @@ PACKAGES=(
   libvulkan-dev mesa-vulkan-drivers glslang-tools glslang-dev spirv-tools vulkan-validationlayers
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
+  # libFuzzer targets (deploy/fuzz.sh)
+  clang libclang-rt-14-dev
 )
 
 missing=()

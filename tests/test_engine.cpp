@@ -220,7 +220,7 @@ LeakErrors leak_errors(const EngineSetup& s, const std::vector<Lightmap>& engine
       e[i][j] += luminance(engine[o].texels[t]);
       r[i][j] += luminance(reference[o].texels[t]);
     }
-    const std::string& name = s.scene.objects()[s.world.objects[o].object].name;
+    const std::string name = s.scene.objects()[s.world.objects[o].object].name;
     const bool lit_walls = name == "room_1_0_walls" || name == "room_0_1_walls";
     for (int i = 0; i < 2; ++i)
       for (int j = 0; j < 2; ++j) {

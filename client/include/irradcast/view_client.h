@@ -1,0 +1,110 @@
+// A viewer's connection to irradcast-server: handshake, the scene package (from the cache when
+// its hash matches, else downloaded and cached), a subscription, and a tile cache kept current
+// as TileUpdates arrive. Composes frames of its own viewpoint with the compositor. Reconnects
+// after a lost connection and resumes: the tiles it holds are only sent again when their version
+// changed. Single-threaded: call poll() to make progress.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "irradcast.pb.h"
+#include "irradcast/atlas.h"
+#include "irradcast/image.h"
+#include "irradcast/lightmap.h"
+#include "irradcast/scene.h"
+#include "irradcast/world.h"
+
+namespace irradcast {
+
+struct ViewClientOptions {
+  std::string host = "127.0.0.1";
+  std::uint16_t port = 7450;
+  std::string name = "irradcast-view";
+  std::string cache_dir;  // scene packages by hash; empty = no cache
+  wire::TileEncoding encoding = wire::TILE_RGB9E5_ZSTD;
+  std::uint64_t max_bytes_per_s = 0;                 // 0 = no cap
+  std::chrono::milliseconds connect_timeout{10000};  // keep retrying a refused connection this long
+  std::chrono::milliseconds reply_timeout{10000};    // for Welcome and each scene chunk
+  std::chrono::milliseconds ping_interval{5000};     // keeps the server's idle timer happy
+  bool reconnect = true;
+};
+
+struct ViewClientCounters {
+  std::uint64_t bytes_received = 0;
+  std::uint64_t frames_received = 0;
+  std::uint64_t tiles_applied = 0;
+  std::uint64_t scene_bytes_downloaded = 0;
+  std::uint32_t connections = 0;  // 1 + reconnects
+  bool scene_from_cache = false;
+  std::uint64_t errors_received = 0;
+};
+
+class ViewClient {
+ public:
+  explicit ViewClient(ViewClientOptions options);
+  ~ViewClient();
+  ViewClient(const ViewClient&) = delete;
+  ViewClient& operator=(const ViewClient&) = delete;
+
+  // Connects, says Hello, loads the scene and subscribes to every tile. Throws irradcast::Error
+  // when the server cannot be reached within connect_timeout or refuses the session.
+  void connect();
+  // Receives and applies frames for `budget`, pinging as needed; reconnects (if enabled) when the
+  // connection drops. Returns the number of tiles applied.
+  std::size_t poll(std::chrono::milliseconds budget);
+  // Asks for the server's stats and polls until they arrive (or timeout: nullopt).
+  std::optional<wire::Stats> request_stats(std::chrono::milliseconds timeout);
+  void send_camera(const CameraPose& camera);
+  // Says Bye and closes. Idempotent.
+  void close();
+
+  ImageRGB compose(const CameraPose& camera, int width, int height) const;
+  const Scene& scene() const;
+  const World& world() const;
+  const Atlas& atlas() const;
+  const std::vector<Lightmap>& lightmaps() const { return lightmaps_; }
+  std::uint64_t tile_version(std::uint32_t lightmap, std::uint32_t tx, std::uint32_t ty) const;
+  // True when every tile has arrived at least once.
+  bool all_tiles_received() const;
+  std::size_t tile_count() const { return versions_.size(); }
+  const ViewClientCounters& counters() const { return counters_; }
+  const std::string& scene_hash() const { return scene_hash_; }
+  std::uint64_t session() const { return session_; }
+
+ private:
+  struct Net;
+  struct Loaded;
+  void open_connection();
+  void handshake();
+  void load_scene(const wire::Welcome& w);
+  void subscribe();
+  void send(const wire::Envelope& e);
+  // Next frame within the deadline; false on timeout. Throws ConnectionLost.
+  bool read_frame(wire::Envelope& out, std::chrono::steady_clock::time_point deadline);
+  void apply(const wire::Envelope& e);
+  void apply_tile(const wire::TileUpdate& t);
+  void reconnect();
+
+  ViewClientOptions options_;
+  std::unique_ptr<Net> net_;
+  std::unique_ptr<Loaded> loaded_;
+  std::string scene_hash_;
+  std::uint64_t session_ = 0;
+  std::uint64_t tile_epoch_ = 0;
+  std::uint32_t tile_size_ = 0;
+  std::vector<wire::LightmapInfo> infos_;
+  std::vector<std::uint32_t> first_tile_;
+  std::vector<Lightmap> lightmaps_;
+  std::vector<std::uint64_t> versions_;
+  std::optional<wire::Stats> last_stats_;
+  ViewClientCounters counters_;
+  std::chrono::steady_clock::time_point last_ping_{};
+  std::chrono::milliseconds ping_interval_{5000};
+};
+
+}  // namespace irradcast

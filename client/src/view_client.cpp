@@ -1,0 +1,447 @@
+#include "irradcast/view_client.h"
+
+#include <asio.hpp>
+
+#include <algorithm>
+#include <array>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "irradcast/compositor.h"
+#include "irradcast/error.h"
+#include "irradcast/frame.h"
+#include "irradcast/log.h"
+#include "irradcast/ray_scene.h"
+#include "irradcast/scene_package.h"
+#include "irradcast/tile_codec.h"
+
+namespace irradcast {
+
+namespace fs = std::filesystem;
+using asio::ip::tcp;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+// The connection dropped (EOF, reset, or the server closed it after an Error).
+struct ConnectionLost : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+std::uint64_t now_us() {
+  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
+                                        std::chrono::system_clock::now().time_since_epoch())
+                                        .count());
+}
+
+}  // namespace
+
+struct ViewClient::Net {
+  asio::io_context io;
+  tcp::socket socket{io};
+  wire::FrameDecoder decoder;
+  std::array<char, 64 * 1024> buffer{};
+};
+
+// The scene and what is derived from it; World and RayScene hold pointers into the Scene, so
+// they live together at a stable address.
+struct ViewClient::Loaded {
+  wire::UnpackedScene unpacked;
+  World world;
+  std::unique_ptr<RayScene> rays;
+};
+
+ViewClient::ViewClient(ViewClientOptions options) : options_(std::move(options)) {}
+
+ViewClient::~ViewClient() {
+  try {
+    close();
+  } catch (...) {
+  }
+}
+
+void ViewClient::connect() {
+  open_connection();
+  handshake();
+}
+
+void ViewClient::open_connection() {
+  const auto deadline = Clock::now() + options_.connect_timeout;
+  std::chrono::milliseconds backoff(50);
+  std::string last_error;
+  for (;;) {
+    net_ = std::make_unique<Net>();
+    std::error_code ec;
+    tcp::resolver resolver(net_->io);
+    auto endpoints = resolver.resolve(options_.host, std::to_string(options_.port), ec);
+    if (!ec) asio::connect(net_->socket, endpoints, ec);
+    if (!ec) {
+      net_->socket.set_option(tcp::no_delay(true), ec);
+      ++counters_.connections;
+      return;
+    }
+    last_error = ec.message();
+    if (Clock::now() + backoff > deadline)
+      throw Error("cannot connect to " + options_.host + ":" + std::to_string(options_.port) +
+                  ": " + last_error);
+    std::this_thread::sleep_for(backoff);
+    backoff = std::min(backoff * 2, std::chrono::milliseconds(1000));
+  }
+}
+
+void ViewClient::send(const wire::Envelope& e) {
+  std::string frame = wire::encode_frame(e);
+  std::error_code ec;
+  asio::write(net_->socket, asio::buffer(frame), ec);
+  if (ec) throw ConnectionLost("write: " + ec.message());
+}
+
+bool ViewClient::read_frame(wire::Envelope& out, Clock::time_point deadline) {
+  for (;;) {
+    switch (net_->decoder.next(out)) {
+      case wire::DecodeStatus::Frame:
+        ++counters_.frames_received;
+        return true;
+      case wire::DecodeStatus::TooLarge:
+      case wire::DecodeStatus::Malformed:
+        throw Error("the server sent a bad frame: " + net_->decoder.error());
+      case wire::DecodeStatus::NeedMore:
+        break;
+    }
+    const auto now = Clock::now();
+    if (now >= deadline) return false;
+    std::error_code result = asio::error::would_block;
+    std::size_t got = 0;
+    net_->socket.async_read_some(asio::buffer(net_->buffer),
+                                 [&](std::error_code ec, std::size_t n) {
+                                   result = ec;
+                                   got = n;
+                                 });
+    net_->io.restart();
+    net_->io.run_for(deadline - now);
+    if (result == asio::error::would_block) {
+      // Timed out: cancel the read and let its handler run before the buffer goes out of use.
+      std::error_code ignored;
+      net_->socket.cancel(ignored);
+      net_->io.restart();
+      net_->io.run();
+      if (result == asio::error::would_block || result == asio::error::operation_aborted) {
+        if (got > 0) {
+          counters_.bytes_received += got;
+          net_->decoder.feed(net_->buffer.data(), got);
+        }
+        return false;
+      }
+    }
+    if (result && result != asio::error::operation_aborted)
+      throw ConnectionLost(result == asio::error::eof ? "the server closed the connection"
+                                                      : result.message());
+    counters_.bytes_received += got;
+    net_->decoder.feed(net_->buffer.data(), got);
+  }
+}
+
+void ViewClient::handshake() {
+  wire::Envelope hello;
+  wire::Hello* h = hello.mutable_hello();
+  h->set_protocol_version(wire::kProtocolVersion);
+  h->set_client_name(options_.name);
+  if (loaded_) {
+    // Resume: the scene we hold and the tile versions we have.
+    h->set_cached_scene_hash(scene_hash_);
+    h->set_known_epoch(tile_epoch_);
+    for (std::uint32_t m = 0; m < infos_.size(); ++m)
+      for (std::uint32_t ty = 0; ty < infos_[m].tiles_y(); ++ty)
+        for (std::uint32_t tx = 0; tx < infos_[m].tiles_x(); ++tx) {
+          std::uint64_t v = versions_[first_tile_[m] + ty * infos_[m].tiles_x() + tx];
+          if (v == 0) continue;
+          wire::TileVersion* k = h->add_known();
+          k->set_lightmap(m);
+          k->set_tile_x(tx);
+          k->set_tile_y(ty);
+          k->set_version(v);
+        }
+  }
+  send(hello);
+  wire::Envelope e;
+  const auto deadline = Clock::now() + options_.reply_timeout;
+  for (;;) {
+    if (!read_frame(e, deadline)) throw Error("the server did not answer hello in time");
+    if (e.has_error()) throw Error("the server refused the session: " + e.error().message());
+    if (e.has_welcome()) break;
+  }
+  const wire::Welcome& w = e.welcome();
+  if (w.protocol_version() != wire::kProtocolVersion)
+    throw Error("the server speaks protocol " + std::to_string(w.protocol_version()) +
+                ", this client " + std::to_string(wire::kProtocolVersion));
+  session_ = w.session();
+  if (loaded_ && w.tile_epoch() != tile_epoch_) {
+    // Another lineage of versions: what we hold stays on screen until replaced, but any version
+    // the server sends is news.
+    std::fill(versions_.begin(), versions_.end(), 0);
+  }
+  tile_epoch_ = w.tile_epoch();
+  // Ping often enough for the server's idle timer.
+  ping_interval_ = options_.ping_interval;
+  if (w.idle_timeout_ms() > 0)
+    ping_interval_ = std::min(ping_interval_, std::chrono::milliseconds(w.idle_timeout_ms() / 3));
+  if (!loaded_ || w.scene_hash() != scene_hash_) load_scene(w);
+  subscribe();
+  last_ping_ = Clock::now();
+}
+
+void ViewClient::load_scene(const wire::Welcome& w) {
+  std::string bytes;
+  fs::path cached;
+  if (!options_.cache_dir.empty()) {
+    cached = fs::path(options_.cache_dir) / (wire::hex(w.scene_hash()) + ".scene");
+    std::ifstream f(cached, std::ios::binary);
+    if (f) {
+      std::ostringstream ss;
+      ss << f.rdbuf();
+      bytes = ss.str();
+    }
+  }
+  std::unique_ptr<Loaded> loaded = std::make_unique<Loaded>();
+  bool from_cache = false;
+  if (!bytes.empty()) {
+    try {
+      loaded->unpacked = wire::open_scene_package(bytes, w.scene_hash());
+      from_cache = true;
+    } catch (const Error& e) {
+      log::warn("view", cached.string() + " is damaged (" + e.what() + "); downloading again");
+      bytes.clear();
+    }
+  }
+  if (!from_cache) {
+    wire::Envelope req;
+    req.mutable_scene_request()->set_offset(0);
+    send(req);
+    wire::SceneAssembler assembler(w.scene_hash(), w.scene_bytes());
+    wire::Envelope e;
+    while (!assembler.complete()) {
+      if (!read_frame(e, Clock::now() + options_.reply_timeout))
+        throw Error("the scene download stalled");
+      if (e.has_error()) throw Error("scene download: the server says: " + e.error().message());
+      if (e.has_scene_chunk()) {
+        counters_.scene_bytes_downloaded += e.scene_chunk().data().size();
+        assembler.add(e.scene_chunk());
+      } else {
+        apply(e);
+      }
+    }
+    bytes = assembler.bytes();
+    loaded->unpacked = wire::open_scene_package(bytes, w.scene_hash());
+    if (!cached.empty()) {
+      std::error_code ec;
+      fs::create_directories(cached.parent_path(), ec);
+      const fs::path tmp = cached.string() + ".tmp" + std::to_string(session_);
+      std::ofstream f(tmp, std::ios::binary);
+      f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+      f.close();
+      if (f) fs::rename(tmp, cached, ec);
+      if (!f || ec) log::warn("view", "cannot cache the scene in " + cached.string());
+    }
+  }
+  counters_.scene_from_cache = from_cache;
+  loaded->world = World::build(loaded->unpacked.scene);
+  loaded->rays = std::make_unique<RayScene>(loaded->world);
+  const Atlas& atlas = loaded->unpacked.atlas;
+  if (static_cast<std::size_t>(w.lightmaps_size()) != atlas.objects.size())
+    throw Error("the server announces " + std::to_string(w.lightmaps_size()) +
+                " lightmaps, the scene package has " + std::to_string(atlas.objects.size()));
+  if (w.tile_size() == 0) throw Error("the server announces a tile size of 0");
+  infos_.assign(w.lightmaps().begin(), w.lightmaps().end());
+  tile_size_ = w.tile_size();
+  first_tile_.clear();
+  lightmaps_.clear();
+  std::uint32_t total = 0;
+  for (std::size_t m = 0; m < infos_.size(); ++m) {
+    const wire::LightmapInfo& li = infos_[m];
+    const ObjectLightmap& o = atlas.objects[m];
+    if (static_cast<int>(li.width()) != o.width || static_cast<int>(li.height()) != o.height ||
+        static_cast<int>(li.tiles_x()) !=
+            wire::tiles_along(o.width, static_cast<int>(tile_size_)) ||
+        static_cast<int>(li.tiles_y()) != wire::tiles_along(o.height, static_cast<int>(tile_size_)))
+      throw Error("lightmap " + std::to_string(m) +
+                  ": the server's layout does not match the scene");
+    first_tile_.push_back(total);
+    total += li.tiles_x() * li.tiles_y();
+    lightmaps_.emplace_back(o.width, o.height);
+  }
+  first_tile_.push_back(total);
+  versions_.assign(total, 0);
+  scene_hash_ = w.scene_hash();
+  loaded_ = std::move(loaded);
+  log::info("view", "scene '" + w.scene_id() + "' " +
+                        (from_cache ? "from the cache" : "downloaded") + ": " +
+                        std::to_string(infos_.size()) + " lightmaps, " + std::to_string(total) +
+                        " tiles");
+}
+
+void ViewClient::subscribe() {
+  wire::Envelope s;
+  s.mutable_subscribe()->set_all(true);
+  s.mutable_subscribe()->set_encoding(options_.encoding);
+  s.mutable_subscribe()->set_max_bytes_per_s(options_.max_bytes_per_s);
+  send(s);
+}
+
+void ViewClient::apply(const wire::Envelope& e) {
+  switch (e.msg_case()) {
+    case wire::Envelope::kTileUpdate:
+      apply_tile(e.tile_update());
+      break;
+    case wire::Envelope::kStats:
+      last_stats_ = e.stats();
+      break;
+    case wire::Envelope::kError:
+      ++counters_.errors_received;
+      log::warn("view", "server error: " + e.error().message());
+      break;
+    case wire::Envelope::kBye:
+      log::info("view", "server says bye: " + e.bye().reason());
+      break;
+    default:
+      break;  // Pong and anything newer: nothing to do
+  }
+}
+
+void ViewClient::apply_tile(const wire::TileUpdate& t) {
+  if (t.lightmap() >= infos_.size())
+    throw Error("tile for unknown lightmap " + std::to_string(t.lightmap()));
+  const wire::LightmapInfo& li = infos_[t.lightmap()];
+  if (t.tile_x() >= li.tiles_x() || t.tile_y() >= li.tiles_y())
+    throw Error("tile " + std::to_string(t.tile_x()) + "," + std::to_string(t.tile_y()) +
+                " is outside lightmap " + std::to_string(t.lightmap()));
+  const wire::TileRect r = wire::tile_rect(
+      static_cast<int>(li.width()), static_cast<int>(li.height()), static_cast<int>(tile_size_),
+      static_cast<int>(t.tile_x()), static_cast<int>(t.tile_y()));
+  if (static_cast<int>(t.width()) != r.w || static_cast<int>(t.height()) != r.h)
+    throw Error("tile size does not match the layout");
+  const std::uint32_t index = first_tile_[t.lightmap()] + t.tile_y() * li.tiles_x() + t.tile_x();
+  if (t.version() <= versions_[index]) return;  // stale (cannot happen with this server)
+  wire::decode_tile(t.payload(), t.encoding(), r, lightmaps_[t.lightmap()]);
+  versions_[index] = t.version();
+  ++counters_.tiles_applied;
+}
+
+std::size_t ViewClient::poll(std::chrono::milliseconds budget) {
+  if (!net_) throw Error("not connected");
+  const auto deadline = Clock::now() + budget;
+  const std::uint64_t before = counters_.tiles_applied;
+  while (Clock::now() < deadline) {
+    try {
+      if (Clock::now() - last_ping_ >= ping_interval_) {
+        wire::Envelope p;
+        p.mutable_ping()->set_nonce(counters_.frames_received);
+        p.mutable_ping()->set_time_us(now_us());
+        send(p);
+        last_ping_ = Clock::now();
+      }
+      wire::Envelope e;
+      const auto until = std::min(deadline, last_ping_ + ping_interval_);
+      if (read_frame(e, until)) apply(e);
+    } catch (const ConnectionLost& lost) {
+      if (!options_.reconnect) throw Error(std::string("connection lost: ") + lost.what());
+      log::info("view", std::string("connection lost (") + lost.what() + "); reconnecting");
+      reconnect();
+    }
+  }
+  return counters_.tiles_applied - before;
+}
+
+void ViewClient::reconnect() {
+  net_.reset();
+  open_connection();
+  handshake();
+}
+
+std::optional<wire::Stats> ViewClient::request_stats(std::chrono::milliseconds timeout) {
+  last_stats_.reset();
+  wire::Envelope r;
+  r.mutable_stats_request();
+  try {
+    send(r);
+  } catch (const ConnectionLost&) {
+    poll(std::chrono::milliseconds(1));  // reconnects
+    return std::nullopt;
+  }
+  const auto deadline = Clock::now() + timeout;
+  while (!last_stats_ && Clock::now() < deadline)
+    poll(std::min(std::chrono::milliseconds(50),
+                  std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()) +
+                      std::chrono::milliseconds(1)));
+  return last_stats_;
+}
+
+void ViewClient::send_camera(const CameraPose& c) {
+  wire::Envelope e;
+  wire::CameraUpdate* u = e.mutable_camera_update();
+  auto set = [](wire::Vec3* v, glm::vec3 x) {
+    v->set_x(x.x);
+    v->set_y(x.y);
+    v->set_z(x.z);
+  };
+  set(u->mutable_eye(), c.eye);
+  set(u->mutable_forward(), c.forward);
+  set(u->mutable_up(), c.up);
+  u->set_yfov(c.yfov);
+  try {
+    send(e);
+  } catch (const ConnectionLost&) {
+  }
+}
+
+void ViewClient::close() {
+  if (!net_) return;
+  if (net_->socket.is_open()) {
+    try {
+      send(wire::make_bye("viewer done"));
+    } catch (const ConnectionLost&) {
+    }
+    std::error_code ec;
+    net_->socket.shutdown(tcp::socket::shutdown_both, ec);
+    net_->socket.close(ec);
+  }
+  net_.reset();
+}
+
+ImageRGB ViewClient::compose(const CameraPose& camera, int width, int height) const {
+  if (!loaded_) throw Error("no scene yet");
+  return irradcast::compose(loaded_->world, *loaded_->rays, loaded_->unpacked.atlas, lightmaps_,
+                            camera, width, height);
+}
+
+const Scene& ViewClient::scene() const {
+  if (!loaded_) throw Error("no scene yet");
+  return loaded_->unpacked.scene;
+}
+
+const World& ViewClient::world() const {
+  if (!loaded_) throw Error("no scene yet");
+  return loaded_->world;
+}
+
+const Atlas& ViewClient::atlas() const {
+  if (!loaded_) throw Error("no scene yet");
+  return loaded_->unpacked.atlas;
+}
+
+std::uint64_t ViewClient::tile_version(std::uint32_t lightmap, std::uint32_t tx,
+                                       std::uint32_t ty) const {
+  if (lightmap >= infos_.size() || tx >= infos_[lightmap].tiles_x() ||
+      ty >= infos_[lightmap].tiles_y())
+    return 0;
+  return versions_[first_tile_[lightmap] + ty * infos_[lightmap].tiles_x() + tx];
+}
+
+bool ViewClient::all_tiles_received() const {
+  for (std::uint64_t v : versions_)
+    if (v == 0) return false;
+  return !versions_.empty();
+}
+
+}  // namespace irradcast

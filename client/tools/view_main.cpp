@@ -1,0 +1,225 @@
+// irradcast-view: a thin viewer. Connects to irradcast-server, gets the scene (cached by hash),
+// keeps its tile cache current, and composes its own viewpoint: primary rays, lightmap lookup,
+// tone mapping. Headless: writes the final frame to a PNG or EXR file.
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "irradcast/camera.h"
+#include "irradcast/error.h"
+#include "irradcast/image.h"
+#include "irradcast/log.h"
+#include "irradcast/tonemap.h"
+#include "irradcast/view_client.h"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+namespace fs = std::filesystem;
+
+struct Options {
+  std::string connect;
+  std::string camera;
+  int width = 512;
+  int height = 512;
+  std::string out;
+  int frames = 1;
+  int frame_ms = 250;
+  bool until_converged = false;
+  double converge_at = 0.02;
+  double timeout_s = 120.0;
+  std::string cache_dir = "auto";
+  std::string encoding = "rgb9e5";
+  std::uint64_t max_rate = 0;
+  std::string name = "irradcast-view";
+  std::string tonemap = "reinhard";
+  std::string exposure = "auto";
+  std::string json;
+  std::string log_level = "info";
+  bool no_reconnect = false;
+};
+
+std::string default_cache_dir() {
+  if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) return std::string(x) + "/irradcast";
+  if (const char* h = std::getenv("HOME"); h && *h) return std::string(h) + "/.cache/irradcast";
+  return "";
+}
+
+int run(const Options& o) {
+  using namespace irradcast;
+  log::set_level(log::parse_level(o.log_level));
+  const auto colon = o.connect.rfind(':');
+  if (colon == std::string::npos || colon == 0 || colon + 1 == o.connect.size())
+    throw Error("--connect must be HOST:PORT, not '" + o.connect + "'");
+  ViewClientOptions vo;
+  vo.host = o.connect.substr(0, colon);
+  try {
+    std::size_t used = 0;
+    int port = std::stoi(o.connect.substr(colon + 1), &used);
+    if (used != o.connect.size() - colon - 1 || port < 1 || port > 65535)
+      throw std::invalid_argument("port");
+    vo.port = static_cast<std::uint16_t>(port);
+  } catch (const std::exception&) {
+    throw Error("--connect: '" + o.connect.substr(colon + 1) + "' is not a port number");
+  }
+  vo.name = o.name;
+  vo.cache_dir = o.cache_dir == "auto"   ? default_cache_dir()
+                 : o.cache_dir == "none" ? ""
+                                         : o.cache_dir;
+  if (o.encoding == "rgb9e5")
+    vo.encoding = wire::TILE_RGB9E5_ZSTD;
+  else if (o.encoding == "half")
+    vo.encoding = wire::TILE_HALF_ZSTD;
+  else
+    throw Error("--encoding must be rgb9e5 or half, not '" + o.encoding + "'");
+  vo.max_bytes_per_s = o.max_rate;
+  vo.reconnect = !o.no_reconnect;
+  const std::string ext = fs::path(o.out).extension().string();
+  if (ext != ".png" && ext != ".exr") throw Error("--out must end in .png or .exr: " + o.out);
+  ToneMapOptions tm;
+  tm.op = parse_tone_operator(o.tonemap);
+  if (o.exposure != "auto") {
+    tm.auto_exposure = false;
+    try {
+      tm.exposure_ev = std::stof(o.exposure);
+    } catch (const std::exception&) {
+      throw Error("--exposure must be 'auto' or a number of stops");
+    }
+  }
+
+  const auto start = Clock::now();
+  const auto deadline =
+      start + std::chrono::milliseconds(static_cast<long long>(o.timeout_s * 1e3));
+  ViewClient client(vo);
+  client.connect();
+  const double t_scene = std::chrono::duration<double>(Clock::now() - start).count();
+  CameraPose camera = default_camera(client.scene(), client.world());
+  if (!o.camera.empty()) camera = parse_camera(o.camera, camera);
+  client.send_camera(camera);
+
+  ImageRGB frame;
+  int frames = 0;
+  bool converged = false;
+  double t_converged = -1.0;
+  const auto interval = std::chrono::milliseconds(o.frame_ms);
+  for (;;) {
+    client.poll(interval);
+    if (o.until_converged) {
+      auto stats = client.request_stats(std::chrono::seconds(5));
+      if (stats && client.all_tiles_received() && stats->queue_depth() == 0 &&
+          (stats->engine_idle() || stats->convergence() <= o.converge_at)) {
+        converged = true;
+        t_converged = std::chrono::duration<double>(Clock::now() - start).count();
+      }
+    }
+    const bool timed_out = Clock::now() > deadline;
+    // --frames: a frame per interval. --until-converged: only the final frame (a headless
+    // viewer has no one to show the others to, and composing them would take CPU from the
+    // server on a shared machine).
+    if (!o.until_converged || converged || timed_out) {
+      frame = client.compose(camera, o.width, o.height);
+      ++frames;
+    }
+    if (o.until_converged ? converged : frames >= o.frames) break;
+    if (timed_out) {
+      log::warn("view", "timed out after " + std::to_string(o.timeout_s) + " s");
+      break;
+    }
+  }
+  if (ext == ".exr")
+    write_exr(o.out, frame);
+  else
+    write_png(o.out, frame.width, frame.height, tonemap_srgb8(frame, tm));
+  const ViewClientCounters& c = client.counters();
+  client.close();
+  const double t_total = std::chrono::duration<double>(Clock::now() - start).count();
+  char line[512];
+  std::snprintf(line, sizeof line,
+                "%s: %d frames, %.1f KB received (scene %s, %.1f KB), %llu tiles applied, "
+                "scene ready after %.2f s, %s %.2f s, %u connection(s)",
+                o.out.c_str(), frames, c.bytes_received / 1024.0,
+                c.scene_from_cache ? "from cache" : "downloaded", c.scene_bytes_downloaded / 1024.0,
+                static_cast<unsigned long long>(c.tiles_applied), t_scene,
+                o.until_converged ? (converged ? "converged image after" : "NOT converged after")
+                                  : "done after",
+                o.until_converged && converged ? t_converged : t_total, c.connections);
+  std::printf("%s\n", line);
+  if (!o.json.empty()) {
+    nlohmann::json j = {{"out", o.out},
+                        {"frames", frames},
+                        {"bytes_received", c.bytes_received},
+                        {"scene_bytes_downloaded", c.scene_bytes_downloaded},
+                        {"scene_from_cache", c.scene_from_cache},
+                        {"tiles_applied", c.tiles_applied},
+                        {"connections", c.connections},
+                        {"seconds_to_scene", t_scene},
+                        {"converged", converged},
+                        {"seconds_to_converged", t_converged},
+                        {"seconds_total", t_total}};
+    std::ofstream f(o.json);
+    f << j.dump(2) << "\n";
+    if (!f) throw Error(o.json + ": cannot write");
+  }
+  return o.until_converged && !converged ? 3 : 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  CLI::App app{
+      "irradcast-view: a thin viewer of an irradcast-server. Downloads the scene once "
+      "(cached by content hash), keeps its irradiance tiles current, and composes its "
+      "own viewpoint into FILE.png or FILE.exr.",
+      "irradcast-view"};
+  app.option_defaults()->always_capture_default();
+  app.add_option("--connect", o.connect, "server address HOST:PORT")->required();
+  app.add_option("--camera", o.camera,
+                 "eye=x,y,z:target=x,y,z:fov=deg[:up=x,y,z] (default: the scene's camera)");
+  app.add_option("--width", o.width, "image width")->check(CLI::Range(1, 16384));
+  app.add_option("--height", o.height, "image height")->check(CLI::Range(1, 16384));
+  app.add_option("--out", o.out, "output image (.png tone-mapped, .exr linear)")->required();
+  app.add_option("--frames", o.frames, "frames to compose, one per --frame-ms")
+      ->check(CLI::Range(1, 1 << 20));
+  app.add_option("--frame-ms", o.frame_ms, "milliseconds of tile streaming between frames")
+      ->check(CLI::Range(1, 600000));
+  app.add_flag("--until-converged", o.until_converged,
+               "compose until every tile is current and the server's lightmaps are converged "
+               "(or final); exit 3 if --timeout comes first");
+  app.add_option("--converge-at", o.converge_at,
+                 "convergence target: the server's mean relative standard error")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--timeout", o.timeout_s, "give up after this many seconds")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--cache-dir", o.cache_dir,
+                 "scene cache (auto = $XDG_CACHE_HOME/irradcast or ~/.cache/irradcast; none)");
+  app.add_option("--encoding", o.encoding, "tile encoding: rgb9e5 | half");
+  app.add_option("--max-rate", o.max_rate, "byte-rate cap for tiles, bytes/s (0 = none)");
+  app.add_option("--name", o.name, "client name in the server's logs");
+  app.add_option("--tonemap", o.tonemap, "reinhard | aces | clamp");
+  app.add_option("--exposure", o.exposure, "auto (key 0.18) or exposure in stops");
+  app.add_option("--json", o.json, "also write a JSON report here");
+  app.add_flag("--no-reconnect", o.no_reconnect,
+               "fail instead of reconnecting when the connection drops");
+  app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    return run(o);
+  } catch (const irradcast::Error& e) {
+    std::fprintf(stderr, "irradcast-view: error: %s\n", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "irradcast-view: internal error: %s\n", e.what());
+    return 2;
+  }
+}

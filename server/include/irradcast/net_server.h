@@ -1,0 +1,63 @@
+// The network server: accepts TCP connections and runs one session per client (the protocol of
+// docs/PROTOCOL.md) on a small pool of Asio I/O threads. It serves the scene package and the
+// tiles of an EngineHost; the engine runs on its own thread and only tells the server which
+// tiles got new versions. A session's memory is bounded: at most one queue entry per tile and a
+// capped number of control frames, so a slow or stuck client never makes the server buffer
+// without bound or stall the others.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "irradcast/engine_host.h"
+
+namespace irradcast {
+
+struct ServerOptions {
+  std::string bind = "0.0.0.0";
+  std::uint16_t port = 7450;  // 0 = any free port (see Server::port())
+  int io_threads = 2;
+  std::size_t max_frame = 16u << 20;              // largest frame accepted from a client
+  std::chrono::milliseconds idle_timeout{30000};  // close after this long without a frame
+  std::size_t scene_chunk_bytes = 256u << 10;     // SceneChunk payload size
+  std::size_t max_control_frames = 256;           // queued replies before a client is dropped
+  std::uint32_t max_clients = 4096;
+};
+
+struct ServerStats {
+  std::uint32_t clients = 0;
+  std::uint64_t connections = 0;  // accepted so far
+  std::uint64_t bytes_sent = 0;
+  std::uint64_t bytes_received = 0;
+  std::uint64_t frames_received = 0;
+  std::uint64_t tiles_sent = 0;
+  std::uint64_t tiles_coalesced = 0;
+  std::uint64_t scene_bytes_sent = 0;
+  std::uint64_t errors_sent = 0;
+  std::uint64_t queue_depth = 0;  // tiles waiting, all clients
+};
+
+class Server {
+ public:
+  Server(EngineHost& host, ServerOptions options);
+  ~Server();
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+
+  // Binds and starts the I/O threads. Throws irradcast::Error if the address cannot be bound.
+  void start();
+  // Tells every client (Error SERVER_SHUTDOWN), closes every connection, joins the threads.
+  // Idempotent.
+  void stop();
+  std::uint16_t port() const;
+  ServerStats stats() const;
+
+  struct Impl;
+
+ private:
+  std::shared_ptr<Impl> impl_;
+};
+
+}  // namespace irradcast

@@ -1,0 +1,163 @@
+#include "irradcast/engine_host.h"
+
+#include <chrono>
+
+#include "irradcast/embree_backend.h"
+#include "irradcast/engine.h"
+#include "irradcast/error.h"
+#include "irradcast/gbuffer.h"
+#include "irradcast/lights.h"
+#include "irradcast/log.h"
+#include "irradcast/ray_scene.h"
+#include "irradcast/texel_validity.h"
+
+namespace irradcast {
+
+struct EngineHost::Impl {
+  std::unique_ptr<RayScene> rays;
+  std::unique_ptr<LightSampler> lights;
+  std::vector<TexelGBuffer> gbuffers;
+  std::unique_ptr<Engine> engine;
+};
+
+namespace {
+std::uint64_t now_us() {
+  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
+                                        std::chrono::system_clock::now().time_since_epoch())
+                                        .count());
+}
+}  // namespace
+
+EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions options)
+    : scene_(std::move(scene)),
+      scene_id_(std::move(scene_id)),
+      options_(options),
+      impl_(std::make_unique<Impl>()) {
+  options_.engine.validate();
+  world_ = World::build(scene_);
+  if (world_.objects.empty()) throw Error(scene_id_ + ": the scene has no triangles to light");
+  impl_->rays = std::make_unique<RayScene>(world_);
+  impl_->lights = std::make_unique<LightSampler>(world_);
+  if (impl_->lights->empty())
+    log::warn("engine", scene_id_ + " has no lights: every tile will be black");
+  atlas_ = build_atlas(world_, options_.atlas);
+  impl_->gbuffers = rasterize_gbuffer(world_, atlas_);
+  mark_hidden_texels(*impl_->rays, impl_->gbuffers);
+  impl_->engine = std::make_unique<Engine>(
+      world_, atlas_, impl_->gbuffers, *impl_->rays,
+      std::make_unique<EmbreeBackend>(*impl_->rays, *impl_->lights), options_.engine);
+  std::vector<std::pair<int, int>> sizes;
+  for (const ObjectLightmap& o : atlas_.objects) sizes.emplace_back(o.width, o.height);
+  tiles_ = std::make_unique<TileStore>(sizes, options_.tiles);
+  package_ = wire::make_scene_package(scene_, atlas_);
+  {
+    const EngineParams& e = options_.engine;
+    std::string key = package_.hash;
+    auto add = [&](double v) { key += "|" + std::to_string(v); };
+    for (double v :
+         {static_cast<double>(e.cell_size), static_cast<double>(e.tracing_range),
+          static_cast<double>(e.direct_samples), static_cast<double>(e.indirect_samples),
+          static_cast<double>(e.indirect_bounces), static_cast<double>(e.probe_resolution),
+          static_cast<double>(e.dispatch), static_cast<double>(e.distant_point),
+          static_cast<double>(e.relocate_probes), static_cast<double>(e.probe_visibility),
+          static_cast<double>(e.seed), static_cast<double>(options_.atlas.texels_per_scene),
+          static_cast<double>(options_.atlas.max_lightmap_size),
+          static_cast<double>(options_.tiles.tile_size),
+          static_cast<double>(options_.tiles.change_threshold),
+          static_cast<double>(options_.tiles.floor_fraction)})
+      add(v);
+    const std::string digest = wire::sha256(key);
+    for (int i = 0; i < 8; ++i)
+      tile_epoch_ =
+          (tile_epoch_ << 8) | static_cast<unsigned char>(digest[static_cast<std::size_t>(i)]);
+  }
+  log::info("engine", scene_id_ + ": " + std::to_string(atlas_.objects.size()) + " lightmaps, " +
+                          std::to_string(impl_->engine->texel_count()) + " texels, " +
+                          std::to_string(tiles_->tile_count()) + " tiles, scene package " +
+                          std::to_string(package_.bytes.size()) + " bytes");
+}
+
+EngineHost::~EngineHost() {
+  stop();
+}
+
+void EngineHost::set_listener(PublishListener listener) {
+  std::lock_guard lock(mutex_);
+  listener_ = std::move(listener);
+}
+
+void EngineHost::start() {
+  if (thread_.joinable()) return;
+  stopping_ = false;
+  thread_ = std::thread([this] { run(); });
+}
+
+void EngineHost::stop() {
+  stopping_ = true;
+  cv_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+void EngineHost::step() {
+  if (thread_.joinable()) throw Error("engine host: step() while the engine thread runs");
+  do_update();
+}
+
+void EngineHost::run() {
+  while (!stopping_) {
+    {
+      std::unique_lock lock(mutex_);
+      if (stats_.idle) {
+        cv_.wait(lock, [&] { return stopping_.load(); });
+        break;
+      }
+    }
+    try {
+      do_update();
+    } catch (const std::exception& e) {
+      // The engine's input was validated at construction; a failure here is a bug. Keep the
+      // last published tiles and stop refining rather than take the service down.
+      log::error("engine", std::string("update failed, refinement stopped: ") + e.what());
+      std::lock_guard lock(mutex_);
+      stats_.idle = true;
+      cv_.notify_all();
+    }
+  }
+}
+
+void EngineHost::do_update() {
+  UpdateStats u = impl_->engine->update();
+  std::vector<Lightmap> maps = impl_->engine->lightmaps();
+  std::vector<std::uint32_t> changed = tiles_->publish(maps, now_us());
+  PublishListener listener;
+  {
+    std::lock_guard lock(mutex_);
+    stats_.updates = impl_->engine->updates();
+    stats_.last_update_ms = 1e3 * u.total_seconds;
+    stats_.rays_per_s = u.total_seconds > 0.0 ? u.total_rays() / u.total_seconds : 0.0;
+    stats_.convergence = impl_->engine->mean_relative_error();
+    stats_.tiles_published += changed.size();
+    if (options_.max_updates > 0 && stats_.updates >= options_.max_updates) {
+      stats_.idle = true;
+      log::info("engine", "reached " + std::to_string(options_.max_updates) +
+                              " updates; the lightmaps are final");
+    }
+    listener = listener_;
+  }
+  log::debug("engine", "update " + std::to_string(impl_->engine->updates()) + ": " +
+                           std::to_string(changed.size()) + " tiles changed");
+  if (listener && !changed.empty()) listener(changed);
+  cv_.notify_all();
+}
+
+EngineHostStats EngineHost::stats() const {
+  std::lock_guard lock(mutex_);
+  return stats_;
+}
+
+void EngineHost::wait_for_updates(std::uint64_t updates) const {
+  std::unique_lock lock(mutex_);
+  cv_.wait(lock, [&] { return stats_.updates >= updates || stats_.idle || stopping_.load(); });
+}
+
+}  // namespace irradcast

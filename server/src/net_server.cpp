@@ -1,0 +1,648 @@
+#include "irradcast/net_server.h"
+
+#include <asio.hpp>
+
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <deque>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <thread>
+#include <vector>
+
+#include "irradcast/error.h"
+#include "irradcast/frame.h"
+#include "irradcast/log.h"
+#include "irradcast/send_queue.h"
+
+namespace irradcast {
+
+using asio::ip::tcp;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+class Session;
+
+}  // namespace
+
+// The server's state. Sessions and handlers refer to it by plain pointer: they only run on the
+// I/O threads, which stop() joins before the Impl can go (and a handler that owned a reference
+// would make a cycle through the io_context that owns the handler). The engine listener holds a
+// weak_ptr.
+struct Server::Impl {
+  Impl(EngineHost& h, ServerOptions o) : host(h), options(std::move(o)), acceptor(io) {}
+
+  EngineHost& host;
+  ServerOptions options;
+  asio::io_context io;
+  tcp::acceptor acceptor;
+  std::vector<std::thread> threads;
+  std::optional<asio::executor_work_guard<asio::io_context::executor_type>> work;
+  std::atomic<bool> stopping{false};
+  Clock::time_point started = Clock::now();
+  std::atomic<std::uint64_t> next_session{1};
+
+  mutable std::mutex sessions_mutex;
+  std::set<std::shared_ptr<Session>> sessions;
+
+  // Counters (sessions add to them).
+  std::atomic<std::uint64_t> connections{0}, bytes_sent{0}, bytes_received{0}, frames_received{0},
+      tiles_sent{0}, tiles_coalesced{0}, scene_bytes_sent{0}, errors_sent{0};
+
+  void accept();
+  void on_publish(const std::vector<std::uint32_t>& tiles);
+  void remove(const std::shared_ptr<Session>& s) {
+    std::lock_guard lock(sessions_mutex);
+    sessions.erase(s);
+  }
+  std::uint32_t client_count() const {
+    std::lock_guard lock(sessions_mutex);
+    return static_cast<std::uint32_t>(sessions.size());
+  }
+};
+
+namespace {
+
+// One client connection. Every handler runs on the session's strand, so a session's state
+// needs no locks; the engine thread reaches it only through asio::post.
+class Session : public std::enable_shared_from_this<Session> {
+ public:
+  Session(Server::Impl* server, tcp::socket socket)
+      : server_(server),
+        socket_(std::move(socket)),
+        strand_(asio::make_strand(server_->io)),
+        idle_timer_(strand_),
+        rate_timer_(strand_),
+        close_timer_(strand_),
+        decoder_(server_->options.max_frame),
+        id_(server_->next_session++) {
+    const TileStore& tiles = server_->host.tiles();
+    known_.assign(tiles.tile_count(), 0);
+    queue_.resize(tiles.tile_count());
+    subscribed_.assign(tiles.lightmap_count(), 0);
+    std::error_code ec;
+    auto ep = socket_.remote_endpoint(ec);
+    peer_ = ec ? std::string("?") : ep.address().to_string() + ":" + std::to_string(ep.port());
+  }
+
+  void start() {
+    asio::post(strand_, [self = shared_from_this()] {
+      self->arm_idle_timer();
+      self->read();
+    });
+  }
+
+  // Engine thread: tiles that got new versions.
+  void tiles_changed(std::shared_ptr<const std::vector<std::uint32_t>> tiles) {
+    asio::post(strand_, [self = shared_from_this(), tiles] {
+      if (self->closed_ || !self->streaming_) return;
+      const TileStore& store = self->server_->host.tiles();
+      for (std::uint32_t t : *tiles)
+        if (self->subscribed_[store.tile(t).lightmap]) self->queue_.push(t);
+      self->pump();
+    });
+  }
+
+  // Server shutdown: an Error SERVER_SHUTDOWN, then close.
+  void shutdown() {
+    asio::post(strand_, [self = shared_from_this()] {
+      self->fail(wire::SERVER_SHUTDOWN, "the server is shutting down");
+    });
+  }
+
+  std::size_t queue_depth() const { return queue_depth_.load(); }
+
+ private:
+  enum class State { AwaitHello, Ready };
+
+  void arm_idle_timer() {
+    idle_timer_.expires_after(server_->options.idle_timeout);
+    idle_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
+      if (ec || self->closed_) return;
+      self->fail(
+          wire::IDLE_TIMEOUT,
+          "no frame for " + std::to_string(self->server_->options.idle_timeout.count()) + " ms");
+    });
+  }
+
+  void read() {
+    if (closed_ || closing_) return;
+    socket_.async_read_some(asio::buffer(buffer_),
+                            asio::bind_executor(strand_, [self = shared_from_this()](
+                                                             std::error_code ec, std::size_t n) {
+                              self->on_read(ec, n);
+                            }));
+  }
+
+  void on_read(std::error_code ec, std::size_t n) {
+    if (closed_) return;
+    if (ec) {
+      if (ec != asio::error::eof && ec != asio::error::operation_aborted)
+        log::debug("server", "session " + std::to_string(id_) + ": read: " + ec.message());
+      close();
+      return;
+    }
+    server_->bytes_received += n;
+    decoder_.feed(buffer_.data(), n);
+    wire::Envelope env;
+    for (;;) {
+      const wire::DecodeStatus st = decoder_.next(env);
+      if (st == wire::DecodeStatus::NeedMore) break;
+      if (st == wire::DecodeStatus::TooLarge) {
+        fail(wire::FRAME_TOO_LARGE, decoder_.error());
+        return;
+      }
+      if (st == wire::DecodeStatus::Malformed) {
+        fail(wire::BAD_FRAME, decoder_.error());
+        return;
+      }
+      ++server_->frames_received;
+      arm_idle_timer();
+      handle(env);
+      if (closed_ || closing_) return;
+    }
+    read();
+  }
+
+  void handle(const wire::Envelope& env) {
+    using E = wire::Envelope;
+    if (state_ == State::AwaitHello && env.msg_case() != E::kHello) {
+      fail(wire::UNEXPECTED_MESSAGE,
+           std::string("expected hello as the first frame, got ") + wire::message_name(env));
+      return;
+    }
+    switch (env.msg_case()) {
+      case E::kHello:
+        on_hello(env.hello());
+        break;
+      case E::kSceneRequest:
+        on_scene_request(env.scene_request());
+        break;
+      case E::kSubscribe:
+        on_subscribe(env.subscribe());
+        break;
+      case E::kCameraUpdate:
+        break;  // accepted; priorities by camera are not used yet
+      case E::kStatsRequest:
+        send_stats();
+        break;
+      case E::kPing: {
+        wire::Envelope pong;
+        pong.mutable_pong()->set_nonce(env.ping().nonce());
+        pong.mutable_pong()->set_time_us(env.ping().time_us());
+        send(pong);
+        break;
+      }
+      case E::kBye:
+        log::debug("server", "session " + std::to_string(id_) + ": bye: " + env.bye().reason());
+        close();
+        break;
+      case E::kPong:
+        break;
+      case E::kError:
+        log::info("server",
+                  "session " + std::to_string(id_) + " reports an error: " + env.error().message());
+        break;
+      default:
+        error(wire::UNEXPECTED_MESSAGE,
+              std::string("a client does not send ") + wire::message_name(env));
+        break;
+    }
+    pump();
+  }
+
+  void on_hello(const wire::Hello& h) {
+    if (state_ != State::AwaitHello) {
+      error(wire::UNEXPECTED_MESSAGE, "hello was already received");
+      return;
+    }
+    if (h.protocol_version() != wire::kProtocolVersion) {
+      fail(wire::UNSUPPORTED_VERSION, "protocol version " + std::to_string(h.protocol_version()) +
+                                          " is not supported; this server speaks " +
+                                          std::to_string(wire::kProtocolVersion));
+      return;
+    }
+    const EngineHost& host = server_->host;
+    const TileStore& tiles = host.tiles();
+    // Resume: tiles the client already holds are only sent again when their version changes.
+    // Versions only mean something for the same scene package.
+    if (h.cached_scene_hash() == host.package().hash && h.known_epoch() == host.tile_epoch())
+      for (const wire::TileVersion& k : h.known()) {
+        std::int64_t i = tiles.index(k.lightmap(), k.tile_x(), k.tile_y());
+        if (i >= 0) known_[static_cast<std::size_t>(i)] = k.version();
+      }
+    client_name_ = h.client_name().substr(0, 64);
+    wire::Envelope w;
+    wire::Welcome* wm = w.mutable_welcome();
+    wm->set_protocol_version(wire::kProtocolVersion);
+    wm->set_session(id_);
+    wm->set_scene_id(host.scene_id());
+    wm->set_scene_hash(host.package().hash);
+    wm->set_scene_bytes(host.package().bytes.size());
+    wm->set_tile_size(static_cast<std::uint32_t>(tiles.options().tile_size));
+    wm->add_capabilities("tiles.rgb9e5");
+    wm->add_capabilities("tiles.half");
+    for (std::uint32_t m = 0; m < tiles.lightmap_count(); ++m) {
+      wire::LightmapInfo* li = wm->add_lightmaps();
+      li->set_width(static_cast<std::uint32_t>(tiles.lightmap_size(m).first));
+      li->set_height(static_cast<std::uint32_t>(tiles.lightmap_size(m).second));
+      li->set_tiles_x(static_cast<std::uint32_t>(tiles.tiles_x(m)));
+      li->set_tiles_y(static_cast<std::uint32_t>(tiles.tiles_y(m)));
+    }
+    wm->set_max_frame_bytes(static_cast<std::uint32_t>(server_->options.max_frame));
+    wm->set_idle_timeout_ms(static_cast<std::uint32_t>(server_->options.idle_timeout.count()));
+    wm->set_tile_epoch(host.tile_epoch());
+    send(w);
+    state_ = State::Ready;
+    log::info("server", "session " + std::to_string(id_) + " (" + peer_ + ", '" + client_name_ +
+                            "') joined; " + std::to_string(h.known_size()) + " tiles known");
+  }
+
+  void on_scene_request(const wire::SceneRequest& r) {
+    const std::string& bytes = server_->host.package().bytes;
+    if (r.offset() > bytes.size()) {
+      error(wire::BAD_REQUEST, "scene offset " + std::to_string(r.offset()) +
+                                   " is past the end of the " + std::to_string(bytes.size()) +
+                                   "-byte package");
+      return;
+    }
+    scene_offset_ = r.offset();
+    scene_active_ = true;
+  }
+
+  void on_subscribe(const wire::Subscribe& s) {
+    const TileStore& tiles = server_->host.tiles();
+    if (s.encoding() != wire::TILE_RGB9E5_ZSTD && s.encoding() != wire::TILE_HALF_ZSTD &&
+        s.encoding() != wire::TILE_RGB9E5_DELTA_ZSTD) {
+      error(wire::BAD_REQUEST, "unknown tile encoding " + std::to_string(s.encoding()));
+      return;
+    }
+    std::vector<std::uint8_t> wanted(tiles.lightmap_count(), s.all() ? 1 : 0);
+    if (!s.all())
+      for (std::uint32_t m : s.lightmaps()) {
+        if (m >= wanted.size()) {
+          error(wire::BAD_REQUEST, "there is no lightmap " + std::to_string(m) +
+                                       " (the scene has " + std::to_string(wanted.size()) + ")");
+          return;
+        }
+        wanted[m] = 1;
+      }
+    // Deltas need a per-client copy of every tile; this server sends full RGB9E5 instead, which
+    // a delta-capable client also accepts.
+    encoding_ =
+        s.encoding() == wire::TILE_HALF_ZSTD ? wire::TILE_HALF_ZSTD : wire::TILE_RGB9E5_ZSTD;
+    rate_ = static_cast<double>(s.max_bytes_per_s());
+    tokens_ = rate_ > 0.0 ? std::max(rate_ * 0.25, 65536.0) : 0.0;
+    last_refill_ = Clock::now();
+    subscribed_ = wanted;
+    streaming_ = true;
+    for (std::uint32_t m = 0; m < tiles.lightmap_count(); ++m) {
+      if (!subscribed_[m]) continue;
+      auto [first, last] = tiles.tiles_of(m);
+      for (std::uint32_t t = first; t < last; ++t)
+        if (tiles.version(t) > known_[t]) queue_.push(t);
+    }
+  }
+
+  void send_stats() {
+    const EngineHostStats es = server_->host.stats();
+    wire::Envelope e;
+    wire::Stats* s = e.mutable_stats();
+    s->set_clients(server_->client_count());
+    s->set_bytes_sent(server_->bytes_sent.load());
+    s->set_tiles_sent(server_->tiles_sent.load());
+    s->set_tiles_coalesced(server_->tiles_coalesced.load());
+    s->set_updates(es.updates);
+    s->set_rays_per_s(es.rays_per_s);
+    s->set_convergence(es.convergence);
+    s->set_engine_update_ms(es.last_update_ms);
+    s->set_queue_depth(queue_.size() + (held_ ? 1 : 0));
+    s->set_uptime_ms(static_cast<std::uint64_t>(
+        std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - server_->started)
+            .count()));
+    s->set_bytes_received(server_->bytes_received.load());
+    s->set_frames_received(server_->frames_received.load());
+    s->set_errors_sent(server_->errors_sent.load());
+    s->set_engine_idle(es.idle);
+    s->set_bytes_per_texel(server_->host.tiles().bytes_per_texel());
+    send(e);
+  }
+
+  // A reply or notice; the connection stays open.
+  void error(wire::ErrorCode code, const std::string& message) {
+    log::info("server", "session " + std::to_string(id_) + ": error sent: " + message);
+    ++server_->errors_sent;
+    send(wire::make_error(code, message));
+  }
+
+  // An Error frame, then close once it is written (or after a grace period if the client does
+  // not read).
+  void fail(wire::ErrorCode code, const std::string& message) {
+    if (closed_ || closing_) return;
+    log::info("server", "session " + std::to_string(id_) + " (" + peer_ + ") closed: " + message);
+    ++server_->errors_sent;
+    control_.push_back(wire::encode_frame(wire::make_error(code, message)));
+    closing_ = true;
+    close_timer_.expires_after(std::chrono::seconds(2));
+    close_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
+      if (!ec) self->close();
+    });
+    pump();
+  }
+
+  void send(const wire::Envelope& e) {
+    if (closed_ || closing_) return;
+    if (control_.size() >= server_->options.max_control_frames) {
+      fail(wire::BAD_REQUEST,
+           "the client does not read its replies (" + std::to_string(control_.size()) + " queued)");
+      return;
+    }
+    control_.push_back(wire::encode_frame(e));
+  }
+
+  // Starts the next write if none is in flight: control frames first, then the scene package,
+  // then tiles (within the byte-rate cap).
+  void pump() {
+    if (closed_ || writing_) return;
+    std::string frame;
+    bool is_tile = false, is_scene = false;
+    if (!control_.empty()) {
+      frame = std::move(control_.front());
+      control_.pop_front();
+    } else if (closing_) {
+      close();
+      return;
+    } else if (scene_active_) {
+      frame = next_scene_chunk();
+      is_scene = true;
+    } else if (streaming_) {
+      if (!next_tile(frame)) return;
+      is_tile = true;
+    } else {
+      return;
+    }
+    writing_ = true;
+    auto data = std::make_shared<std::string>(std::move(frame));
+    asio::async_write(socket_, asio::buffer(*data),
+                      asio::bind_executor(strand_, [self = shared_from_this(), data, is_tile,
+                                                    is_scene](std::error_code ec, std::size_t n) {
+                        self->writing_ = false;
+                        if (ec) {
+                          self->close();
+                          return;
+                        }
+                        self->server_->bytes_sent += n;
+                        if (is_tile) ++self->server_->tiles_sent;
+                        if (is_scene) self->server_->scene_bytes_sent += n;
+                        self->pump();
+                      }));
+  }
+
+  std::string next_scene_chunk() {
+    const wire::ScenePackage& pkg = server_->host.package();
+    const std::size_t n =
+        std::min<std::size_t>(server_->options.scene_chunk_bytes, pkg.bytes.size() - scene_offset_);
+    wire::Envelope e;
+    wire::SceneChunk* c = e.mutable_scene_chunk();
+    c->set_scene_hash(pkg.hash);
+    c->set_offset(scene_offset_);
+    c->set_total(pkg.bytes.size());
+    c->set_data(pkg.bytes.substr(scene_offset_, n));
+    scene_offset_ += n;
+    if (scene_offset_ >= pkg.bytes.size()) scene_active_ = false;
+    return wire::encode_frame(e);
+  }
+
+  // The next tile frame to send, or false when there is none or the rate cap says wait.
+  bool next_tile(std::string& frame) {
+    const TileStore& store = server_->host.tiles();
+    if (!held_) {
+      std::uint32_t t = 0;
+      for (;;) {
+        if (!queue_.pop(t)) {
+          queue_depth_ = 0;
+          return false;
+        }
+        TileStore::Snapshot snap = store.snapshot(t, encoding_);
+        if (snap.version == 0 || snap.version <= known_[t]) continue;  // nothing new
+        const TileStore::Tile& tile = store.tile(t);
+        wire::Envelope e;
+        wire::TileUpdate* u = e.mutable_tile_update();
+        u->set_lightmap(tile.lightmap);
+        u->set_tile_x(tile.tx);
+        u->set_tile_y(tile.ty);
+        u->set_version(snap.version);
+        u->set_encoding(encoding_);
+        u->set_width(static_cast<std::uint32_t>(tile.rect.w));
+        u->set_height(static_cast<std::uint32_t>(tile.rect.h));
+        u->set_payload(*snap.payload);
+        u->set_server_time_us(snap.time_us);
+        held_frame_ = wire::encode_frame(e);
+        held_ = true;
+        known_[t] = snap.version;
+        break;
+      }
+    }
+    queue_depth_ = queue_.size() + 1;
+    if (rate_ > 0.0) {
+      const auto now = Clock::now();
+      tokens_ =
+          std::min(tokens_ + rate_ * std::chrono::duration<double>(now - last_refill_).count(),
+                   std::max(rate_ * 0.25, 65536.0));
+      last_refill_ = now;
+      const double need = static_cast<double>(held_frame_.size());
+      if (tokens_ < need) {
+        if (!rate_waiting_) {
+          rate_waiting_ = true;
+          const double wait_s = (need - tokens_) / rate_;
+          rate_timer_.expires_after(
+              std::chrono::microseconds(static_cast<std::int64_t>(std::ceil(wait_s * 1e6))));
+          rate_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
+            self->rate_waiting_ = false;
+            if (!ec) self->pump();
+          });
+        }
+        return false;
+      }
+      tokens_ -= need;
+    }
+    frame = std::move(held_frame_);
+    held_ = false;
+    return true;
+  }
+
+  void close() {
+    if (closed_) return;
+    closed_ = true;
+    std::error_code ec;
+    idle_timer_.cancel();
+    rate_timer_.cancel();
+    close_timer_.cancel();
+    socket_.shutdown(tcp::socket::shutdown_both, ec);
+    socket_.close(ec);
+    server_->tiles_coalesced += queue_.coalesced();
+    queue_depth_ = 0;
+    log::debug("server", "session " + std::to_string(id_) + " ended");
+    server_->remove(shared_from_this());
+  }
+
+  Server::Impl* server_;
+  tcp::socket socket_;
+  asio::strand<asio::io_context::executor_type> strand_;
+  asio::steady_timer idle_timer_, rate_timer_, close_timer_;
+  wire::FrameDecoder decoder_;
+  std::array<char, 64 * 1024> buffer_{};
+  std::uint64_t id_;
+  std::string peer_, client_name_;
+  State state_ = State::AwaitHello;
+  bool closed_ = false, closing_ = false, writing_ = false;
+  std::deque<std::string> control_;
+  bool scene_active_ = false;
+  std::uint64_t scene_offset_ = 0;
+  bool streaming_ = false;
+  std::vector<std::uint8_t> subscribed_;
+  std::vector<std::uint64_t> known_;  // newest version the client has (or has been sent)
+  SendQueue queue_;
+  std::atomic<std::size_t> queue_depth_{0};
+  wire::TileEncoding encoding_ = wire::TILE_RGB9E5_ZSTD;
+  bool held_ = false;  // a tile frame waiting for the rate cap
+  std::string held_frame_;
+  double rate_ = 0.0, tokens_ = 0.0;
+  bool rate_waiting_ = false;
+  Clock::time_point last_refill_ = Clock::now();
+};
+
+}  // namespace
+
+void Server::Impl::accept() {
+  acceptor.async_accept(
+      asio::make_strand(io), [self = this](std::error_code ec, tcp::socket socket) {
+        if (self->stopping) return;
+        if (!ec) {
+          ++self->connections;
+          std::shared_ptr<Session> s;
+          {
+            std::lock_guard lock(self->sessions_mutex);
+            if (self->sessions.size() < self->options.max_clients) {
+              s = std::make_shared<Session>(self, std::move(socket));
+              self->sessions.insert(s);
+            }
+          }
+          if (s) {
+            s->start();
+          } else {
+            // Full: one Error frame, best effort, then close.
+            std::string frame =
+                wire::encode_frame(wire::make_error(wire::INTERNAL, "the server is full"));
+            std::error_code ignored;
+            asio::write(socket, asio::buffer(frame), ignored);
+            socket.close(ignored);
+          }
+        } else if (ec != asio::error::operation_aborted) {
+          log::warn("server", "accept: " + ec.message());
+        }
+        self->accept();
+      });
+}
+
+void Server::Impl::on_publish(const std::vector<std::uint32_t>& tiles) {
+  auto shared = std::make_shared<const std::vector<std::uint32_t>>(tiles);
+  std::lock_guard lock(sessions_mutex);
+  for (const auto& s : sessions) s->tiles_changed(shared);
+}
+
+Server::Server(EngineHost& host, ServerOptions options)
+    : impl_(std::make_shared<Impl>(host, std::move(options))) {
+  if (impl_->options.io_threads < 1) throw Error("the server needs at least one I/O thread");
+}
+
+Server::~Server() {
+  stop();
+}
+
+void Server::start() {
+  Impl& im = *impl_;
+  std::error_code ec;
+  asio::ip::address address = asio::ip::make_address(im.options.bind, ec);
+  if (ec) throw Error("--bind: '" + im.options.bind + "' is not an IP address");
+  tcp::endpoint endpoint(address, im.options.port);
+  im.acceptor.open(endpoint.protocol(), ec);
+  if (!ec) im.acceptor.set_option(tcp::acceptor::reuse_address(true), ec);
+  if (!ec) im.acceptor.bind(endpoint, ec);
+  if (!ec) im.acceptor.listen(asio::socket_base::max_listen_connections, ec);
+  if (ec)
+    throw Error("cannot listen on " + im.options.bind + ":" + std::to_string(im.options.port) +
+                ": " + ec.message());
+  std::weak_ptr<Impl> weak = impl_;
+  im.host.set_listener([weak](const std::vector<std::uint32_t>& tiles) {
+    if (auto s = weak.lock()) s->on_publish(tiles);
+  });
+  im.work.emplace(asio::make_work_guard(im.io));
+  im.accept();
+  for (int i = 0; i < im.options.io_threads; ++i)
+    im.threads.emplace_back([&im] {
+      for (;;) {
+        try {
+          im.io.run();
+          break;
+        } catch (const std::exception& e) {
+          // A handler threw: log it and keep serving the other clients.
+          log::error("server", std::string("I/O handler failed: ") + e.what());
+        }
+      }
+    });
+  log::info("server", "listening on " + im.options.bind + ":" + std::to_string(port()));
+}
+
+void Server::stop() {
+  Impl& im = *impl_;
+  if (im.stopping.exchange(true)) return;
+  im.host.set_listener(nullptr);
+  if (im.threads.empty()) return;
+  asio::post(im.io, [&im] {
+    std::error_code ec;
+    im.acceptor.close(ec);
+  });
+  {
+    std::lock_guard lock(im.sessions_mutex);
+    for (const auto& s : im.sessions) s->shutdown();
+  }
+  // Give the sessions a moment to send their Error frames and close.
+  const auto deadline = Clock::now() + std::chrono::seconds(2);
+  while (im.client_count() > 0 && Clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  im.work.reset();
+  im.io.stop();
+  for (auto& t : im.threads) t.join();
+  im.threads.clear();
+  std::lock_guard lock(im.sessions_mutex);
+  im.sessions.clear();
+}
+
+std::uint16_t Server::port() const {
+  std::error_code ec;
+  auto ep = impl_->acceptor.local_endpoint(ec);
+  return ec ? impl_->options.port : ep.port();
+}
+
+ServerStats Server::stats() const {
+  const Impl& im = *impl_;
+  ServerStats s;
+  s.clients = im.client_count();
+  s.connections = im.connections.load();
+  s.bytes_sent = im.bytes_sent.load();
+  s.bytes_received = im.bytes_received.load();
+  s.frames_received = im.frames_received.load();
+  s.tiles_sent = im.tiles_sent.load();
+  s.tiles_coalesced = im.tiles_coalesced.load();
+  s.scene_bytes_sent = im.scene_bytes_sent.load();
+  s.errors_sent = im.errors_sent.load();
+  std::lock_guard lock(im.sessions_mutex);
+  for (const auto& session : im.sessions) s.queue_depth += session->queue_depth();
+  return s;
+}
+
+}  // namespace irradcast

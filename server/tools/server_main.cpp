@@ -1,0 +1,152 @@
+// irradcast-server: runs the GI engine on a scene continuously and streams its irradiance tiles
+// to any number of clients (docs/PROTOCOL.md). Stops cleanly on SIGINT / SIGTERM.
+#include <tbb/global_control.h>
+#include <CLI/CLI.hpp>
+
+#include <csignal>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include <pthread.h>
+
+#include "engine_options.h"
+#include "irradcast/builtin.h"
+#include "irradcast/engine_host.h"
+#include "irradcast/error.h"
+#include "irradcast/log.h"
+#include "irradcast/net_server.h"
+#include "irradcast/progress.h"
+
+namespace {
+
+struct Options {
+  std::string scene = "cornell";
+  float detail = 1.0f;
+  std::string bind = "0.0.0.0";
+  int port = 7450;
+  int io_threads = 2;
+  int threads = 0;
+  int tile_size = 32;
+  float tile_threshold = 0.01f;
+  std::uint32_t max_updates = 0;
+  int idle_timeout_s = 30;
+  int status_every_s = 5;
+  std::string log_level = "info";
+  irradcast::tools::EngineOptions engine;
+};
+
+int run(const Options& o, sigset_t signals) {
+  using namespace irradcast;
+  log::set_level(log::parse_level(o.log_level));
+  Progress::set_enabled(false);
+  std::unique_ptr<tbb::global_control> threads;
+  if (o.threads > 0)
+    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                    static_cast<std::size_t>(o.threads));
+  EngineHostOptions ho;
+  ho.engine = o.engine.params();
+  ho.atlas = o.engine.atlas();
+  ho.tiles.tile_size = o.tile_size;
+  ho.tiles.change_threshold = o.tile_threshold;
+  ho.max_updates = o.max_updates;
+  log::info("server", "loading " + o.scene);
+  EngineHost host(load_scene(o.scene, o.detail), o.scene, ho);
+
+  ServerOptions so;
+  so.bind = o.bind;
+  so.port = static_cast<std::uint16_t>(o.port);
+  so.io_threads = o.io_threads;
+  so.idle_timeout = std::chrono::seconds(o.idle_timeout_s);
+  Server server(host, so);
+  server.start();
+  host.start();
+
+  // The status line, on its own thread, until a signal arrives.
+  std::atomic<bool> done{false};
+  std::thread status([&] {
+    auto next = std::chrono::steady_clock::now();
+    while (!done) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      if (o.status_every_s <= 0 || std::chrono::steady_clock::now() < next) continue;
+      next += std::chrono::seconds(o.status_every_s);
+      const EngineHostStats es = host.stats();
+      const ServerStats ss = server.stats();
+      char line[256];
+      std::snprintf(line, sizeof line,
+                    "updates %llu%s, convergence %.4f, %.2f Mrays/s, %u clients, %.2f MB sent, "
+                    "%llu tiles sent, %llu coalesced, %llu queued",
+                    static_cast<unsigned long long>(es.updates), es.idle ? " (final)" : "",
+                    es.convergence, es.rays_per_s * 1e-6, ss.clients, ss.bytes_sent * 1e-6,
+                    static_cast<unsigned long long>(ss.tiles_sent),
+                    static_cast<unsigned long long>(ss.tiles_coalesced),
+                    static_cast<unsigned long long>(ss.queue_depth));
+      log::info("status", line);
+    }
+  });
+  int sig = 0;
+  sigwait(&signals, &sig);
+  log::info("server",
+            std::string("received ") + (sig == SIGINT ? "SIGINT" : "SIGTERM") + ", shutting down");
+  done = true;
+  status.join();
+  server.stop();
+  host.stop();
+  const ServerStats ss = server.stats();
+  log::info("server", "stopped: " + std::to_string(ss.connections) + " connections, " +
+                          std::to_string(ss.bytes_sent) + " bytes sent");
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  CLI::App app{
+      "irradcast-server: computes a scene's diffuse irradiance continuously (the GI engine) and "
+      "streams it as lightmap tiles to irradcast-view and irradcast-load clients.",
+      "irradcast-server"};
+  app.option_defaults()->always_capture_default();
+  app.add_option("--scene", o.scene, "cornell | rooms:N | FILE.gltf | FILE.glb");
+  app.add_option("--detail", o.detail, "tessellation of rooms:N")->check(CLI::PositiveNumber);
+  app.add_option("--bind", o.bind, "address to listen on");
+  app.add_option("--port", o.port, "TCP port (0 = any free port)")->check(CLI::Range(0, 65535));
+  app.add_option("--io-threads", o.io_threads, "network threads")->check(CLI::Range(1, 64));
+  app.add_option("--threads", o.threads, "engine worker threads (0 = all cores)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--tile-size", o.tile_size, "tile edge in texels")->check(CLI::Range(4, 1024));
+  app.add_option("--tile-threshold", o.tile_threshold,
+                 "relative change that gives a tile a new version")
+      ->check(CLI::Range(0.0f, 10.0f));
+  app.add_option("--max-updates", o.max_updates,
+                 "stop refining after this many engine updates (0 = never)");
+  app.add_option("--idle-timeout", o.idle_timeout_s,
+                 "seconds without a frame before a client is dropped")
+      ->check(CLI::Range(1, 86400));
+  app.add_option("--status-every", o.status_every_s, "seconds between status lines (0 = none)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
+  o.engine.add_to(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  // Block the stop signals in every thread (threads inherit the mask); main waits for them.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  std::signal(SIGPIPE, SIG_IGN);
+  try {
+    return run(o, signals);
+  } catch (const irradcast::Error& e) {
+    std::fprintf(stderr, "irradcast-server: error: %s\n", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "irradcast-server: internal error: %s\n", e.what());
+    return 2;
+  }
+}
