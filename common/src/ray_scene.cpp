@@ -91,6 +91,10 @@ RayScene::~RayScene() {
   if (impl_ && impl_->scene) rtcReleaseScene(impl_->scene);
 }
 
+RTCScene RayScene::embree_scene() const {
+  return impl_->scene;
+}
+
 Hit RayScene::intersect(const Ray& ray) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);

@@ -9,6 +9,8 @@
 
 #include "irradcast/world.h"
 
+struct RTCSceneTy;  // Embree's scene handle is RTCSceneTy* (RTCScene)
+
 namespace irradcast {
 
 struct Hit {
@@ -47,6 +49,9 @@ class RayScene {
   }
 
   const World& world() const { return *world_; }
+  // The Embree scene behind intersect() / occluded(), for benchmarks that time raw Embree calls
+  // on the same BVH. Owned by this RayScene; do not modify or release it.
+  RTCSceneTy* embree_scene() const;
 
  private:
   struct Impl;
