@@ -15,7 +15,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 // Stream ids keep each pass's random numbers independent of the others'.
-enum Stream : std::uint64_t { kDirect = 1, kProbe = 2, kScatter = 3 };
+enum Stream : std::uint64_t { kDirect = 1, kProbe = 2, kScatter = 3, kProbePick = 4 };
 
 Rng texel_rng(const EngineParams& p, std::uint64_t index, std::uint32_t update, Stream stream,
               std::uint32_t bounce) {
@@ -75,6 +75,16 @@ glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d) {
     if (d[a] < 0.0f) t = std::min(t, (b.lo[a] - pad[a] - p[a]) / d[a]);
   }
   return p + std::max(t, 0.0f) * d;
+}
+
+// One of a texel's probes, chosen with probability equal to its weight (u uniform in [0, 1)).
+int pick_probe(const ProbeWeights& w, float u) {
+  float acc = 0.0f;
+  for (int k = 0; k + 1 < w.count; ++k) {
+    acc += w.weight[k];
+    if (u < acc) return k;
+  }
+  return w.count - 1;
 }
 
 }  // namespace
@@ -157,6 +167,9 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
     const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
                     ng = in.texels.geo_normal[i];
     Rng rng = texel_rng(in.params, i, in.update, kScatter, in.bounce);
+    // A stream of its own for probe choices, so the ray directions do not depend on which rays
+    // missed.
+    Rng pick = texel_rng(in.params, i, in.update, kProbePick, in.bounce);
     Frame frame(nrm);
     glm::vec3 sum(0.0f);
     for (int s = 0; s < n; ++s) {
@@ -168,15 +181,16 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
       if (h.valid()) {
         sum += radiance_at(prev, h);
       } else if (!unbiased && !in.probe_weights.empty()) {
+        // One probe, picked with probability equal to its interpolation weight: the same
+        // expectation as the weighted sum over all (up to 8) of them, at one lookup instead of
+        // eight; over many rays and updates the choice averages out.
         glm::vec3 q =
             fixed ? p + extent * ray.direction : exit_point(in.world.bounds, p, ray.direction);
         const ProbeWeights& w = in.probe_weights[i];
-        for (int k = 0; k < w.count; ++k) {
-          glm::vec3 d = q - in.probes.position[w.probe[k]];
-          float len = glm::length(d);
-          if (!(len > 0.0f)) continue;
-          sum += w.weight[k] * sample_probe(probe_radiance, w.probe[k], res, d / len);
-        }
+        const int k = pick_probe(w, pick.next_float());
+        glm::vec3 d = q - in.probes.position[w.probe[k]];
+        float len = glm::length(d);
+        if (len > 0.0f) sum += sample_probe(probe_radiance, w.probe[k], res, d / len);
       }
     }
     // Cosine-weighted sampling: E = pi / N * sum L.
