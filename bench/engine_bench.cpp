@@ -916,7 +916,8 @@ int main(int argc, char** argv) {
           "counts light samples, not shadow rays).\nMr/s: traced rays per second; eng/raw = "
           "engine throughput / raw Embree throughput on the same rays; RS = through RayScene.\n"
           "hit: rays occluded (direct) or hitting within their tmax (probes, scatter); a scatter "
-          "miss reads one probe, picked by weight.\nverify: max |regenerated-ray shading - pass output| / "
+          "miss reads one probe, picked by weight.\nverify: max |regenerated-ray shading - pass "
+          "output| / "
           "max |pass output|.\n");
 
       plot::BarChart chart;
