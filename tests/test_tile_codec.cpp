@@ -305,25 +305,37 @@ TEST(TileCodec, DeltaReproducesTheNewVersionExactly) {
       ASSERT_EQ(half_client.texels[y * 48 + x], expect.texels[y * 48 + x]);
 }
 
-TEST(TileCodec, TileChangedComparesRelativeToTheSentValuePlusAFloor) {
-  Lightmap sent(64, 64, glm::vec3(1.0f, 2.0f, 4.0f));
+TEST(TileCodec, TileChangedComparesTheRmsChangeWithTheTilesLevelPlusAFloor) {
+  Lightmap sent(64, 64, glm::vec3(1.0f, 2.0f, 4.0f));  // level 7/3
   const TileRect r = wire::tile_rect(64, 64, 32, 1, 1);
   Lightmap now = sent;
   EXPECT_FALSE(wire::tile_changed(now, sent, r, 0.01f, 0.0f));
-  // Relative to the texel's largest component (4): 0.03 / 4 < 0.01, 0.05 / 4 > 0.01.
-  now.texels[40 * 64 + 40].x += 0.03f;
+  auto scale_tile = [&](Lightmap& m, const TileRect& t, float s) {
+    for (int y = t.y0; y < t.y0 + t.h; ++y)
+      for (int x = t.x0; x < t.x0 + t.w; ++x) m.texels[y * 64 + x] = s * sent.texels[y * 64 + x];
+  };
+  // The whole tile 0.5% brighter: RMS 0.57% of the level; 2% brighter: 2.3%.
+  scale_tile(now, r, 1.005f);
   EXPECT_FALSE(wire::tile_changed(now, sent, r, 0.01f, 0.0f));
-  now.texels[40 * 64 + 40].x += 0.02f;
+  scale_tile(now, r, 1.02f);
   EXPECT_TRUE(wire::tile_changed(now, sent, r, 0.01f, 0.0f));
   // The same change outside the tile does not count.
   EXPECT_FALSE(wire::tile_changed(now, sent, wire::tile_rect(64, 64, 32, 0, 0), 0.01f, 0.0f));
-  // The floor: tiny absolute changes in dark texels are ignored.
+  // One texel in 1024: a small change does not count, a large one does.
+  now = sent;
+  now.texels[40 * 64 + 40] *= 1.05f;
+  EXPECT_FALSE(wire::tile_changed(now, sent, r, 0.01f, 0.0f));
+  now.texels[40 * 64 + 40] *= 100.0f;
+  EXPECT_TRUE(wire::tile_changed(now, sent, r, 0.01f, 0.0f));
+  // The floor: tiny absolute changes in a dark tile are ignored.
   Lightmap dark_sent(64, 64, glm::vec3(0.0f)), dark_now = dark_sent;
-  dark_now.texels[33 * 64 + 33] = glm::vec3(1e-4f);
+  for (int y = r.y0; y < r.y0 + r.h; ++y)
+    for (int x = r.x0; x < r.x0 + r.w; ++x) dark_now.texels[y * 64 + x] = glm::vec3(1e-4f);
   EXPECT_TRUE(wire::tile_changed(dark_now, dark_sent, r, 0.01f, 0.0f));
   EXPECT_FALSE(wire::tile_changed(dark_now, dark_sent, r, 0.01f, 0.02f));
   EXPECT_TRUE(wire::tile_changed(dark_now, dark_sent, r, 0.01f, 0.005f));
   // NaN and negatives count as 0, like the encoder sends them.
+  dark_now = dark_sent;
   dark_now.texels[33 * 64 + 33] = glm::vec3(kNaN, -1.0f, 0.0f);
   EXPECT_FALSE(wire::tile_changed(dark_now, dark_sent, r, 0.01f, 0.0f));
   // Mismatched maps are an error.

@@ -2,35 +2,9 @@
 
 #include <tbb/parallel_for.h>
 
-#include <cmath>
-
 #include "irradcast/error.h"
 
 namespace irradcast {
-namespace {
-
-// Has a tile changed enough to be worth a new version? The RMS of the texel changes against the
-// tile's mean level (plus a floor for dark tiles). A progressive engine changes every texel a
-// little after every update (Monte Carlo noise shrinking as 1/n); the largest single change in a
-// 32x32 tile stays above any useful threshold long after the tile as a whole has settled, so the
-// criterion averages over the tile.
-bool changed_enough(const Lightmap& now, const Lightmap& sent, const wire::TileRect& r,
-                    float threshold, float floor) {
-  double diff2 = 0.0, level = 0.0;
-  for (int y = r.y0; y < r.y0 + r.h; ++y)
-    for (int x = r.x0; x < r.x0 + r.w; ++x) {
-      const std::size_t k = static_cast<std::size_t>(y) * now.width + x;
-      const glm::vec3 d = now.texels[k] - sent.texels[k];
-      diff2 += static_cast<double>(glm::dot(d, d)) / 3.0;
-      const glm::vec3 s = glm::abs(sent.texels[k]);
-      level += (s.x + s.y + s.z) / 3.0;
-    }
-  const double n = static_cast<double>(r.w) * r.h;
-  if (!(diff2 == diff2)) return true;  // NaN: send it and let the codec sanitise
-  return std::sqrt(diff2 / n) > threshold * (level / n + floor);
-}
-
-}  // namespace
 
 TileStore::TileStore(const std::vector<std::pair<int, int>>& sizes, TileStoreOptions options)
     : options_(options), sizes_(sizes) {
@@ -89,8 +63,9 @@ std::vector<std::uint32_t> TileStore::publish(const std::vector<Lightmap>& maps,
   std::vector<std::shared_ptr<const std::string>> encoded(tiles_.size());
   tbb::parallel_for(std::size_t(0), tiles_.size(), [&](std::size_t i) {
     const Tile& t = tiles_[i];
-    if (state_[i].version != 0 && !changed_enough(maps[t.lightmap], published_[t.lightmap], t.rect,
-                                                  options_.change_threshold, floors[t.lightmap]))
+    if (state_[i].version != 0 &&
+        !wire::tile_changed(maps[t.lightmap], published_[t.lightmap], t.rect,
+                            options_.change_threshold, floors[t.lightmap]))
       return;
     changed[i] = 1;
     encoded[i] = std::make_shared<const std::string>(

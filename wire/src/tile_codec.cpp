@@ -429,21 +429,24 @@ bool tile_changed(const Lightmap& now, const Lightmap& sent, const TileRect& r, 
                            " and " + std::to_string(sent.width) + " x " +
                            std::to_string(sent.height) + ")");
   constexpr float kMax = 3.0e38f;
-  const float f = sanitize(floor, kMax);
-  const float t = sanitize(threshold, kMax);
+  const double f = sanitize(floor, kMax);
+  const double t = sanitize(threshold, kMax);
+  // RMS of the texel changes against the tile's mean level: a progressive engine nudges every
+  // texel after every update (Monte Carlo noise shrinking as 1/n), and the largest single change
+  // in a tile stays above any useful threshold long after the tile as a whole has settled.
+  double diff2 = 0.0, level = 0.0;
   for (int y = 0; y < r.h; ++y)
     for (int x = 0; x < r.w; ++x) {
       const std::size_t k = texel_index(now, r, x, y);
       const glm::vec3 a = now.texels[k], b = sent.texels[k];
-      float diff = 0.0f, mag = 0.0f;
       for (int c = 0; c < 3; ++c) {
-        const float ac = sanitize(a[c], kMax), bc = sanitize(b[c], kMax);
-        diff = std::max(diff, std::abs(ac - bc));
-        mag = std::max(mag, bc);
+        const double ac = sanitize(a[c], kMax), bc = sanitize(b[c], kMax);
+        diff2 += (ac - bc) * (ac - bc) / 3.0;
+        level += bc / 3.0;
       }
-      if (diff > t * (mag + f)) return true;
     }
-  return false;
+  const double n = static_cast<double>(r.w) * static_cast<double>(r.h);
+  return n > 0.0 && std::sqrt(diff2 / n) > t * (level / n + f);
 }
 
 float change_floor(const Lightmap& map, float fraction) {

@@ -64,9 +64,11 @@ float rgb9e5_max_relative_error();  // 1 / 511.5 (2^-9, a little more when the e
 float half_max_relative_error();    // 2^-11
 float tile_absolute_error_floor();  // 2^-25 (the smallest steps of both formats, halved)
 
-// Decides whether a tile changed enough to send a new version: true if, for some texel in r,
-// max_c |now_c - sent_c| > threshold * (max_c |sent_c| + floor). Values are sanitised as the
-// encoder does first. Throws irradcast::Error if the maps differ in size or r is outside them.
+// Decides whether a tile changed enough to send a new version: true if the RMS over the tile's
+// texels and channels of (now - sent) exceeds threshold * (the tile's mean sent value + floor).
+// An RMS, not a maximum: a progressive engine changes every texel a little after every update.
+// Values are sanitised as the encoder does first. Throws irradcast::Error if the maps differ in
+// size or r is outside them.
 bool tile_changed(const Lightmap& now, const Lightmap& sent, const TileRect& r, float threshold,
                   float floor);
 // A floor for tile_changed(): `fraction` of the mean luminance of the map (0 for an empty map).
