@@ -84,6 +84,42 @@ Range axis_range(double lo, double hi, bool from_zero) {
   return r;
 }
 
+// A log axis over the decimal logarithms [lo, hi] of the data: ticks (as logarithms) at 1, 2 and
+// 5 x 10^k when the range spans fewer than 4 decades, else at the decades only; the range runs
+// from the last tick at or below lo to the first at or above hi.
+Range log_axis_range(double lo, double hi) {
+  if (!(hi > lo)) lo -= 0.5, hi += 0.5;
+  const bool decades_only = hi - lo >= 4.0;
+  std::vector<double> marks;
+  for (long long k = static_cast<long long>(std::floor(lo)) - 1;
+       k <= static_cast<long long>(std::ceil(hi)) + 1; ++k)
+    for (double m : decades_only ? std::vector<double>{1.0} : std::vector<double>{1.0, 2.0, 5.0})
+      marks.push_back(static_cast<double>(k) + std::log10(m));
+  Range r;
+  std::size_t first = 0, last = marks.size() - 1;
+  for (std::size_t i = 0; i < marks.size(); ++i)
+    if (marks[i] <= lo + 1e-9) first = i;
+  for (std::size_t i = marks.size(); i-- > 0;)
+    if (marks[i] >= hi - 1e-9) last = i;
+  r.ticks.assign(marks.begin() + static_cast<long>(first),
+                 marks.begin() + static_cast<long>(last) + 1);
+  r.lo = r.ticks.front();
+  r.hi = r.ticks.back();
+  return r;
+}
+
+// The label of a log-axis tick (a logarithm): the value itself, in as few digits as it needs.
+std::string log_tick_label(double log_value) {
+  const double v = std::pow(10.0, log_value);
+  char buf[64];
+  if (v >= 1e5 || v < 1e-4)
+    std::snprintf(buf, sizeof(buf), "%.0e", v);
+  else
+    std::snprintf(buf, sizeof(buf), "%.*f",
+                  std::max(0, static_cast<int>(-std::floor(log_value + 1e-9))), v);
+  return buf;
+}
+
 void draw_title(Canvas& c, const std::string& title, const std::string& note) {
   c.text(c.width() / 2.0, 14.0, title, 3.0, kBlack, Align::Center);
   if (!note.empty()) c.text(c.width() / 2.0, 44.0, note, 1.5, kDarkGrey, Align::Center);
@@ -197,7 +233,26 @@ std::string tick_label(double value, double step) {
   return buf;
 }
 
-void write_xy_plot(const std::string& path, const XYPlot& plot) {
+void write_xy_plot(const std::string& path, const XYPlot& in) {
+  // On a log axis the series are drawn in decimal logarithms; points that have none are dropped.
+  XYPlot plot = in;
+  if (plot.x_log || plot.y_log)
+    for (Series& s : plot.series) {
+      Series t = s;
+      t.x.clear();
+      t.y.clear();
+      t.labels.clear();
+      for (std::size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+        if ((plot.x_log && !(s.x[i] > 0.0)) || (plot.y_log && !(s.y[i] > 0.0))) continue;
+        t.x.push_back(plot.x_log ? std::log10(s.x[i]) : s.x[i]);
+        t.y.push_back(plot.y_log ? std::log10(s.y[i]) : s.y[i]);
+        if (i < s.labels.size()) {
+          t.labels.resize(t.x.size() - 1);
+          t.labels.push_back(s.labels[i]);
+        }
+      }
+      s = std::move(t);
+    }
   Canvas c(plot.width, plot.height);
   const double left = 110, right = 40, top = plot.note.empty() ? 70 : 80, bottom = 80;
   const double px0 = left, px1 = plot.width - right, py0 = top, py1 = plot.height - bottom;
@@ -213,8 +268,15 @@ void write_xy_plot(const std::string& path, const XYPlot& plot) {
     }
   if (!(xmax >= xmin)) xmin = 0.0, xmax = 1.0;
   if (!(ymax >= ymin)) ymin = 0.0, ymax = 1.0;
-  Range xr = axis_range(xmin, xmax, plot.x_from_zero);
-  Range yr = axis_range(ymin, ymax, plot.y_from_zero);
+  ymax += plot.y_headroom * (ymax - ymin);
+  Range xr = plot.x_log ? log_axis_range(xmin, xmax) : axis_range(xmin, xmax, plot.x_from_zero);
+  Range yr = plot.y_log ? log_axis_range(ymin, ymax) : axis_range(ymin, ymax, plot.y_from_zero);
+  auto x_label = [&](double t) {
+    return plot.x_log ? log_tick_label(t) : tick_label(t, xr.step());
+  };
+  auto y_label = [&](double t) {
+    return plot.y_log ? log_tick_label(t) : tick_label(t, yr.step());
+  };
   auto sx = [&](double v) { return px0 + (v - xr.lo) / (xr.hi - xr.lo) * (px1 - px0); };
   auto sy = [&](double v) { return py1 - (v - yr.lo) / (yr.hi - yr.lo) * (py1 - py0); };
 
@@ -224,14 +286,13 @@ void write_xy_plot(const std::string& path, const XYPlot& plot) {
     double x = sx(t);
     c.line(x, py0, x, py1, 1.0, kGrey);
     c.line(x, py1, x, py1 + 6, 1.5, kBlack);
-    c.text(x, py1 + 12, tick_label(t, xr.step()), 2.0, kBlack, Align::Center);
+    c.text(x, py1 + 12, x_label(t), 2.0, kBlack, Align::Center);
   }
   for (double t : yr.ticks) {
     double y = sy(t);
     c.line(px0, y, px1, y, 1.0, kGrey);
     c.line(px0 - 6, y, px0, y, 1.5, kBlack);
-    c.text(px0 - 10, y - Canvas::text_height(2.0) / 2, tick_label(t, yr.step()), 2.0, kBlack,
-           Align::Right);
+    c.text(px0 - 10, y - Canvas::text_height(2.0) / 2, y_label(t), 2.0, kBlack, Align::Right);
   }
   c.line(px0, py1, px1, py1, 2.0, kBlack);
   c.line(px0, py0, px0, py1, 2.0, kBlack);
@@ -253,13 +314,21 @@ void write_xy_plot(const std::string& path, const XYPlot& plot) {
     }
   }
 
-  // Legend, top left inside the plot area.
+  // Legend, in the chosen corner inside the plot area.
   double lw = 0;
-  for (const Series& s : plot.series) lw = std::max(lw, Canvas::text_width(s.label, 2.0));
+  std::size_t rows = 0;
+  for (const Series& s : plot.series)
+    if (!s.label.empty()) {
+      lw = std::max(lw, Canvas::text_width(s.label, 2.0));
+      ++rows;
+    }
   if (lw > 0) {
-    const double row = 26, bw = lw + 62, bh = row * plot.series.size() + 10;
-    const bool br = plot.legend == XYPlot::Legend::BottomRight;
-    const double lx = br ? px1 - 16 - bw : px0 + 16, ly = br ? py1 - 16 - bh : py0 + 12;
+    const double row = 26, bw = lw + 62, bh = row * static_cast<double>(rows) + 10;
+    const bool right =
+        plot.legend == XYPlot::Legend::TopRight || plot.legend == XYPlot::Legend::BottomRight;
+    const bool bottom =
+        plot.legend == XYPlot::Legend::BottomLeft || plot.legend == XYPlot::Legend::BottomRight;
+    const double lx = right ? px1 - 16 - bw : px0 + 16, ly = bottom ? py1 - 16 - bh : py0 + 12;
     c.fill_rect(lx, ly, lx + bw, ly + bh, kWhite);
     c.line(lx, ly, lx + bw, ly, 1.0, kGrey);
     c.line(lx + bw, ly, lx + bw, ly + bh, 1.0, kGrey);
@@ -267,6 +336,7 @@ void write_xy_plot(const std::string& path, const XYPlot& plot) {
     c.line(lx, ly + bh, lx, ly, 1.0, kGrey);
     double y = ly + 8;
     for (const Series& s : plot.series) {
+      if (s.label.empty()) continue;
       double my = y + Canvas::text_height(2.0) / 2;
       if (s.lines) c.line(lx + 8, my, lx + 40, my, s.line_width, s.color);
       if (s.points) c.disc(lx + 24, my, 5.0, s.color);

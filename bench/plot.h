@@ -73,8 +73,14 @@ struct XYPlot {
   std::vector<Series> series;
   bool x_from_zero = true;  // axis ranges start at 0 (else at the data minimum)
   bool y_from_zero = true;
+  // Logarithmic axes (ticks at 1, 2, 5 x 10^k, or decades only over a wide range; points with
+  // values <= 0 are left out). *_from_zero does not apply to a log axis.
+  bool x_log = false;
+  bool y_log = false;
   std::string note;  // optional line of text under the title
-  enum class Legend { TopLeft, BottomRight } legend = Legend::TopLeft;
+  // Series with an empty label are left out of the legend.
+  enum class Legend { TopLeft, TopRight, BottomLeft, BottomRight } legend = Legend::TopLeft;
+  double y_headroom = 0.0;  // extra room above the data, as a fraction of its y range (legend)
   int width = 960, height = 620;
 };
 void write_xy_plot(const std::string& path, const XYPlot& plot);

@@ -7,27 +7,17 @@
 #include <fstream>
 #include <string>
 
+#include "cli.h"
 #include "irradcast/image.h"
 
 namespace fs = std::filesystem;
 
 namespace {
 
-struct Result {
-  int status = -1;
-  std::string output;  // stdout and stderr together
-};
+using Result = irradcast::test::CliResult;
 
 Result run_bake(const std::string& args) {
-  std::string cmd = std::string(IRRADCAST_BAKE_EXE) + " " + args + " 2>&1";
-  Result r;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return r;
-  std::array<char, 4096> buf{};
-  while (std::fgets(buf.data(), buf.size(), p)) r.output += buf.data();
-  int status = pclose(p);
-  r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
+  return irradcast::test::run_cli(IRRADCAST_BAKE_EXE, args);
 }
 
 fs::path temp_dir(const std::string& name) {

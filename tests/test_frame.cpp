@@ -130,6 +130,30 @@ std::vector<Envelope> all_messages() {
     m->set_errors_sent(1);
     m->set_engine_idle(true);
     m->set_bytes_per_texel(2.3);
+    PassTime* p = m->add_pass_times();
+    p->set_pass("scatter");
+    p->set_bounce(2);
+    p->set_ms(12.5);
+    p->set_rays(1000000);
+    p->set_seconds_total(3.75);
+    p->set_rays_total(300000000);
+    m->add_pass_times()->set_pass("direct");
+    m->set_update_rate(23.5);
+    m->set_queue_depth_total(70);
+    m->set_queue_depth_max(30);
+    m->set_connections(99);
+    m->set_clients_refused(2);
+    m->set_scene_bytes_sent(123456);
+    m->set_tile_bytes_sent(1ULL << 39);
+    m->set_tiles_published(8000);
+    m->set_engine_seconds_total(88.25);
+    m->set_rays_total(1ULL << 45);
+    SessionsClosed* c = m->add_sessions_closed();
+    c->set_reason("idle_timeout");
+    c->set_sessions(3);
+    m->add_sessions_closed()->set_reason("bye");
+    m->set_tiles(480);
+    m->set_texels(118000);
     out.push_back(e);
   }
   {

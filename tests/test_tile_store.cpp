@@ -112,3 +112,59 @@ TEST(SendQueue, HoldsEachTileOnceAndCountsCoalescedVersions) {
     for (std::uint32_t i = 0; i < 10; ++i) q.push(i);
   EXPECT_EQ(q.size(), 10u);
 }
+
+// With the engine's noise: a change of the size of the noise waits for the refresh ratio
+// (R^(1+h) more samples, h spread over the tiles), a change well beyond it goes out at once.
+TEST(TileStore, ChangesWithinTheEnginesNoiseWaitForTheRefreshRatio) {
+  TileStoreOptions o;
+  o.tile_size = 8;
+  o.change_threshold = 0.01f;
+  o.refresh_ratio = 2.0f;
+  o.significance = 2.0f;
+  const int tiles_x = 16, w = 8 * tiles_x, h = 8;
+  TileStore store({{w, h}}, o);
+  Lightmap level(w, h);
+  for (glm::vec3& t : level.texels) t = glm::vec3(1.0f);
+  // Standard error of each texel's mean: 5% of the level.
+  Lightmap se(w, h);
+  for (glm::vec3& t : se.texels) t = glm::vec3(0.05f);
+  const std::vector<Lightmap> ses{se};
+  TileStore::Noise noise{1, &ses};
+  ASSERT_EQ(store.publish({level}, 1, &noise).size(), static_cast<std::size_t>(tiles_x));
+
+  // A noise-sized change: 4% RMS (above the 1% threshold) where a change of se * sqrt(3 - 1) =
+  // 7% RMS is expected from noise alone at 3x the samples: not significant, so a tile waits
+  // unless 3x reaches its refresh ratio.
+  Lightmap noisy = level;
+  for (std::size_t i = 0; i < noisy.texels.size(); ++i)
+    noisy.texels[i] = glm::vec3(i % 2 ? 1.04f : 0.96f);
+  noise.samples = 3;  // 3 / 1 = 3x: tiles with 2^(1+h) <= 3 refresh, the others wait
+  const std::size_t refreshed = store.publish({noisy}, 2, &noise).size();
+  EXPECT_GT(refreshed, 0u);
+  EXPECT_LT(refreshed, static_cast<std::size_t>(tiles_x)) << "the refreshes are spread";
+  // The others all refresh by 4x the samples.
+  noise.samples = 4;
+  EXPECT_EQ(refreshed + store.publish({noisy}, 3, &noise).size(),
+            static_cast<std::size_t>(tiles_x));
+
+  // A real change (+50% in tile 5) at only 1.25x the samples: beyond the noise, out at once;
+  // the other tiles, unchanged, stay.
+  noise.samples = 5;
+  Lightmap edited = noisy;
+  for (int y = 0; y < h; ++y)
+    for (int x = 40; x < 48; ++x) edited.texels[static_cast<std::size_t>(y) * w + x] *= 1.5f;
+  const auto changed = store.publish({edited}, 4, &noise);
+  ASSERT_EQ(changed.size(), 1u);
+  EXPECT_EQ(changed[0], 5u);
+
+  // Without noise information every change beyond the threshold gets a version, as before.
+  Lightmap back = edited;
+  for (std::size_t i = 0; i < back.texels.size(); ++i) back.texels[i] *= 1.02f;
+  EXPECT_EQ(store.publish({back}, 5).size(), static_cast<std::size_t>(tiles_x));
+}
+
+TEST(TileStore, RejectsARefreshRatioBelowOne) {
+  TileStoreOptions o;
+  o.refresh_ratio = 0.5f;
+  EXPECT_THROW(TileStore({{8, 8}}, o), Error);
+}

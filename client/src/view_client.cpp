@@ -152,17 +152,7 @@ void ViewClient::handshake() {
     // Resume: the scene we hold and the tile versions we have.
     h->set_cached_scene_hash(scene_hash_);
     h->set_known_epoch(tile_epoch_);
-    for (std::uint32_t m = 0; m < infos_.size(); ++m)
-      for (std::uint32_t ty = 0; ty < infos_[m].tiles_y(); ++ty)
-        for (std::uint32_t tx = 0; tx < infos_[m].tiles_x(); ++tx) {
-          std::uint64_t v = versions_[first_tile_[m] + ty * infos_[m].tiles_x() + tx];
-          if (v == 0) continue;
-          wire::TileVersion* k = h->add_known();
-          k->set_lightmap(m);
-          k->set_tile_x(tx);
-          k->set_tile_y(ty);
-          k->set_version(v);
-        }
+    tiles_.add_known(*h);
   }
   send(hello);
   wire::Envelope e;
@@ -180,7 +170,7 @@ void ViewClient::handshake() {
   if (loaded_ && w.tile_epoch() != tile_epoch_) {
     // Another lineage of versions: what we hold stays on screen until replaced, but any version
     // the server sends is news.
-    std::fill(versions_.begin(), versions_.end(), 0);
+    tiles_.forget_versions();
   }
   tile_epoch_ = w.tile_epoch();
   // Ping often enough for the server's idle timer.
@@ -248,37 +238,13 @@ void ViewClient::load_scene(const wire::Welcome& w) {
   counters_.scene_from_cache = from_cache;
   loaded->world = World::build(loaded->unpacked.scene);
   loaded->rays = std::make_unique<RayScene>(loaded->world);
-  const Atlas& atlas = loaded->unpacked.atlas;
-  if (static_cast<std::size_t>(w.lightmaps_size()) != atlas.objects.size())
-    throw Error("the server announces " + std::to_string(w.lightmaps_size()) +
-                " lightmaps, the scene package has " + std::to_string(atlas.objects.size()));
-  if (w.tile_size() == 0) throw Error("the server announces a tile size of 0");
-  infos_.assign(w.lightmaps().begin(), w.lightmaps().end());
-  tile_size_ = w.tile_size();
-  first_tile_.clear();
-  lightmaps_.clear();
-  std::uint32_t total = 0;
-  for (std::size_t m = 0; m < infos_.size(); ++m) {
-    const wire::LightmapInfo& li = infos_[m];
-    const ObjectLightmap& o = atlas.objects[m];
-    if (static_cast<int>(li.width()) != o.width || static_cast<int>(li.height()) != o.height ||
-        static_cast<int>(li.tiles_x()) !=
-            wire::tiles_along(o.width, static_cast<int>(tile_size_)) ||
-        static_cast<int>(li.tiles_y()) != wire::tiles_along(o.height, static_cast<int>(tile_size_)))
-      throw Error("lightmap " + std::to_string(m) +
-                  ": the server's layout does not match the scene");
-    first_tile_.push_back(total);
-    total += li.tiles_x() * li.tiles_y();
-    lightmaps_.emplace_back(o.width, o.height);
-  }
-  first_tile_.push_back(total);
-  versions_.assign(total, 0);
+  tiles_.configure(w, loaded->unpacked.atlas);
   scene_hash_ = w.scene_hash();
   loaded_ = std::move(loaded);
   log::info("view", "scene '" + w.scene_id() + "' " +
                         (from_cache ? "from the cache" : "downloaded") + ": " +
-                        std::to_string(infos_.size()) + " lightmaps, " + std::to_string(total) +
-                        " tiles");
+                        std::to_string(tiles_.lightmaps().size()) + " lightmaps, " +
+                        std::to_string(tiles_.tile_count()) + " tiles");
 }
 
 void ViewClient::subscribe() {
@@ -310,22 +276,7 @@ void ViewClient::apply(const wire::Envelope& e) {
 }
 
 void ViewClient::apply_tile(const wire::TileUpdate& t) {
-  if (t.lightmap() >= infos_.size())
-    throw Error("tile for unknown lightmap " + std::to_string(t.lightmap()));
-  const wire::LightmapInfo& li = infos_[t.lightmap()];
-  if (t.tile_x() >= li.tiles_x() || t.tile_y() >= li.tiles_y())
-    throw Error("tile " + std::to_string(t.tile_x()) + "," + std::to_string(t.tile_y()) +
-                " is outside lightmap " + std::to_string(t.lightmap()));
-  const wire::TileRect r = wire::tile_rect(
-      static_cast<int>(li.width()), static_cast<int>(li.height()), static_cast<int>(tile_size_),
-      static_cast<int>(t.tile_x()), static_cast<int>(t.tile_y()));
-  if (static_cast<int>(t.width()) != r.w || static_cast<int>(t.height()) != r.h)
-    throw Error("tile size does not match the layout");
-  const std::uint32_t index = first_tile_[t.lightmap()] + t.tile_y() * li.tiles_x() + t.tile_x();
-  if (t.version() <= versions_[index]) return;  // stale (cannot happen with this server)
-  wire::decode_tile(t.payload(), t.encoding(), r, lightmaps_[t.lightmap()]);
-  versions_[index] = t.version();
-  ++counters_.tiles_applied;
+  if (tiles_.apply(t)) ++counters_.tiles_applied;
 }
 
 std::size_t ViewClient::poll(std::chrono::milliseconds budget) {
@@ -411,8 +362,8 @@ void ViewClient::close() {
 
 ImageRGB ViewClient::compose(const CameraPose& camera, int width, int height) const {
   if (!loaded_) throw Error("no scene yet");
-  return irradcast::compose(loaded_->world, *loaded_->rays, loaded_->unpacked.atlas, lightmaps_,
-                            camera, width, height);
+  return irradcast::compose(loaded_->world, *loaded_->rays, loaded_->unpacked.atlas,
+                            tiles_.lightmaps(), camera, width, height);
 }
 
 const Scene& ViewClient::scene() const {
@@ -428,20 +379,6 @@ const World& ViewClient::world() const {
 const Atlas& ViewClient::atlas() const {
   if (!loaded_) throw Error("no scene yet");
   return loaded_->unpacked.atlas;
-}
-
-std::uint64_t ViewClient::tile_version(std::uint32_t lightmap, std::uint32_t tx,
-                                       std::uint32_t ty) const {
-  if (lightmap >= infos_.size() || tx >= infos_[lightmap].tiles_x() ||
-      ty >= infos_[lightmap].tiles_y())
-    return 0;
-  return versions_[first_tile_[lightmap] + ty * infos_[lightmap].tiles_x() + tx];
-}
-
-bool ViewClient::all_tiles_received() const {
-  for (std::uint64_t v : versions_)
-    if (v == 0) return false;
-  return !versions_.empty();
 }
 
 }  // namespace irradcast

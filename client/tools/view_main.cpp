@@ -13,6 +13,7 @@
 
 #include "irradcast/camera.h"
 #include "irradcast/error.h"
+#include "irradcast/host_port.h"
 #include "irradcast/image.h"
 #include "irradcast/log.h"
 #include "irradcast/tonemap.h"
@@ -54,20 +55,10 @@ std::string default_cache_dir() {
 int run(const Options& o) {
   using namespace irradcast;
   log::set_level(log::parse_level(o.log_level));
-  const auto colon = o.connect.rfind(':');
-  if (colon == std::string::npos || colon == 0 || colon + 1 == o.connect.size())
-    throw Error("--connect must be HOST:PORT, not '" + o.connect + "'");
+  const HostPort hp = parse_host_port(o.connect);
   ViewClientOptions vo;
-  vo.host = o.connect.substr(0, colon);
-  try {
-    std::size_t used = 0;
-    int port = std::stoi(o.connect.substr(colon + 1), &used);
-    if (used != o.connect.size() - colon - 1 || port < 1 || port > 65535)
-      throw std::invalid_argument("port");
-    vo.port = static_cast<std::uint16_t>(port);
-  } catch (const std::exception&) {
-    throw Error("--connect: '" + o.connect.substr(colon + 1) + "' is not a port number");
-  }
+  vo.host = hp.host;
+  vo.port = hp.port;
   vo.name = o.name;
   vo.cache_dir = o.cache_dir == "auto"   ? default_cache_dir()
                  : o.cache_dir == "none" ? ""

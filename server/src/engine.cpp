@@ -319,6 +319,14 @@ std::vector<Lightmap> Engine::component(int bounce) const {
   return to_lightmaps(mean_[bounce]);
 }
 
+std::vector<Lightmap> Engine::standard_error() const {
+  if (updates_ < 2) return {};
+  std::vector<glm::vec3> se(texels_.size());
+  for (std::size_t i = 0; i < se.size(); ++i)
+    se[i] = glm::vec3(static_cast<float>(std::sqrt(total_m2_[i] / (updates_ - 1) / updates_)));
+  return to_lightmaps(se);
+}
+
 double Engine::mean_relative_error() const {
   if (updates_ < 2 || texels_.size() == 0) return 1.0;
   double sum = 0.0;

@@ -1,5 +1,6 @@
 #include "irradcast/engine_host.h"
 
+#include <algorithm>
 #include <chrono>
 
 #include "irradcast/embree_backend.h"
@@ -10,6 +11,7 @@
 #include "irradcast/log.h"
 #include "irradcast/ray_scene.h"
 #include "irradcast/texel_validity.h"
+#include "irradcast/thread_priority.h"
 
 namespace irradcast {
 
@@ -71,6 +73,8 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
       tile_epoch_ =
           (tile_epoch_ << 8) | static_cast<unsigned char>(digest[static_cast<std::size_t>(i)]);
   }
+  stats_.texels = impl_->engine->texel_count();
+  stats_.tiles = tiles_->tile_count();
   log::info("engine", scene_id_ + ": " + std::to_string(atlas_.objects.size()) + " lightmaps, " +
                           std::to_string(impl_->engine->texel_count()) + " texels, " +
                           std::to_string(tiles_->tile_count()) + " tiles, scene package " +
@@ -89,7 +93,12 @@ void EngineHost::set_listener(PublishListener listener) {
 void EngineHost::start() {
   if (thread_.joinable()) return;
   stopping_ = false;
-  thread_ = std::thread([this] { run(); });
+  if (options_.engine_nice > 0) set_tbb_worker_nice(options_.engine_nice);
+  thread_ = std::thread([this] {
+    set_thread_name("irradcast-eng");
+    if (options_.engine_nice > 0) set_thread_nice(options_.engine_nice);
+    run();
+  });
 }
 
 void EngineHost::stop() {
@@ -126,9 +135,16 @@ void EngineHost::run() {
 }
 
 void EngineHost::do_update() {
+  const auto began = std::chrono::steady_clock::now();
   UpdateStats u = impl_->engine->update();
   std::vector<Lightmap> maps = impl_->engine->lightmaps();
-  std::vector<std::uint32_t> changed = tiles_->publish(maps, now_us());
+  // With the engine's own noise estimate, tiles that only changed by Monte Carlo noise wait
+  // until their refresh is worth the bytes (TileStoreOptions::refresh_ratio).
+  const std::vector<Lightmap> standard_error = impl_->engine->standard_error();
+  const TileStore::Noise noise{impl_->engine->updates(), &standard_error};
+  std::vector<std::uint32_t> changed = tiles_->publish(maps, now_us(), &noise);
+  const double bytes_per_texel = tiles_->bytes_per_texel();
+  const auto ended = std::chrono::steady_clock::now();
   PublishListener listener;
   {
     std::lock_guard lock(mutex_);
@@ -137,6 +153,15 @@ void EngineHost::do_update() {
     stats_.rays_per_s = u.total_seconds > 0.0 ? u.total_rays() / u.total_seconds : 0.0;
     stats_.convergence = impl_->engine->mean_relative_error();
     stats_.tiles_published += changed.size();
+    stats_.seconds_total += u.total_seconds;
+    stats_.rays_total += u.total_rays();
+    stats_.bytes_per_texel = bytes_per_texel;
+    record_passes(u);
+    if (stats_.updates == 1) first_update_ = began;
+    update_ends_.push_back(ended);
+    while (!update_ends_.empty() && (ended - update_ends_.front() > kUpdateRateWindow ||
+                                     update_ends_.size() > kMaxUpdateEnds))
+      update_ends_.pop_front();
     if (options_.max_updates > 0 && stats_.updates >= options_.max_updates) {
       stats_.idle = true;
       log::info("engine", "reached " + std::to_string(options_.max_updates) +
@@ -150,9 +175,44 @@ void EngineHost::do_update() {
   cv_.notify_all();
 }
 
+void EngineHost::record_passes(const UpdateStats& u) {
+  // The list of passes is fixed by the parameters; it is built on the first update.
+  const bool probes = !options_.engine.unbiased();
+  if (stats_.passes.empty()) {
+    stats_.passes.push_back({"direct", 0});
+    for (std::size_t b = 1; b <= u.scatter.size(); ++b) {
+      if (probes) stats_.passes.push_back({"probes", static_cast<std::uint32_t>(b)});
+      stats_.passes.push_back({"scatter", static_cast<std::uint32_t>(b)});
+    }
+  }
+  auto add = [](EnginePassStats& p, const PassTiming& t) {
+    p.seconds = t.seconds;
+    p.rays = t.rays;
+    p.seconds_total += t.seconds;
+    p.rays_total += t.rays;
+  };
+  std::size_t i = 0;
+  add(stats_.passes[i++], u.direct);
+  for (std::size_t b = 0; b < u.scatter.size() && i < stats_.passes.size(); ++b) {
+    if (probes && b < u.probes.size()) add(stats_.passes[i++], u.probes[b]);
+    if (i < stats_.passes.size()) add(stats_.passes[i++], u.scatter[b]);
+  }
+}
+
 EngineHostStats EngineHost::stats() const {
   std::lock_guard lock(mutex_);
-  return stats_;
+  EngineHostStats s = stats_;
+  // Updates that finished within the window, over the window (or the time since the first
+  // update began, when shorter).
+  const auto now = std::chrono::steady_clock::now();
+  std::size_t recent = 0;
+  for (auto it = update_ends_.rbegin(); it != update_ends_.rend() && now - *it <= kUpdateRateWindow;
+       ++it)
+    ++recent;
+  const double span = std::min(std::chrono::duration<double>(kUpdateRateWindow).count(),
+                               std::chrono::duration<double>(now - first_update_).count());
+  s.update_rate = recent > 0 && span > 0.0 ? static_cast<double>(recent) / span : 0.0;
+  return s;
 }
 
 void EngineHost::wait_for_updates(std::uint64_t updates) const {

@@ -2,6 +2,7 @@
 
 #include <asio.hpp>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cmath>
@@ -16,6 +17,7 @@
 #include "irradcast/frame.h"
 #include "irradcast/log.h"
 #include "irradcast/send_queue.h"
+#include "irradcast/thread_priority.h"
 
 namespace irradcast {
 
@@ -49,8 +51,10 @@ struct Server::Impl {
   std::set<std::shared_ptr<Session>> sessions;
 
   // Counters (sessions add to them).
-  std::atomic<std::uint64_t> connections{0}, bytes_sent{0}, bytes_received{0}, frames_received{0},
-      tiles_sent{0}, tiles_coalesced{0}, scene_bytes_sent{0}, errors_sent{0};
+  std::atomic<std::uint64_t> connections{0}, clients_refused{0}, bytes_sent{0}, bytes_received{0},
+      frames_received{0}, tiles_sent{0}, tile_bytes_sent{0}, tiles_coalesced{0},
+      scene_bytes_sent{0}, errors_sent{0};
+  std::array<std::atomic<std::uint64_t>, kCloseReasons> sessions_closed{};
 
   void accept();
   void on_publish(const std::vector<std::uint32_t>& tiles);
@@ -62,9 +66,30 @@ struct Server::Impl {
     std::lock_guard lock(sessions_mutex);
     return static_cast<std::uint32_t>(sessions.size());
   }
+  ServerStats stats() const;
 };
 
 namespace {
+
+// The reason a session ends after sending an Error frame with this code.
+CloseReason reason_of(wire::ErrorCode code) {
+  switch (code) {
+    case wire::BAD_FRAME:
+      return CloseReason::BadFrame;
+    case wire::FRAME_TOO_LARGE:
+      return CloseReason::FrameTooLarge;
+    case wire::UNSUPPORTED_VERSION:
+      return CloseReason::UnsupportedVersion;
+    case wire::UNEXPECTED_MESSAGE:
+      return CloseReason::UnexpectedMessage;
+    case wire::IDLE_TIMEOUT:
+      return CloseReason::IdleTimeout;
+    case wire::SERVER_SHUTDOWN:
+      return CloseReason::Shutdown;
+    default:
+      return CloseReason::Internal;
+  }
+}
 
 // One client connection. Every handler runs on the session's strand, so a session's state
 // needs no locks; the engine thread reaches it only through asio::post.
@@ -102,6 +127,7 @@ class Session : public std::enable_shared_from_this<Session> {
       const TileStore& store = self->server_->host.tiles();
       for (std::uint32_t t : *tiles)
         if (self->subscribed_[store.tile(t).lightmap]) self->queue_.push(t);
+      self->queue_changed();
       self->pump();
     });
   }
@@ -117,6 +143,15 @@ class Session : public std::enable_shared_from_this<Session> {
 
  private:
   enum class State { AwaitHello, Ready };
+
+  // After tiles were queued: publishes the queue depth, and adds the versions coalesced since
+  // the last call to the server's counter (so that it is live, not counted at the end).
+  void queue_changed() {
+    queue_depth_ = queue_.size() + (held_ ? 1 : 0);
+    const std::uint64_t c = queue_.coalesced();
+    server_->tiles_coalesced += c - coalesced_counted_;
+    coalesced_counted_ = c;
+  }
 
   void arm_idle_timer() {
     idle_timer_.expires_after(server_->options.idle_timeout);
@@ -142,7 +177,7 @@ class Session : public std::enable_shared_from_this<Session> {
     if (ec) {
       if (ec != asio::error::eof && ec != asio::error::operation_aborted)
         log::debug("server", "session " + std::to_string(id_) + ": read: " + ec.message());
-      close();
+      close(CloseReason::Disconnect);
       return;
     }
     server_->bytes_received += n;
@@ -198,7 +233,7 @@ class Session : public std::enable_shared_from_this<Session> {
       }
       case E::kBye:
         log::debug("server", "session " + std::to_string(id_) + ": bye: " + env.bye().reason());
-        close();
+        close(CloseReason::Bye);
         break;
       case E::kPong:
         break;
@@ -305,16 +340,18 @@ class Session : public std::enable_shared_from_this<Session> {
       for (std::uint32_t t = first; t < last; ++t)
         if (tiles.version(t) > known_[t]) queue_.push(t);
     }
+    queue_changed();
   }
 
   void send_stats() {
     const EngineHostStats es = server_->host.stats();
+    const ServerStats ss = server_->stats();
     wire::Envelope e;
     wire::Stats* s = e.mutable_stats();
-    s->set_clients(server_->client_count());
-    s->set_bytes_sent(server_->bytes_sent.load());
-    s->set_tiles_sent(server_->tiles_sent.load());
-    s->set_tiles_coalesced(server_->tiles_coalesced.load());
+    s->set_clients(ss.clients);
+    s->set_bytes_sent(ss.bytes_sent);
+    s->set_tiles_sent(ss.tiles_sent);
+    s->set_tiles_coalesced(ss.tiles_coalesced);
     s->set_updates(es.updates);
     s->set_rays_per_s(es.rays_per_s);
     s->set_convergence(es.convergence);
@@ -323,11 +360,37 @@ class Session : public std::enable_shared_from_this<Session> {
     s->set_uptime_ms(static_cast<std::uint64_t>(
         std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - server_->started)
             .count()));
-    s->set_bytes_received(server_->bytes_received.load());
-    s->set_frames_received(server_->frames_received.load());
-    s->set_errors_sent(server_->errors_sent.load());
+    s->set_bytes_received(ss.bytes_received);
+    s->set_frames_received(ss.frames_received);
+    s->set_errors_sent(ss.errors_sent);
     s->set_engine_idle(es.idle);
     s->set_bytes_per_texel(server_->host.tiles().bytes_per_texel());
+    for (const EnginePassStats& p : es.passes) {
+      wire::PassTime* pt = s->add_pass_times();
+      pt->set_pass(p.pass);
+      pt->set_bounce(p.bounce);
+      pt->set_ms(1e3 * p.seconds);
+      pt->set_rays(p.rays);
+      pt->set_seconds_total(p.seconds_total);
+      pt->set_rays_total(p.rays_total);
+    }
+    s->set_update_rate(es.update_rate);
+    s->set_queue_depth_total(ss.queue_depth);
+    s->set_queue_depth_max(ss.queue_depth_max);
+    s->set_connections(ss.connections);
+    s->set_clients_refused(ss.clients_refused);
+    s->set_scene_bytes_sent(ss.scene_bytes_sent);
+    s->set_tile_bytes_sent(ss.tile_bytes_sent);
+    s->set_tiles_published(es.tiles_published);
+    s->set_engine_seconds_total(es.seconds_total);
+    s->set_rays_total(es.rays_total);
+    for (std::size_t r = 0; r < kCloseReasons; ++r) {
+      wire::SessionsClosed* c = s->add_sessions_closed();
+      c->set_reason(close_reason_name(static_cast<CloseReason>(r)));
+      c->set_sessions(ss.sessions_closed[r]);
+    }
+    s->set_tiles(es.tiles);
+    s->set_texels(es.texels);
     send(e);
   }
 
@@ -341,14 +404,18 @@ class Session : public std::enable_shared_from_this<Session> {
   // An Error frame, then close once it is written (or after a grace period if the client does
   // not read).
   void fail(wire::ErrorCode code, const std::string& message) {
+    fail(code, message, reason_of(code));
+  }
+  void fail(wire::ErrorCode code, const std::string& message, CloseReason reason) {
     if (closed_ || closing_) return;
     log::info("server", "session " + std::to_string(id_) + " (" + peer_ + ") closed: " + message);
     ++server_->errors_sent;
     control_.push_back(wire::encode_frame(wire::make_error(code, message)));
     closing_ = true;
+    close_reason_ = reason;
     close_timer_.expires_after(std::chrono::seconds(2));
     close_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
-      if (!ec) self->close();
+      if (!ec) self->close(CloseReason::Disconnect);
     });
     pump();
   }
@@ -357,7 +424,8 @@ class Session : public std::enable_shared_from_this<Session> {
     if (closed_ || closing_) return;
     if (control_.size() >= server_->options.max_control_frames) {
       fail(wire::BAD_REQUEST,
-           "the client does not read its replies (" + std::to_string(control_.size()) + " queued)");
+           "the client does not read its replies (" + std::to_string(control_.size()) + " queued)",
+           CloseReason::SlowClient);
       return;
     }
     control_.push_back(wire::encode_frame(e));
@@ -373,7 +441,7 @@ class Session : public std::enable_shared_from_this<Session> {
       frame = std::move(control_.front());
       control_.pop_front();
     } else if (closing_) {
-      close();
+      close(CloseReason::Disconnect);  // the reason fail() gave stands
       return;
     } else if (scene_active_) {
       frame = next_scene_chunk();
@@ -391,11 +459,14 @@ class Session : public std::enable_shared_from_this<Session> {
                                                     is_scene](std::error_code ec, std::size_t n) {
                         self->writing_ = false;
                         if (ec) {
-                          self->close();
+                          self->close(CloseReason::Disconnect);
                           return;
                         }
                         self->server_->bytes_sent += n;
-                        if (is_tile) ++self->server_->tiles_sent;
+                        if (is_tile) {
+                          ++self->server_->tiles_sent;
+                          self->server_->tile_bytes_sent += n;
+                        }
                         if (is_scene) self->server_->scene_bytes_sent += n;
                         self->pump();
                       }));
@@ -474,18 +545,22 @@ class Session : public std::enable_shared_from_this<Session> {
     return true;
   }
 
-  void close() {
+  // Closes the connection. `reason` counts unless fail() gave one before.
+  void close(CloseReason reason) {
     if (closed_) return;
     closed_ = true;
+    if (!close_reason_) close_reason_ = reason;
     std::error_code ec;
     idle_timer_.cancel();
     rate_timer_.cancel();
     close_timer_.cancel();
     socket_.shutdown(tcp::socket::shutdown_both, ec);
     socket_.close(ec);
-    server_->tiles_coalesced += queue_.coalesced();
+    queue_changed();
+    ++server_->sessions_closed[static_cast<std::size_t>(*close_reason_)];
     queue_depth_ = 0;
-    log::debug("server", "session " + std::to_string(id_) + " ended");
+    log::debug("server", "session " + std::to_string(id_) + " ended (" +
+                             close_reason_name(*close_reason_) + ")");
     server_->remove(shared_from_this());
   }
 
@@ -506,6 +581,8 @@ class Session : public std::enable_shared_from_this<Session> {
   std::vector<std::uint8_t> subscribed_;
   std::vector<std::uint64_t> known_;  // newest version the client has (or has been sent)
   SendQueue queue_;
+  std::uint64_t coalesced_counted_ = 0;  // of queue_.coalesced(), added to the server's counter
+  std::optional<CloseReason> close_reason_;
   std::atomic<std::size_t> queue_depth_{0};
   wire::TileEncoding encoding_ = wire::TILE_RGB9E5_ZSTD;
   bool held_ = false;  // a tile frame waiting for the rate cap
@@ -535,6 +612,7 @@ void Server::Impl::accept() {
             s->start();
           } else {
             // Full: one Error frame, best effort, then close.
+            ++self->clients_refused;
             std::string frame =
                 wire::encode_frame(wire::make_error(wire::INTERNAL, "the server is full"));
             std::error_code ignored;
@@ -584,6 +662,7 @@ void Server::start() {
   im.accept();
   for (int i = 0; i < im.options.io_threads; ++i)
     im.threads.emplace_back([&im] {
+      set_thread_name("irradcast-io");
       for (;;) {
         try {
           im.io.run();
@@ -629,20 +708,59 @@ std::uint16_t Server::port() const {
 }
 
 ServerStats Server::stats() const {
-  const Impl& im = *impl_;
+  return impl_->stats();
+}
+
+ServerStats Server::Impl::stats() const {
+  const Impl& im = *this;
   ServerStats s;
   s.clients = im.client_count();
   s.connections = im.connections.load();
+  s.clients_refused = im.clients_refused.load();
   s.bytes_sent = im.bytes_sent.load();
   s.bytes_received = im.bytes_received.load();
   s.frames_received = im.frames_received.load();
   s.tiles_sent = im.tiles_sent.load();
+  s.tile_bytes_sent = im.tile_bytes_sent.load();
   s.tiles_coalesced = im.tiles_coalesced.load();
   s.scene_bytes_sent = im.scene_bytes_sent.load();
   s.errors_sent = im.errors_sent.load();
+  for (std::size_t r = 0; r < kCloseReasons; ++r)
+    s.sessions_closed[r] = im.sessions_closed[r].load();
+  s.uptime_seconds = std::chrono::duration<double>(Clock::now() - im.started).count();
   std::lock_guard lock(im.sessions_mutex);
-  for (const auto& session : im.sessions) s.queue_depth += session->queue_depth();
+  for (const auto& session : im.sessions) {
+    const std::uint64_t depth = session->queue_depth();
+    s.queue_depth += depth;
+    s.queue_depth_max = std::max(s.queue_depth_max, depth);
+  }
   return s;
+}
+
+const char* close_reason_name(CloseReason reason) {
+  switch (reason) {
+    case CloseReason::Bye:
+      return "bye";
+    case CloseReason::Disconnect:
+      return "disconnect";
+    case CloseReason::IdleTimeout:
+      return "idle_timeout";
+    case CloseReason::BadFrame:
+      return "bad_frame";
+    case CloseReason::FrameTooLarge:
+      return "frame_too_large";
+    case CloseReason::UnsupportedVersion:
+      return "unsupported_version";
+    case CloseReason::UnexpectedMessage:
+      return "unexpected_message";
+    case CloseReason::SlowClient:
+      return "slow_client";
+    case CloseReason::Shutdown:
+      return "shutdown";
+    case CloseReason::Internal:
+      return "internal";
+  }
+  return "unknown";
 }
 
 }  // namespace irradcast

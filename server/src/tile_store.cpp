@@ -2,6 +2,8 @@
 
 #include <tbb/parallel_for.h>
 
+#include <cmath>
+
 #include "irradcast/error.h"
 
 namespace irradcast {
@@ -11,6 +13,9 @@ TileStore::TileStore(const std::vector<std::pair<int, int>>& sizes, TileStoreOpt
   if (options_.tile_size < 1 || options_.tile_size > 4096)
     throw Error("tile size must be in 1..4096, not " + std::to_string(options_.tile_size));
   if (!(options_.change_threshold >= 0.0f)) throw Error("tile change threshold must be >= 0");
+  if (!(options_.refresh_ratio >= 1.0f))
+    throw Error("tile refresh ratio must be >= 1, not " + std::to_string(options_.refresh_ratio));
+  if (!(options_.significance >= 0.0f)) throw Error("tile significance must be >= 0");
   for (std::uint32_t m = 0; m < sizes_.size(); ++m) {
     first_tile_.push_back(static_cast<std::uint32_t>(tiles_.size()));
     const auto [w, h] = sizes_[m];
@@ -46,8 +51,58 @@ std::pair<std::uint32_t, std::uint32_t> TileStore::tiles_of(std::uint32_t lightm
   return {first_tile_.at(lightmap), first_tile_.at(lightmap + 1)};
 }
 
+namespace {
+
+double luminance(glm::vec3 v) {
+  return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z;
+}
+
+// h in [0, 1) per tile, evenly spread (golden-ratio sequence).
+double tile_jitter(std::size_t i) {
+  const double x = static_cast<double>(i) * 0.6180339887498949;
+  return x - std::floor(x);
+}
+
+}  // namespace
+
+bool TileStore::changed_enough(std::size_t i, const std::vector<Lightmap>& maps, float floor,
+                               const Noise* noise) const {
+  const Tile& t = tiles_[i];
+  const State& s = state_[i];
+  if (s.version == 0) return true;
+  // Below the threshold nothing is worth sending, noise or not.
+  if (!wire::tile_changed(maps[t.lightmap], published_[t.lightmap], t.rect,
+                          options_.change_threshold, floor))
+    return false;
+  if (!noise || !noise->standard_error || noise->standard_error->size() != maps.size() ||
+      s.samples == 0 || noise->samples <= s.samples)
+    return true;
+  // Enough new samples: the client's copy is noticeably noisier than ours.
+  const double growth = static_cast<double>(noise->samples) / static_cast<double>(s.samples);
+  const double ratio = std::pow(static_cast<double>(options_.refresh_ratio), 1.0 + tile_jitter(i));
+  if (growth >= ratio) return true;
+  // Otherwise only a change beyond the noise. For nested running means the change since the
+  // version with n0 samples has a variance of se(n)^2 (n / n0 - 1), with se(n) the standard
+  // error now; RMS over the tile, in luminance.
+  const Lightmap& now = maps[t.lightmap];
+  const Lightmap& sent = published_[t.lightmap];
+  const Lightmap& se = (*noise->standard_error)[t.lightmap];
+  if (se.width != now.width || se.height != now.height) return true;
+  double change2 = 0.0, noise2 = 0.0;
+  for (int y = t.rect.y0; y < t.rect.y0 + t.rect.h; ++y)
+    for (int x = t.rect.x0; x < t.rect.x0 + t.rect.w; ++x) {
+      const std::size_t k = static_cast<std::size_t>(y) * now.width + x;
+      const double d = luminance(now.texels[k]) - luminance(sent.texels[k]);
+      change2 += d * d;
+      noise2 += static_cast<double>(se.texels[k].x) * se.texels[k].x;
+    }
+  const double expected2 = noise2 * (growth - 1.0);
+  const double z = options_.significance;
+  return change2 > z * z * expected2;
+}
+
 std::vector<std::uint32_t> TileStore::publish(const std::vector<Lightmap>& maps,
-                                              std::uint64_t time_us) {
+                                              std::uint64_t time_us, const Noise* noise) {
   if (maps.size() != sizes_.size())
     throw Error("tile store: " + std::to_string(maps.size()) + " lightmaps published, expected " +
                 std::to_string(sizes_.size()));
@@ -63,10 +118,7 @@ std::vector<std::uint32_t> TileStore::publish(const std::vector<Lightmap>& maps,
   std::vector<std::shared_ptr<const std::string>> encoded(tiles_.size());
   tbb::parallel_for(std::size_t(0), tiles_.size(), [&](std::size_t i) {
     const Tile& t = tiles_[i];
-    if (state_[i].version != 0 &&
-        !wire::tile_changed(maps[t.lightmap], published_[t.lightmap], t.rect,
-                            options_.change_threshold, floors[t.lightmap]))
-      return;
+    if (!changed_enough(i, maps, floors[t.lightmap], noise)) return;
     changed[i] = 1;
     encoded[i] = std::make_shared<const std::string>(
         wire::encode_tile(maps[t.lightmap], t.rect, wire::TILE_RGB9E5_ZSTD));
@@ -88,6 +140,7 @@ std::vector<std::uint32_t> TileStore::publish(const std::vector<Lightmap>& maps,
     payload_bytes_ += encoded[i]->size();
     ++s.version;
     s.time_us = time_us;
+    s.samples = noise ? noise->samples : 0;
     s.rgb9e5 = std::move(encoded[i]);
     {
       std::lock_guard half_lock(half_mutex_);

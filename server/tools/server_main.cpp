@@ -16,6 +16,8 @@
 #include "irradcast/engine_host.h"
 #include "irradcast/error.h"
 #include "irradcast/log.h"
+#include "irradcast/metrics_endpoint.h"
+#include "irradcast/metrics_text.h"
 #include "irradcast/net_server.h"
 #include "irradcast/progress.h"
 
@@ -30,9 +32,13 @@ struct Options {
   int threads = 0;
   int tile_size = 32;
   float tile_threshold = 0.01f;
+  float tile_refresh = 2.0f;
+  int engine_nice = 10;
   std::uint32_t max_updates = 0;
   int idle_timeout_s = 30;
   int status_every_s = 5;
+  int metrics_port = -1;     // -1: no metrics endpoint
+  std::string metrics_bind;  // empty: --bind
   std::string log_level = "info";
   irradcast::tools::EngineOptions engine;
 };
@@ -50,6 +56,8 @@ int run(const Options& o, sigset_t signals) {
   ho.atlas = o.engine.atlas();
   ho.tiles.tile_size = o.tile_size;
   ho.tiles.change_threshold = o.tile_threshold;
+  ho.tiles.refresh_ratio = o.tile_refresh;
+  ho.engine_nice = o.engine_nice;
   ho.max_updates = o.max_updates;
   log::info("server", "loading " + o.scene);
   EngineHost host(load_scene(o.scene, o.detail), o.scene, ho);
@@ -61,6 +69,15 @@ int run(const Options& o, sigset_t signals) {
   so.idle_timeout = std::chrono::seconds(o.idle_timeout_s);
   Server server(host, so);
   server.start();
+  std::unique_ptr<MetricsEndpoint> metrics;
+  if (o.metrics_port >= 0) {
+    MetricsEndpointOptions mo;
+    mo.bind = o.metrics_bind.empty() ? o.bind : o.metrics_bind;
+    mo.port = static_cast<std::uint16_t>(o.metrics_port);
+    metrics = std::make_unique<MetricsEndpoint>(
+        [&server, &host] { return format_metrics(collect_metrics(server, host)); }, mo);
+    metrics->start();  // logs "metrics on http://ADDR:PORT/metrics"
+  }
   host.start();
 
   // The status line, on its own thread, until a signal arrives.
@@ -73,15 +90,16 @@ int run(const Options& o, sigset_t signals) {
       next += std::chrono::seconds(o.status_every_s);
       const EngineHostStats es = host.stats();
       const ServerStats ss = server.stats();
-      char line[256];
+      char line[384];
       std::snprintf(line, sizeof line,
-                    "updates %llu%s, convergence %.4f, %.2f Mrays/s, %u clients, %.2f MB sent, "
-                    "%llu tiles sent, %llu coalesced, %llu queued",
+                    "updates %llu%s (%.2f/s), convergence %.4f, %.2f Mrays/s, %u clients, "
+                    "%.2f MB sent, %llu tiles sent, %llu coalesced, %llu queued (max %llu)",
                     static_cast<unsigned long long>(es.updates), es.idle ? " (final)" : "",
-                    es.convergence, es.rays_per_s * 1e-6, ss.clients, ss.bytes_sent * 1e-6,
-                    static_cast<unsigned long long>(ss.tiles_sent),
+                    es.update_rate, es.convergence, es.rays_per_s * 1e-6, ss.clients,
+                    ss.bytes_sent * 1e-6, static_cast<unsigned long long>(ss.tiles_sent),
                     static_cast<unsigned long long>(ss.tiles_coalesced),
-                    static_cast<unsigned long long>(ss.queue_depth));
+                    static_cast<unsigned long long>(ss.queue_depth),
+                    static_cast<unsigned long long>(ss.queue_depth_max));
       log::info("status", line);
     }
   });
@@ -91,6 +109,7 @@ int run(const Options& o, sigset_t signals) {
             std::string("received ") + (sig == SIGINT ? "SIGINT" : "SIGTERM") + ", shutting down");
   done = true;
   status.join();
+  if (metrics) metrics->stop();
   server.stop();
   host.stop();
   const ServerStats ss = server.stats();
@@ -119,6 +138,14 @@ int main(int argc, char** argv) {
   app.add_option("--tile-threshold", o.tile_threshold,
                  "relative change that gives a tile a new version")
       ->check(CLI::Range(0.0f, 10.0f));
+  app.add_option("--engine-nice", o.engine_nice,
+                 "nice value of the engine's threads, so the network threads come first "
+                 "(0 = same as the process)")
+      ->check(CLI::Range(0, 19));
+  app.add_option("--tile-refresh", o.tile_refresh,
+                 "a tile whose change is within the engine's noise gets a new version once its "
+                 "samples grew by R^(1+h), h in [0,1) per tile (1 = every update)")
+      ->check(CLI::Range(1.0f, 1000.0f));
   app.add_option("--max-updates", o.max_updates,
                  "stop refining after this many engine updates (0 = never)");
   app.add_option("--idle-timeout", o.idle_timeout_s,
@@ -126,6 +153,13 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 86400));
   app.add_option("--status-every", o.status_every_s, "seconds between status lines (0 = none)")
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--metrics-port", o.metrics_port,
+                 "serve Prometheus metrics at http://ADDR:PORT/metrics (0 = any free port; off "
+                 "when not given)")
+      ->check(CLI::Range(0, 65535))
+      ->default_str("off");
+  app.add_option("--metrics-bind", o.metrics_bind,
+                 "address for the metrics endpoint (default: the --bind address)");
   app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
   o.engine.add_to(app);
   try {

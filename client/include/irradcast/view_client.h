@@ -17,6 +17,7 @@
 #include "irradcast/image.h"
 #include "irradcast/lightmap.h"
 #include "irradcast/scene.h"
+#include "irradcast/tile_cache.h"
 #include "irradcast/world.h"
 
 namespace irradcast {
@@ -67,11 +68,13 @@ class ViewClient {
   const Scene& scene() const;
   const World& world() const;
   const Atlas& atlas() const;
-  const std::vector<Lightmap>& lightmaps() const { return lightmaps_; }
-  std::uint64_t tile_version(std::uint32_t lightmap, std::uint32_t tx, std::uint32_t ty) const;
+  const std::vector<Lightmap>& lightmaps() const { return tiles_.lightmaps(); }
+  std::uint64_t tile_version(std::uint32_t lightmap, std::uint32_t tx, std::uint32_t ty) const {
+    return tiles_.version(lightmap, tx, ty);
+  }
   // True when every tile has arrived at least once.
-  bool all_tiles_received() const;
-  std::size_t tile_count() const { return versions_.size(); }
+  bool all_tiles_received() const { return tiles_.all_received(); }
+  std::size_t tile_count() const { return tiles_.tile_count(); }
   const ViewClientCounters& counters() const { return counters_; }
   const std::string& scene_hash() const { return scene_hash_; }
   std::uint64_t session() const { return session_; }
@@ -96,11 +99,7 @@ class ViewClient {
   std::string scene_hash_;
   std::uint64_t session_ = 0;
   std::uint64_t tile_epoch_ = 0;
-  std::uint32_t tile_size_ = 0;
-  std::vector<wire::LightmapInfo> infos_;
-  std::vector<std::uint32_t> first_tile_;
-  std::vector<Lightmap> lightmaps_;
-  std::vector<std::uint64_t> versions_;
+  TileCache tiles_;
   std::optional<wire::Stats> last_stats_;
   ViewClientCounters counters_;
   std::chrono::steady_clock::time_point last_ping_{};

@@ -61,6 +61,10 @@ class Engine {
   std::vector<Lightmap> component(int bounce) const;
   // Per texel: samples (updates) so far, and the relative standard error of its total estimate.
   double mean_relative_error() const;
+  // Per texel, the standard error of the mean of its total estimate (luminance, in every
+  // channel), as lightmaps like lightmaps(); empty before the second update. The tile store
+  // uses it to tell a real change of a tile from Monte Carlo noise.
+  std::vector<Lightmap> standard_error() const;
 
  private:
   void build_texels(const std::vector<TexelGBuffer>& gbuffers);

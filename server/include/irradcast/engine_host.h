@@ -5,8 +5,10 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -23,11 +25,27 @@
 
 namespace irradcast {
 
+struct UpdateStats;
+
 struct EngineHostOptions {
   EngineParams engine;
   AtlasOptions atlas;
   TileStoreOptions tiles;
   std::uint32_t max_updates = 0;  // stop refining after this many updates (0 = never)
+  // Nice value of the engine thread and its TBB workers while the host runs (0 = as the
+  // process): the network threads come first (see thread_priority.h).
+  int engine_nice = 10;
+};
+
+// One engine pass (direct, or a bounce's probe gather or scatter): the last update's time and
+// rays, and the totals over every update.
+struct EnginePassStats {
+  std::string pass;          // "direct", "probes" or "scatter"
+  std::uint32_t bounce = 0;  // 0 for direct, k for the k-th indirect bounce
+  double seconds = 0.0;      // last update
+  std::uint64_t rays = 0;    // last update
+  double seconds_total = 0.0;
+  std::uint64_t rays_total = 0;
 };
 
 struct EngineHostStats {
@@ -37,6 +55,18 @@ struct EngineHostStats {
   double convergence = 1.0;  // mean relative standard error of the texels
   bool idle = false;         // max_updates reached: the lightmaps will not change
   std::uint64_t tiles_published = 0;
+  // Passes in the order they run: direct, then per bounce probes (not in unbiased mode, which
+  // has no probes) and scatter. Empty before the first update.
+  std::vector<EnginePassStats> passes;
+  double seconds_total = 0.0;  // time in updates (Engine::update), summed
+  std::uint64_t rays_total = 0;
+  // Updates per second over the last kUpdateRateWindow: the updates that finished in that
+  // window divided by the window (or by the time since the first update began, when that is
+  // shorter). Sliding, so it falls to 0 within the window once the engine stops refining.
+  double update_rate = 0.0;
+  double bytes_per_texel = 0.0;  // TileStore::bytes_per_texel() after the last publish
+  std::uint64_t texels = 0;      // texels the engine computes
+  std::uint64_t tiles = 0;       // tiles in the tile store
 };
 
 class EngineHost {
@@ -68,7 +98,9 @@ class EngineHost {
   std::uint64_t tile_epoch() const { return tile_epoch_; }
   TileStore& tiles() { return *tiles_; }
   const TileStore& tiles() const { return *tiles_; }
+  // A copy of the stats; update_rate is computed at the time of the call.
   EngineHostStats stats() const;
+  static constexpr std::chrono::seconds kUpdateRateWindow{10};
   // Blocks until at least `updates` updates are published or the engine is idle (tests).
   void wait_for_updates(std::uint64_t updates) const;
 
@@ -76,6 +108,8 @@ class EngineHost {
   struct Impl;
   void run();
   void do_update();
+  void record_passes(const UpdateStats& u);  // with mutex_ held
+  static constexpr std::size_t kMaxUpdateEnds = 1u << 16;
 
   Scene scene_;
   std::string scene_id_;
@@ -92,6 +126,10 @@ class EngineHost {
   mutable std::mutex mutex_;
   mutable std::condition_variable cv_;
   EngineHostStats stats_;
+  // For update_rate: when the first update began, and when each update of the last
+  // kUpdateRateWindow finished (oldest first).
+  std::chrono::steady_clock::time_point first_update_{};
+  std::deque<std::chrono::steady_clock::time_point> update_ends_;
 };
 
 }  // namespace irradcast

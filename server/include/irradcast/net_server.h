@@ -6,7 +6,9 @@
 // without bound or stall the others.
 #pragma once
 
+#include <array>
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -26,17 +28,41 @@ struct ServerOptions {
   std::uint32_t max_clients = 4096;
 };
 
+// Why a session ended (ServerStats::sessions_closed).
+enum class CloseReason : std::uint8_t {
+  Bye,                 // the client said Bye
+  Disconnect,          // the client closed the connection, or a read or write failed
+  IdleTimeout,         // no frame for the idle timeout
+  BadFrame,            // a frame that does not parse
+  FrameTooLarge,       // a frame above the size cap
+  UnsupportedVersion,  // Hello with another protocol version
+  UnexpectedMessage,   // a first frame other than Hello
+  SlowClient,          // the client did not read its replies
+  Shutdown,            // the server stopped
+  Internal,            // a failure inside the server
+};
+inline constexpr std::size_t kCloseReasons = 10;
+// "bye", "disconnect", "idle_timeout", "bad_frame", "frame_too_large", "unsupported_version",
+// "unexpected_message", "slow_client", "shutdown", "internal".
+const char* close_reason_name(CloseReason reason);
+
+// Counters count since the server was created; the rest is the state at the time of the call.
 struct ServerStats {
   std::uint32_t clients = 0;
-  std::uint64_t connections = 0;  // accepted so far
-  std::uint64_t bytes_sent = 0;
+  std::uint64_t connections = 0;      // accepted so far (refused ones included)
+  std::uint64_t clients_refused = 0;  // accepted and closed at once: max_clients reached
+  std::uint64_t bytes_sent = 0;       // every frame
   std::uint64_t bytes_received = 0;
   std::uint64_t frames_received = 0;
   std::uint64_t tiles_sent = 0;
-  std::uint64_t tiles_coalesced = 0;
-  std::uint64_t scene_bytes_sent = 0;
+  std::uint64_t tile_bytes_sent = 0;   // TileUpdate frames
+  std::uint64_t tiles_coalesced = 0;   // versions replaced while waiting (counted as they happen)
+  std::uint64_t scene_bytes_sent = 0;  // SceneChunk frames
   std::uint64_t errors_sent = 0;
-  std::uint64_t queue_depth = 0;  // tiles waiting, all clients
+  std::uint64_t queue_depth = 0;      // tiles waiting, all clients
+  std::uint64_t queue_depth_max = 0;  // tiles waiting for the client with the longest queue
+  std::array<std::uint64_t, kCloseReasons> sessions_closed{};  // by CloseReason
+  double uptime_seconds = 0.0;
 };
 
 class Server {

@@ -20,6 +20,12 @@ struct TileStoreOptions {
   int tile_size = 32;              // texels per tile edge
   float change_threshold = 0.01f;  // RMS change / mean level that earns a tile a new version
   float floor_fraction = 1e-3f;    // of the map's mean luminance, below which changes are noise
+  // With noise information (see TileStore::Noise): a tile whose change is within Monte Carlo
+  // noise gets a new version only once its sample count grew by a factor R^(1+h), h in [0, 1)
+  // spread over the tiles (so versions do not come in bursts); a change beyond `significance`
+  // times the expected noise of the change (a real change, e.g. a scene edit) at once.
+  float refresh_ratio = 2.0f;
+  float significance = 2.0f;
 };
 
 class TileStore {
@@ -38,9 +44,18 @@ class TileStore {
   // One lightmap per (width, height). Throws irradcast::Error on a bad tile size.
   TileStore(const std::vector<std::pair<int, int>>& sizes, TileStoreOptions options = {});
 
+  // What the engine knows of its own noise: the samples per texel so far and the standard error
+  // of each texel's mean (Engine::standard_error()).
+  struct Noise {
+    std::uint64_t samples = 0;
+    const std::vector<Lightmap>* standard_error = nullptr;
+  };
+
   // Engine thread: gives every tile that changed beyond the threshold (all of them the first
-  // time) a new version and encodes it. Returns the global indices of those tiles.
-  std::vector<std::uint32_t> publish(const std::vector<Lightmap>& maps, std::uint64_t time_us);
+  // time) a new version and encodes it; with `noise`, changes within the noise wait for the
+  // refresh ratio (see TileStoreOptions). Returns the global indices of those tiles.
+  std::vector<std::uint32_t> publish(const std::vector<Lightmap>& maps, std::uint64_t time_us,
+                                     const Noise* noise = nullptr);
 
   std::size_t tile_count() const { return tiles_.size(); }
   const Tile& tile(std::uint32_t index) const { return tiles_[index]; }
@@ -67,9 +82,13 @@ class TileStore {
   struct State {
     std::uint64_t version = 0;
     std::uint64_t time_us = 0;
+    std::uint64_t samples = 0;  // the engine's samples per texel at this version (0: unknown)
     std::shared_ptr<const std::string> rgb9e5;
     mutable std::shared_ptr<const std::string> half;  // encoded on first request
   };
+  bool changed_enough(std::size_t i, const std::vector<Lightmap>& maps, float floor,
+                      const Noise* noise) const;
+
   TileStoreOptions options_;
   std::vector<std::pair<int, int>> sizes_;
   std::vector<std::uint32_t> first_tile_;  // per lightmap, plus the total at the end

@@ -1,0 +1,133 @@
+// LoadReport as text for people and as JSON for scripts and benchmarks.
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <sstream>
+
+#include "irradcast/load_generator.h"
+
+namespace irradcast {
+
+namespace {
+
+std::string fixed(double v, int decimals = 1) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", decimals, v);
+  return buf;
+}
+
+std::string bytes(double b) {
+  if (b >= 1e9) return fixed(b / 1e9, 2) + " GB";
+  if (b >= 1e6) return fixed(b / 1e6, 2) + " MB";
+  if (b >= 1e3) return fixed(b / 1e3, 1) + " kB";
+  return fixed(b, 0) + " B";
+}
+
+std::string dist(const Percentiles& p, const std::string& unit, int decimals = 1) {
+  if (p.count == 0) return "-";
+  return "p50 " + fixed(p.p50, decimals) + unit + "  p95 " + fixed(p.p95, decimals) + unit +
+         "  p99 " + fixed(p.p99, decimals) + unit + "  max " + fixed(p.max, decimals) + unit;
+}
+
+std::string byte_dist(const Percentiles& p, const std::string& suffix) {
+  if (p.count == 0) return "-";
+  return "p50 " + bytes(p.p50) + suffix + "  p95 " + bytes(p.p95) + suffix + "  mean " +
+         bytes(p.mean) + suffix;
+}
+
+nlohmann::json to_json(const Percentiles& p) {
+  return {{"count", p.count}, {"p50", p.p50}, {"p95", p.p95},
+          {"p99", p.p99},     {"max", p.max}, {"mean", p.mean}};
+}
+
+}  // namespace
+
+std::string LoadReport::text() const {
+  std::ostringstream s;
+  s << "irradcast-load: " << users << (options.render ? " render" : " thin") << " users for "
+    << fixed(elapsed_s) << " s against " << options.host << ":" << options.port;
+  if (options.render) s << " (" << options.width << "x" << options.height << ")";
+  s << "\n";
+  s << "  users             " << connected << " connected, " << failed << " failed, " << full_image
+    << " with a full image\n";
+  s << "  scene loaded      " << dist(scene_ms, " ms") << "\n";
+  s << "  first full image  " << dist(full_image_ms, " ms") << "\n";
+  s << "  tile latency      " << dist(tile_latency_ms, " ms") << "  (" << tiles_live
+    << " live tiles of " << tiles_applied << " applied)\n";
+  s << "  after full image  " << dist(steady_tile_latency_ms, " ms") << "  ("
+    << steady_tile_latency_ms.count << " tiles)\n";
+  s << "  bytes/s per user  " << byte_dist(bytes_per_s, "/s") << "\n";
+  s << "  bytes/s steady    " << byte_dist(steady_bytes_per_s, "/s") << "\n";
+  s << "  to full image     " << byte_dist(bytes_to_full_image, "") << "\n";
+  if (options.render) {
+    s << "  frames/s per user " << dist(frames_per_s, "", 2) << "\n";
+    s << "  compose per frame " << dist(frame_ms, " ms") << "\n";
+  }
+  s << "  errors            ";
+  if (errors.empty()) s << "none";
+  bool first = true;
+  for (const auto& [kind, n] : errors) {
+    s << (first ? "" : ", ") << kind << ": " << n;
+    first = false;
+  }
+  s << "\n";
+  return s.str();
+}
+
+std::string LoadReport::json(bool per_user_details) const {
+  nlohmann::json j;
+  j["options"] = {{"host", options.host},
+                  {"port", options.port},
+                  {"users", options.users},
+                  {"duration_s", options.duration_s},
+                  {"mode", options.render ? "render" : "thin"},
+                  {"width", options.width},
+                  {"height", options.height},
+                  {"fps", options.fps},
+                  {"camera_hz", options.camera_hz},
+                  {"camera_path", options.camera_path},
+                  {"ramp_s", options.ramp_s}};
+  j["elapsed_s"] = elapsed_s;
+  j["users"] = {{"total", users},
+                {"connected", connected},
+                {"failed", failed},
+                {"scene_loaded", scene_loaded},
+                {"full_image", full_image}};
+  j["scene_ms"] = to_json(scene_ms);
+  j["full_image_ms"] = to_json(full_image_ms);
+  j["tile_latency_ms"] = to_json(tile_latency_ms);
+  j["steady_tile_latency_ms"] = to_json(steady_tile_latency_ms);
+  j["bytes_per_s_per_user"] = to_json(bytes_per_s);
+  j["steady_bytes_per_s_per_user"] = to_json(steady_bytes_per_s);
+  j["bytes_to_full_image"] = to_json(bytes_to_full_image);
+  j["frames_per_s_per_user"] = to_json(frames_per_s);
+  j["compose_ms"] = to_json(frame_ms);
+  j["totals"] = {{"tiles_applied", tiles_applied},
+                 {"tiles_live", tiles_live},
+                 {"bytes_received", bytes_received},
+                 {"frames", frames},
+                 {"camera_updates", camera_updates}};
+  j["errors"] = nlohmann::json::object();
+  for (const auto& [kind, n] : errors) j["errors"][kind] = n;
+  if (per_user_details) {
+    nlohmann::json list = nlohmann::json::array();
+    for (const LoadUserResult& u : per_user)
+      list.push_back({{"connected", u.connected},
+                      {"scene_loaded", u.scene_loaded},
+                      {"full_image", u.full_image},
+                      {"scene_ms", u.scene_ms},
+                      {"full_image_ms", u.full_image_ms},
+                      {"bytes_received", u.bytes_received},
+                      {"bytes_to_full_image", u.bytes_to_full_image},
+                      {"tiles_applied", u.tiles_applied},
+                      {"tiles_live", u.tiles_live},
+                      {"frames", u.frames},
+                      {"tiles_held", u.tiles_held},
+                      {"versions_digest", std::to_string(u.versions_digest)},
+                      {"failure", u.failure}});
+    j["per_user"] = list;
+  }
+  return j.dump(2);
+}
+
+}  // namespace irradcast

@@ -1,0 +1,89 @@
+#include "irradcast/tile_cache.h"
+
+#include <algorithm>
+#include <string>
+
+#include "irradcast/error.h"
+#include "irradcast/tile_codec.h"
+
+namespace irradcast {
+
+void TileCache::configure(const wire::Welcome& w, const Atlas& atlas) {
+  if (static_cast<std::size_t>(w.lightmaps_size()) != atlas.objects.size())
+    throw Error("the server announces " + std::to_string(w.lightmaps_size()) +
+                " lightmaps, the scene package has " + std::to_string(atlas.objects.size()));
+  if (w.tile_size() == 0) throw Error("the server announces a tile size of 0");
+  const int ts = static_cast<int>(w.tile_size());
+  std::vector<wire::LightmapInfo> infos(w.lightmaps().begin(), w.lightmaps().end());
+  std::vector<std::uint32_t> first;
+  std::vector<Lightmap> maps;
+  std::uint32_t total = 0;
+  for (std::size_t m = 0; m < infos.size(); ++m) {
+    const wire::LightmapInfo& li = infos[m];
+    const ObjectLightmap& o = atlas.objects[m];
+    if (static_cast<int>(li.width()) != o.width || static_cast<int>(li.height()) != o.height ||
+        static_cast<int>(li.tiles_x()) != wire::tiles_along(o.width, ts) ||
+        static_cast<int>(li.tiles_y()) != wire::tiles_along(o.height, ts))
+      throw Error("lightmap " + std::to_string(m) +
+                  ": the server's layout does not match the scene");
+    first.push_back(total);
+    total += li.tiles_x() * li.tiles_y();
+    maps.emplace_back(o.width, o.height);
+  }
+  first.push_back(total);
+  tile_size_ = w.tile_size();
+  infos_ = std::move(infos);
+  first_tile_ = std::move(first);
+  lightmaps_ = std::move(maps);
+  versions_.assign(total, 0);
+  received_ = 0;
+}
+
+bool TileCache::apply(const wire::TileUpdate& t) {
+  if (!configured()) throw Error("a tile arrived before the scene");
+  if (t.lightmap() >= infos_.size())
+    throw Error("tile for unknown lightmap " + std::to_string(t.lightmap()));
+  const wire::LightmapInfo& li = infos_[t.lightmap()];
+  if (t.tile_x() >= li.tiles_x() || t.tile_y() >= li.tiles_y())
+    throw Error("tile " + std::to_string(t.tile_x()) + "," + std::to_string(t.tile_y()) +
+                " is outside lightmap " + std::to_string(t.lightmap()));
+  const wire::TileRect r = wire::tile_rect(
+      static_cast<int>(li.width()), static_cast<int>(li.height()), static_cast<int>(tile_size_),
+      static_cast<int>(t.tile_x()), static_cast<int>(t.tile_y()));
+  if (static_cast<int>(t.width()) != r.w || static_cast<int>(t.height()) != r.h)
+    throw Error("tile size does not match the layout");
+  const std::uint32_t index = first_tile_[t.lightmap()] + t.tile_y() * li.tiles_x() + t.tile_x();
+  if (t.version() <= versions_[index]) return false;  // stale (this server never sends one)
+  wire::decode_tile(t.payload(), t.encoding(), r, lightmaps_[t.lightmap()]);
+  if (versions_[index] == 0) ++received_;
+  versions_[index] = t.version();
+  return true;
+}
+
+void TileCache::forget_versions() {
+  std::fill(versions_.begin(), versions_.end(), 0);
+  received_ = 0;
+}
+
+void TileCache::add_known(wire::Hello& h) const {
+  for (std::uint32_t m = 0; m < infos_.size(); ++m)
+    for (std::uint32_t ty = 0; ty < infos_[m].tiles_y(); ++ty)
+      for (std::uint32_t tx = 0; tx < infos_[m].tiles_x(); ++tx) {
+        const std::uint64_t v = versions_[first_tile_[m] + ty * infos_[m].tiles_x() + tx];
+        if (v == 0) continue;
+        wire::TileVersion* k = h.add_known();
+        k->set_lightmap(m);
+        k->set_tile_x(tx);
+        k->set_tile_y(ty);
+        k->set_version(v);
+      }
+}
+
+std::uint64_t TileCache::version(std::uint32_t lightmap, std::uint32_t tx, std::uint32_t ty) const {
+  if (lightmap >= infos_.size() || tx >= infos_[lightmap].tiles_x() ||
+      ty >= infos_[lightmap].tiles_y())
+    return 0;
+  return versions_[first_tile_[lightmap] + ty * infos_[lightmap].tiles_x() + tx];
+}
+
+}  // namespace irradcast

@@ -1,0 +1,158 @@
+// irradcast-load: simulated users against an irradcast-server. Each user is a full protocol
+// client (scene download, subscription, camera updates, tile decoding; frames in render mode),
+// all on one Asio io_context. A live progress line while it runs; at the end a report as text
+// and, with --json, as JSON. Run several processes (or machines) for more users than one
+// process can drive; their JSON reports add up.
+#include <sys/resource.h>
+#include <unistd.h>
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <fstream>
+#include <string>
+
+#include "irradcast/error.h"
+#include "irradcast/host_port.h"
+#include "irradcast/load_generator.h"
+#include "irradcast/log.h"
+
+namespace {
+
+struct Options {
+  std::string connect;
+  int users = 8;
+  double duration = 10.0;
+  std::string mode = "thin";
+  int width = 320, height = 240;
+  double fps = 30.0;
+  double camera_hz = 10.0;
+  std::string camera_path = "orbit";
+  double ramp = 0.0;
+  int threads = 0;
+  std::string encoding = "rgb9e5";
+  std::string json;
+  std::string name = "irradcast-load";
+  std::string log_level = "warn";
+  bool quiet = false;
+};
+
+// One socket per user: raise the descriptor limit to what the system allows.
+void raise_fd_limit(int users) {
+  rlimit lim{};
+  if (getrlimit(RLIMIT_NOFILE, &lim) != 0) return;
+  const rlim_t want = static_cast<rlim_t>(users) + 64;
+  if (lim.rlim_cur >= want) return;
+  lim.rlim_cur = std::min(want, lim.rlim_max);
+  setrlimit(RLIMIT_NOFILE, &lim);
+  if (lim.rlim_cur < want)
+    irradcast::log::warn("load", "only " + std::to_string(lim.rlim_cur) +
+                                     " file descriptors allowed; some users will fail to "
+                                     "connect (raise ulimit -n or run more processes)");
+}
+
+int run(const Options& o) {
+  using namespace irradcast;
+  log::set_level(log::parse_level(o.log_level));
+  const HostPort hp = parse_host_port(o.connect);
+  LoadOptions lo;
+  lo.host = hp.host;
+  lo.port = hp.port;
+  lo.users = o.users;
+  lo.duration_s = o.duration;
+  if (o.mode != "thin" && o.mode != "render")
+    throw Error("--mode must be thin or render, not '" + o.mode + "'");
+  lo.render = o.mode == "render";
+  lo.width = o.width;
+  lo.height = o.height;
+  lo.fps = o.fps;
+  lo.camera_hz = o.camera_hz;
+  lo.camera_path = o.camera_path;
+  lo.ramp_s = o.ramp;
+  lo.threads = o.threads;
+  lo.name = o.name;
+  if (o.encoding == "rgb9e5")
+    lo.encoding = wire::TILE_RGB9E5_ZSTD;
+  else if (o.encoding == "half")
+    lo.encoding = wire::TILE_HALF_ZSTD;
+  else
+    throw Error("--encoding must be rgb9e5 or half, not '" + o.encoding + "'");
+  raise_fd_limit(o.users);
+
+  const bool tty = isatty(fileno(stderr)) != 0;
+  auto progress = [&](const LoadProgress& p) {
+    if (o.quiet) return;
+    char line[256];
+    std::snprintf(line, sizeof line,
+                  "[load] %5.1f/%.0f s  users %d/%d connected, %d scene, %d full, %d failed  "
+                  "tiles %llu  rx %.1f MB  p99 %.1f ms  errors %llu",
+                  p.elapsed_s, o.duration, p.connected, p.users, p.scene_loaded, p.full_image,
+                  p.failed, static_cast<unsigned long long>(p.tiles_applied),
+                  static_cast<double>(p.bytes_received) / 1e6, p.latency_p99_ms,
+                  static_cast<unsigned long long>(p.errors));
+    // A live line on a terminal; a line every 5 s in a log.
+    if (tty)
+      std::fprintf(stderr, "\r%s\x1b[K", line);
+    else if (static_cast<int>(p.elapsed_s + 0.5) % 5 == 0)
+      std::fprintf(stderr, "%s\n", line);
+  };
+  const LoadReport report = run_load(lo, progress);
+  if (tty && !o.quiet) std::fprintf(stderr, "\n");
+  std::fputs(report.text().c_str(), stdout);
+  if (!o.json.empty()) {
+    std::ofstream f(o.json);
+    f << report.json() << "\n";
+    if (!f) throw Error("cannot write the report to '" + o.json + "'");
+  }
+  // Exit 0 only when every user connected and none failed.
+  return report.failed == 0 && report.connected == report.users ? 0 : 3;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  CLI::App app{
+      "irradcast-load: simulated users against an irradcast-server. Each user downloads the "
+      "scene, subscribes, sends camera updates along its path and applies every tile (and "
+      "composes frames in render mode). Prints a live progress line and a report: users "
+      "connected/failed, time to scene and to the first full image, tile latency, bandwidth, "
+      "frame rate and errors by kind. Exits 3 when a user failed.",
+      "irradcast-load"};
+  app.option_defaults()->always_capture_default();
+  app.add_option("--connect", o.connect, "server address HOST:PORT")->required();
+  app.add_option("--users", o.users, "simulated users")->check(CLI::Range(1, 100000));
+  app.add_option("--duration", o.duration, "seconds from start to the users' Bye")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--mode", o.mode, "thin (network + tile decoding) | render (also frames)");
+  app.add_option("--width", o.width, "frame width (render mode)")->check(CLI::Range(1, 8192));
+  app.add_option("--height", o.height, "frame height (render mode)")->check(CLI::Range(1, 8192));
+  app.add_option("--fps", o.fps, "render mode: frames per second per user at most (0 = no cap)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--camera-hz", o.camera_hz, "camera updates per second per user")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--camera-path", o.camera_path,
+                 "orbit | random-walk | FILE of keyframes 't ex ey ez tx ty tz [yfov_deg]'");
+  app.add_option("--ramp", o.ramp, "connect the users evenly over this many seconds")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--threads", o.threads, "I/O threads (0 = one per core)")
+      ->check(CLI::Range(0, 256));
+  app.add_option("--encoding", o.encoding, "tile encoding: rgb9e5 | half");
+  app.add_option("--json", o.json, "also write the report as JSON here");
+  app.add_option("--name", o.name, "client name prefix in the server's logs");
+  app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
+  app.add_flag("--quiet", o.quiet, "no progress line");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    return run(o);
+  } catch (const irradcast::Error& e) {
+    std::fprintf(stderr, "irradcast-load: error: %s\n", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "irradcast-load: internal error: %s\n", e.what());
+    return 2;
+  }
+}

@@ -1,0 +1,35 @@
+// The server's metrics in the Prometheus text exposition format (version 0.0.4): what the
+// metrics endpoint serves at /metrics. The formatting takes plain structs (a snapshot of
+// Server::stats() and EngineHost::stats()) and returns the text, so it is testable without a
+// server. Every metric is named irradcast_*, has # HELP and # TYPE lines, counters end in
+// _total, and units are seconds and bytes. The list with meanings: docs/METRICS.md.
+#pragma once
+
+#include <string>
+#include <string_view>
+
+#include "irradcast/engine_host.h"
+#include "irradcast/net_server.h"
+
+namespace irradcast {
+
+struct MetricsSnapshot {
+  std::string scene;  // the scene id: the label of irradcast_info
+  ServerStats server;
+  EngineHostStats engine;
+};
+
+// Reads the stats of a running (or stopped) server and engine host. Thread-safe.
+MetricsSnapshot collect_metrics(const Server& server, const EngineHost& host);
+
+// The exposition text: one family per metric, # HELP and # TYPE before its samples, one sample
+// per line (`name{label="value",...} value`), "\n" line ends.
+std::string format_metrics(const MetricsSnapshot& metrics);
+
+// A label value with \, " and newline escaped (\\, \", \n), as the format requires.
+std::string escape_label_value(std::string_view value);
+// A sample value in the shortest form that reads back (strtod) to the same double; NaN as NaN,
+// infinities as +Inf / -Inf. (Integer counters are written with all their digits.)
+std::string format_metric_value(double value);
+
+}  // namespace irradcast

@@ -1,0 +1,845 @@
+// Server metrics: the Prometheus text formatter, the HTTP endpoint (good and bad requests,
+// timeouts), and the numbers it and the Stats frame report for a live engine host and server.
+#include <gtest/gtest.h>
+
+#include <asio.hpp>
+
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <map>
+#include <set>
+#include <stdexcept>
+#include <thread>
+
+#include "irradcast/builtin.h"
+#include "irradcast/engine_host.h"
+#include "irradcast/error.h"
+#include "irradcast/frame.h"
+#include "irradcast/log.h"
+#include "irradcast/metrics_endpoint.h"
+#include "irradcast/metrics_text.h"
+#include "irradcast/net_server.h"
+#include "irradcast/progress.h"
+#include "irradcast/view_client.h"
+
+using namespace irradcast;
+using asio::ip::tcp;
+using namespace std::chrono_literals;
+
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// A strict reader of the text exposition format, for checking what the formatter writes.
+
+using LabelMap = std::map<std::string, std::string>;
+
+struct Sample {
+  std::string name;
+  LabelMap labels;
+  std::string value;  // as written
+};
+
+struct Exposition {
+  std::map<std::string, std::string> help, type;
+  std::vector<Sample> samples;
+  std::vector<std::string> errors;  // every rule broken, one line each
+
+  const Sample* find(const std::string& name, const LabelMap& labels = {}) const {
+    for (const Sample& s : samples)
+      if (s.name == name && s.labels == labels) return &s;
+    return nullptr;
+  }
+  double value(const std::string& name, const LabelMap& labels = {}) const {
+    const Sample* s = find(name, labels);
+    if (!s) throw std::runtime_error("no sample " + name);
+    return std::strtod(s->value.c_str(), nullptr);
+  }
+  std::vector<const Sample*> family(const std::string& name) const {
+    std::vector<const Sample*> out;
+    for (const Sample& s : samples)
+      if (s.name == name) out.push_back(&s);
+    return out;
+  }
+};
+
+bool valid_value(const std::string& v) {
+  if (v == "NaN" || v == "+Inf" || v == "-Inf") return true;
+  char* end = nullptr;
+  std::strtod(v.c_str(), &end);
+  return !v.empty() && end == v.c_str() + v.size();
+}
+
+bool metric_name_char(char c, bool first) {
+  return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_' || c == ':' ||
+         (!first && c >= '0' && c <= '9');
+}
+bool valid_metric_name(const std::string& name) {
+  if (name.empty()) return false;
+  for (std::size_t i = 0; i < name.size(); ++i)
+    if (!metric_name_char(name[i], i == 0)) return false;
+  return true;
+}
+bool valid_label_name(const std::string& name) {
+  return valid_metric_name(name) && name.find(':') == std::string::npos;
+}
+
+// Label pairs `name="value"` separated by commas from text[i], up to and including the closing
+// brace; values escape \\, \" and \n. Returns the position after the brace, or npos.
+std::size_t parse_labels(const std::string& text, std::size_t i, LabelMap& out) {
+  if (i < text.size() && text[i] == '}') return i + 1;
+  for (;;) {
+    const std::size_t eq = text.find('=', i);
+    if (eq == std::string::npos) return std::string::npos;
+    const std::string name = text.substr(i, eq - i);
+    if (!valid_label_name(name) || out.count(name)) return std::string::npos;
+    if (eq + 1 >= text.size() || text[eq + 1] != '"') return std::string::npos;
+    std::string value;
+    std::size_t j = eq + 2;
+    for (;; ++j) {
+      if (j >= text.size()) return std::string::npos;
+      const char c = text[j];
+      if (c == '"') break;
+      if (c == '\n') return std::string::npos;
+      if (c == '\\') {
+        if (++j >= text.size()) return std::string::npos;
+        const char e = text[j];
+        if (e == '\\')
+          value += '\\';
+        else if (e == '"')
+          value += '"';
+        else if (e == 'n')
+          value += '\n';
+        else
+          return std::string::npos;
+      } else {
+        value += c;
+      }
+    }
+    out[name] = value;
+    i = j + 1;
+    if (i >= text.size()) return std::string::npos;
+    if (text[i] == '}') return i + 1;
+    if (text[i] != ',') return std::string::npos;
+    ++i;
+  }
+}
+
+// `name{labels} value` or `name value` (no time stamps).
+bool parse_sample(const std::string& line, Sample& s) {
+  std::size_t i = 0;
+  while (i < line.size() && metric_name_char(line[i], i == 0)) ++i;
+  s.name = line.substr(0, i);
+  if (s.name.empty() || i >= line.size()) return false;
+  if (line[i] == '{') {
+    i = parse_labels(line, i + 1, s.labels);
+    if (i == std::string::npos || i >= line.size()) return false;
+  }
+  if (line[i] != ' ') return false;
+  s.value = line.substr(i + 1);
+  return !s.value.empty() && s.value.find(' ') == std::string::npos;
+}
+
+Exposition parse_exposition(const std::string& text) {
+  Exposition x;
+  if (text.empty() || text.back() != '\n') x.errors.push_back("the text does not end in \\n");
+  std::set<std::string> finished;  // families whose samples are over
+  std::set<std::string> keys;
+  std::string current;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    std::size_t nl = text.find('\n', pos);
+    if (nl == std::string::npos) nl = text.size();
+    const std::string line = text.substr(pos, nl - pos);
+    pos = nl + 1;
+    if (line.rfind("#", 0) == 0) {
+      // `# HELP name text` or `# TYPE name type`
+      const std::string kind = line.substr(0, 7);
+      const std::size_t space = line.find(' ', 7);
+      if ((kind != "# HELP " && kind != "# TYPE ") || space == std::string::npos) {
+        x.errors.push_back("unexpected comment: " + line);
+        continue;
+      }
+      const std::string name = line.substr(7, space - 7), rest = line.substr(space + 1);
+      if (!valid_metric_name(name)) x.errors.push_back("bad name: " + line);
+      auto& map = kind == "# HELP " ? x.help : x.type;
+      if (map.count(name)) x.errors.push_back("second " + kind + "for " + name);
+      if (finished.count(name) || name == current)
+        x.errors.push_back(kind + "after the samples of " + name);
+      map[name] = rest;
+      if (kind == "# TYPE ") {
+        if (rest != "counter" && rest != "gauge")
+          x.errors.push_back("type " + rest + " of " + name);
+        const bool total = name.size() > 6 && name.substr(name.size() - 6) == "_total";
+        if ((rest == "counter") != total)
+          x.errors.push_back(name + ": counters and only counters end in _total");
+      }
+      if (name.rfind("irradcast_", 0) != 0) x.errors.push_back(name + " lacks the prefix");
+      continue;
+    }
+    Sample s;
+    if (!parse_sample(line, s)) {
+      x.errors.push_back("not a sample line: " + line);
+      continue;
+    }
+    if (!valid_value(s.value)) x.errors.push_back("bad value: " + line);
+    if (!x.help.count(s.name) || !x.type.count(s.name))
+      x.errors.push_back("no HELP and TYPE before " + s.name);
+    if (s.name != current) {
+      if (finished.count(s.name)) x.errors.push_back("samples of " + s.name + " not together");
+      if (!current.empty()) finished.insert(current);
+      current = s.name;
+    }
+    std::string key = s.name;
+    for (const auto& [k, v] : s.labels) key += "|" + k + "=" + v;
+    if (!keys.insert(key).second) x.errors.push_back("duplicate sample: " + line);
+    x.samples.push_back(std::move(s));
+  }
+  return x;
+}
+
+std::string join(const std::vector<std::string>& lines) {
+  std::string s;
+  for (const auto& l : lines) s += l + "\n";
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Raw HTTP over loopback.
+
+struct HttpResult {
+  std::string raw;  // everything received
+  int status = 0;
+  std::string head, body;
+  bool closed = false;  // the server closed the connection
+  std::string header(const std::string& name) const {
+    std::size_t p = 0;
+    while ((p = head.find("\r\n", p)) != std::string::npos) {
+      p += 2;
+      if (head.compare(p, name.size() + 1, name + ":") == 0) {
+        std::size_t e = head.find("\r\n", p);
+        std::string v = head.substr(p + name.size() + 1, e - p - name.size() - 1);
+        while (!v.empty() && v.front() == ' ') v.erase(0, 1);
+        return v;
+      }
+    }
+    return {};
+  }
+};
+
+// Reads until the peer closes or `limit` passes.
+std::string read_until_closed(asio::io_context& io, tcp::socket& s, std::chrono::milliseconds limit,
+                              bool& closed) {
+  std::string out;
+  std::array<char, 4096> buf{};
+  const auto deadline = std::chrono::steady_clock::now() + limit;
+  closed = false;
+  for (;;) {
+    std::error_code result = asio::error::would_block;
+    std::size_t n = 0;
+    s.async_read_some(asio::buffer(buf), [&](std::error_code ec, std::size_t got) {
+      result = ec;
+      n = got;
+    });
+    io.restart();
+    io.run_until(deadline);
+    if (result == asio::error::would_block) {  // timed out
+      s.cancel();
+      io.restart();
+      io.run();
+      return out;
+    }
+    out.append(buf.data(), n);
+    if (result) {
+      closed = true;
+      return out;
+    }
+  }
+}
+
+HttpResult parse_http(std::string raw, bool closed) {
+  HttpResult r;
+  r.raw = std::move(raw);
+  r.closed = closed;
+  const std::size_t end = r.raw.find("\r\n\r\n");
+  if (end == std::string::npos) return r;
+  r.head = r.raw.substr(0, end);
+  r.body = r.raw.substr(end + 4);
+  if (r.head.rfind("HTTP/1.1 ", 0) == 0) r.status = std::atoi(r.head.c_str() + 9);
+  return r;
+}
+
+// Sends `request` in pieces of `piece` bytes (0: at once) and reads the response to the end.
+HttpResult http(std::uint16_t port, const std::string& request, std::size_t piece = 0,
+                std::chrono::milliseconds limit = 5000ms) {
+  asio::io_context io;
+  tcp::socket s(io);
+  s.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+  s.set_option(tcp::no_delay(true));
+  if (piece == 0) piece = request.size();
+  for (std::size_t i = 0; i < request.size(); i += piece) {
+    asio::write(s, asio::buffer(request.data() + i, std::min(piece, request.size() - i)));
+    if (piece < request.size()) std::this_thread::sleep_for(2ms);
+  }
+  bool closed = false;
+  std::string raw = read_until_closed(io, s, limit, closed);
+  return parse_http(std::move(raw), closed);
+}
+
+HttpResult get(std::uint16_t port, const std::string& path = "/metrics") {
+  return http(port, "GET " + path + " HTTP/1.1\r\nHost: localhost\r\nUser-Agent: test\r\n\r\n");
+}
+
+// ---------------------------------------------------------------------------------------------
+// An in-process engine host and server (as in test_service.cpp).
+
+EngineHostOptions small_host(float texels_per_scene = 48.0f) {
+  Progress::set_enabled(false);
+  log::set_level(log::Level::Warn);
+  EngineHostOptions o;
+  o.atlas.texels_per_scene = texels_per_scene;
+  o.tiles.tile_size = 16;
+  return o;
+}
+
+ServerOptions loopback() {
+  ServerOptions o;
+  o.bind = "127.0.0.1";
+  o.port = 0;
+  o.idle_timeout = 10000ms;
+  return o;
+}
+
+MetricsEndpointOptions local_endpoint(std::chrono::milliseconds timeout = 5000ms) {
+  MetricsEndpointOptions o;
+  o.bind = "127.0.0.1";
+  o.port = 0;
+  o.timeout = timeout;
+  return o;
+}
+
+ViewClientOptions client_of(const Server& server, const std::string& name) {
+  ViewClientOptions o;
+  o.port = server.port();
+  o.name = name;
+  o.connect_timeout = 5000ms;
+  return o;
+}
+
+template <class F>
+bool eventually(F condition, std::chrono::milliseconds limit = 10000ms) {
+  const auto deadline = std::chrono::steady_clock::now() + limit;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (condition()) return true;
+    std::this_thread::sleep_for(10ms);
+  }
+  return condition();
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// The formatter
+
+TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
+  MetricsSnapshot m;
+  m.scene = "odd \"scene\" \\ name\nline two";
+  ServerStats& s = m.server;
+  s.clients = 3;
+  s.connections = 17;
+  s.clients_refused = 2;
+  s.bytes_sent = (1ull << 60) + 1;  // beyond a double's 53 bits: written with every digit
+  s.bytes_received = 1234;
+  s.frames_received = 56;
+  s.tiles_sent = 789;
+  s.tile_bytes_sent = 7890;
+  s.tiles_coalesced = 12;
+  s.scene_bytes_sent = 4567;
+  s.errors_sent = 4;
+  s.queue_depth = 40;
+  s.queue_depth_max = 25;
+  for (std::size_t r = 0; r < kCloseReasons; ++r) s.sessions_closed[r] = 100 + r;
+  s.uptime_seconds = 1.0 / 3.0;
+  EngineHostStats& e = m.engine;
+  e.updates = 9;
+  e.last_update_ms = 12.5;
+  e.rays_per_s = 2.5e7;
+  e.convergence = 0.0123456789;
+  e.idle = true;
+  e.tiles_published = 321;
+  e.seconds_total = 0.1 + 0.2;
+  e.rays_total = 9876543210ull;
+  e.update_rate = 7.25;
+  e.bytes_per_texel = 2.33;
+  e.texels = 118000;
+  e.tiles = 480;
+  e.passes = {{"direct", 0, 0.001, 1000, 0.009, 9000},
+              {"probes", 1, 0.002, 2000, 0.018, 18000},
+              {"scatter", 1, 0.003, 3000, 0.027, 27000},
+              {"probes", 2, 0.004, 4000, 0.036, 36000},
+              {"scatter", 2, 5e-320, 5000, 0.045, 45000}};  // a denormal round-trips too
+
+  const std::string text = format_metrics(m);
+  const Exposition x = parse_exposition(text);
+  EXPECT_TRUE(x.errors.empty()) << join(x.errors) << "\n" << text;
+  for (const auto& [name, help] : x.help) EXPECT_FALSE(help.empty()) << name;
+  EXPECT_EQ(x.help.size(), x.type.size());
+
+  // Every value as given (integers digit for digit, doubles bit for bit).
+  std::set<const Sample*> checked;
+  auto u = [&](const std::string& name, std::uint64_t want, const LabelMap& labels = {}) {
+    const Sample* p = x.find(name, labels);
+    ASSERT_NE(p, nullptr) << name;
+    checked.insert(p);
+    EXPECT_EQ(p->value, std::to_string(want)) << name;
+    EXPECT_EQ(x.type.at(name) == "counter", name.ends_with("_total")) << name;
+  };
+  auto d = [&](const std::string& name, double want, const LabelMap& labels = {}) {
+    const Sample* p = x.find(name, labels);
+    ASSERT_NE(p, nullptr) << name;
+    checked.insert(p);
+    EXPECT_EQ(std::strtod(p->value.c_str(), nullptr), want) << name << " = " << p->value;
+  };
+  u("irradcast_info", 1, {{"scene", m.scene}});  // the label value came back unescaped
+  d("irradcast_uptime_seconds", s.uptime_seconds);
+  u("irradcast_clients", 3);
+  u("irradcast_connections_total", 17);
+  u("irradcast_clients_refused_total", 2);
+  for (std::size_t r = 0; r < kCloseReasons; ++r)
+    u("irradcast_sessions_closed_total", 100 + r,
+      {{"reason", close_reason_name(static_cast<CloseReason>(r))}});
+  EXPECT_EQ(x.family("irradcast_sessions_closed_total").size(), kCloseReasons);
+  u("irradcast_bytes_sent_total", (1ull << 60) + 1);
+  u("irradcast_tile_bytes_sent_total", 7890);
+  u("irradcast_scene_bytes_sent_total", 4567);
+  u("irradcast_bytes_received_total", 1234);
+  u("irradcast_frames_received_total", 56);
+  u("irradcast_errors_sent_total", 4);
+  u("irradcast_tiles_sent_total", 789);
+  u("irradcast_tiles_coalesced_total", 12);
+  u("irradcast_queue_depth", 40);
+  u("irradcast_queue_depth_max", 25);
+  u("irradcast_tiles", 480);
+  u("irradcast_tiles_published_total", 321);
+  d("irradcast_bytes_per_texel", 2.33);
+  u("irradcast_engine_updates_total", 9);
+  d("irradcast_engine_update_rate", 7.25);
+  d("irradcast_engine_update_seconds", 12.5e-3);
+  d("irradcast_engine_seconds_total", 0.1 + 0.2);
+  u("irradcast_engine_rays_total", 9876543210ull);
+  d("irradcast_engine_rays_per_second", 2.5e7);
+  d("irradcast_engine_convergence", 0.0123456789);
+  u("irradcast_engine_idle", 1);
+  u("irradcast_engine_texels", 118000);
+  for (const EnginePassStats& p : e.passes) {
+    const LabelMap l = {{"pass", p.pass}, {"bounce", std::to_string(p.bounce)}};
+    d("irradcast_engine_pass_seconds", p.seconds, l);
+    u("irradcast_engine_pass_rays", p.rays, l);
+    d("irradcast_engine_pass_seconds_total", p.seconds_total, l);
+    u("irradcast_engine_pass_rays_total", p.rays_total, l);
+  }
+  EXPECT_EQ(x.family("irradcast_engine_pass_seconds").size(), e.passes.size());
+  // Nothing else: every sample above was checked.
+  EXPECT_EQ(checked.size(), x.samples.size()) << text;
+  EXPECT_EQ(x.samples.size(), 27 + kCloseReasons + 4 * e.passes.size());
+}
+
+TEST(Metrics, FormatterHandlesAnEmptySnapshotAndSpecialValues) {
+  // Before the first update: the pass families have HELP and TYPE and no samples.
+  const Exposition x = parse_exposition(format_metrics(MetricsSnapshot{}));
+  EXPECT_TRUE(x.errors.empty()) << join(x.errors);
+  EXPECT_TRUE(x.family("irradcast_engine_pass_seconds").empty());
+  EXPECT_TRUE(x.type.count("irradcast_engine_pass_seconds"));
+  EXPECT_EQ(x.value("irradcast_engine_updates_total"), 0.0);
+
+  // The checker catches what it should.
+  const std::string head = "# HELP irradcast_a A.\n# TYPE irradcast_a gauge\n";
+  EXPECT_TRUE(parse_exposition(head + "irradcast_a{l=\"x\\\"\"} 1\n").errors.empty());
+  EXPECT_FALSE(parse_exposition("irradcast_a 1\n").errors.empty());  // no HELP, TYPE
+  EXPECT_FALSE(parse_exposition(head + "irradcast_a 1\nirradcast_a 2\n").errors.empty());
+  EXPECT_FALSE(parse_exposition(head + "irradcast_a{l=\"x} 1\n").errors.empty());
+  EXPECT_FALSE(parse_exposition(head + "irradcast_a{l=\"x\"} one\n").errors.empty());
+  EXPECT_FALSE(parse_exposition(head + "irradcast_a 1").errors.empty());  // no final newline
+  EXPECT_FALSE(
+      parse_exposition("# HELP irradcast_b B.\n# TYPE irradcast_b counter\nirradcast_b 1\n")
+          .errors.empty());  // a counter without _total
+
+  EXPECT_EQ(format_metric_value(std::numeric_limits<double>::quiet_NaN()), "NaN");
+  EXPECT_EQ(format_metric_value(std::numeric_limits<double>::infinity()), "+Inf");
+  EXPECT_EQ(format_metric_value(-std::numeric_limits<double>::infinity()), "-Inf");
+  EXPECT_EQ(format_metric_value(0.0), "0");
+  EXPECT_EQ(format_metric_value(0.5), "0.5");
+  EXPECT_EQ(escape_label_value("a\\b\"c\nd"), "a\\\\b\\\"c\\nd");
+  MetricsSnapshot m;
+  m.engine.convergence = std::numeric_limits<double>::infinity();
+  m.engine.rays_per_s = std::numeric_limits<double>::quiet_NaN();
+  const Exposition y = parse_exposition(format_metrics(m));
+  EXPECT_TRUE(y.errors.empty()) << join(y.errors);
+  EXPECT_EQ(y.find("irradcast_engine_convergence")->value, "+Inf");
+  EXPECT_EQ(y.find("irradcast_engine_rays_per_second")->value, "NaN");
+}
+
+// ---------------------------------------------------------------------------------------------
+// The HTTP endpoint on its own
+
+TEST(Metrics, EndpointAnswersBadRequestsAndKeepsServing) {
+  MetricsEndpoint ep([] { return std::string("irradcast_test 1\n"); }, local_endpoint());
+  ep.start();
+  const std::uint16_t port = ep.port();
+  ASSERT_NE(port, 0);
+  EXPECT_EQ(ep.url(), "http://127.0.0.1:" + std::to_string(port) + "/metrics");
+  auto expect_ok = [&](const HttpResult& r, const std::string& what) {
+    EXPECT_EQ(r.status, 200) << what << ": " << r.raw;
+    EXPECT_EQ(r.header("Content-Type").rfind("text/plain; version=0.0.4", 0), 0u) << what;
+    EXPECT_EQ(r.header("Connection"), "close") << what;
+    EXPECT_EQ(r.body, "irradcast_test 1\n") << what;
+    EXPECT_EQ(r.header("Content-Length"), std::to_string(r.body.size())) << what;
+    EXPECT_TRUE(r.closed) << what;
+  };
+  expect_ok(get(port), "GET /metrics");
+  expect_ok(get(port, "/metrics?name[]=x"), "with a query");
+  expect_ok(http(port, "GET /metrics HTTP/1.0\n\n"), "HTTP/1.0 with bare LF");
+  expect_ok(http(port, "GET /metrics HTTP/1.1\r\nHost: a\r\n\r\n", 3), "in 3-byte pieces");
+  {
+    const HttpResult r = http(port, "HEAD /metrics HTTP/1.1\r\nHost: a\r\n\r\n");
+    EXPECT_EQ(r.status, 200);
+    EXPECT_EQ(r.header("Content-Length"), "17");
+    EXPECT_TRUE(r.body.empty());
+  }
+  struct Bad {
+    std::string what, request;
+    int status;
+  };
+  const std::string big(9000, 'a');
+  const std::vector<Bad> bad = {
+      {"unknown path", "GET /nope HTTP/1.1\r\nHost: a\r\n\r\n", 404},
+      {"root", "GET / HTTP/1.1\r\n\r\n", 404},
+      {"POST", "POST /metrics HTTP/1.1\r\nHost: a\r\nContent-Length: 5\r\n\r\nhello", 405},
+      {"DELETE", "DELETE /metrics HTTP/1.1\r\n\r\n", 405},
+      {"garbage bytes", std::string("\x00\x01\x02\xff\xfegarbage\r\n\r\n", 16), 400},
+      {"binary after a method", std::string("GET \x01\x02\r\n\r\n", 10), 400},
+      {"no version", "GET /metrics\r\n\r\n", 400},
+      {"HTTP/2", "GET /metrics HTTP/2.0\r\n\r\n", 400},
+      {"absolute target", "GET http://a/metrics HTTP/1.1\r\n\r\n", 400},
+      {"header without colon", "GET /metrics HTTP/1.1\r\nHost a\r\n\r\n", 400},
+      {"folded header", "GET /metrics HTTP/1.1\r\nX-A: 1\r\n  2\r\n\r\n", 400},
+      {"oversized header", "GET /metrics HTTP/1.1\r\nX-Big: " + big + "\r\n\r\n", 400},
+      {"oversized, never ending", "GET /metrics HTTP/1.1\r\nX-Big: " + big, 400},
+      {"JSON", "{\"get\": \"/metrics\"}\r\n\r\n", 400},
+  };
+  for (const Bad& b : bad) {
+    const HttpResult r = http(port, b.request);
+    EXPECT_EQ(r.status, b.status) << b.what << ": " << r.raw;
+    EXPECT_EQ(r.header("Connection"), "close") << b.what;
+    EXPECT_TRUE(r.closed) << b.what;
+    if (b.status == 405) {
+      EXPECT_EQ(r.header("Allow"), "GET, HEAD");
+    }
+    expect_ok(get(port), "after " + b.what);
+  }
+  const MetricsEndpointStats st = ep.stats();
+  EXPECT_EQ(st.bad, bad.size());
+  EXPECT_EQ(st.ok, 5u + bad.size());
+  EXPECT_EQ(st.timeouts, 0u);
+  ep.stop();
+  ep.stop();  // idempotent
+}
+
+TEST(Metrics, EndpointClosesIdleConnectionsAfterTheTimeout) {
+  MetricsEndpointOptions o = local_endpoint(300ms);
+  o.max_connections = 2;
+  MetricsEndpoint ep([] { return std::string("irradcast_test 1\n"); }, o);
+  ep.start();
+  {  // Connects and sends nothing.
+    asio::io_context io;
+    tcp::socket s(io);
+    s.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), ep.port()));
+    const auto t0 = std::chrono::steady_clock::now();
+    bool closed = false;
+    EXPECT_EQ(read_until_closed(io, s, 3000ms, closed), "");
+    const auto waited = std::chrono::steady_clock::now() - t0;
+    EXPECT_TRUE(closed);
+    EXPECT_GE(waited, 250ms);
+    EXPECT_LT(waited, 2000ms);
+  }
+  {  // Sends half a request and stops.
+    asio::io_context io;
+    tcp::socket s(io);
+    s.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), ep.port()));
+    asio::write(s, asio::buffer(std::string("GET /metrics HTTP/1.1\r\nHo")));
+    bool closed = false;
+    EXPECT_EQ(read_until_closed(io, s, 3000ms, closed), "");
+    EXPECT_TRUE(closed);
+  }
+  EXPECT_EQ(get(ep.port()).status, 200);
+  EXPECT_EQ(ep.stats().timeouts, 2u);
+  {  // max_connections idle connections: a third is closed at once, and the endpoint serves
+    // again once the idle ones time out.
+    asio::io_context io;
+    tcp::socket a(io), b(io), c(io);
+    const tcp::endpoint at(asio::ip::make_address("127.0.0.1"), ep.port());
+    a.connect(at);
+    b.connect(at);
+    ASSERT_TRUE(eventually([&] { return ep.stats().connections >= 5; }));
+    c.connect(at);
+    bool closed = false;
+    const auto t0 = std::chrono::steady_clock::now();
+    read_until_closed(io, c, 3000ms, closed);
+    EXPECT_TRUE(closed);
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, 250ms);
+    EXPECT_EQ(ep.stats().refused, 1u);
+  }
+  EXPECT_TRUE(eventually([&] { return get(ep.port()).status == 200; }, 3000ms));
+  // stop() does not wait for an idle connection's timeout.
+  {
+    MetricsEndpoint slow([] { return std::string(); }, local_endpoint(60000ms));
+    slow.start();
+    asio::io_context io;
+    tcp::socket s(io);
+    s.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), slow.port()));
+    ASSERT_TRUE(eventually([&] { return slow.stats().connections == 1; }));
+    const auto t0 = std::chrono::steady_clock::now();
+    slow.stop();
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, 1000ms);
+  }
+}
+
+TEST(Metrics, EndpointAnswers500WhenTheBodyFunctionThrows) {
+  std::atomic<bool> fail{true};
+  MetricsEndpoint ep(
+      [&] {
+        if (fail) throw std::runtime_error("no stats");
+        return std::string("irradcast_test 2\n");
+      },
+      local_endpoint());
+  ep.start();
+  EXPECT_EQ(get(ep.port()).status, 500);
+  fail = false;
+  EXPECT_EQ(get(ep.port()).body, "irradcast_test 2\n");
+}
+
+TEST(Metrics, EndpointRefusesAnAddressItCannotBind) {
+  MetricsEndpointOptions o = local_endpoint();
+  o.bind = "not-an-address";
+  MetricsEndpoint bad_address([] { return std::string(); }, o);
+  EXPECT_THROW(bad_address.start(), Error);
+  MetricsEndpoint first([] { return std::string(); }, local_endpoint());
+  first.start();
+  o = local_endpoint();
+  o.port = first.port();
+  MetricsEndpoint taken([] { return std::string(); }, o);
+  EXPECT_THROW(taken.start(), Error);
+}
+
+// ---------------------------------------------------------------------------------------------
+// End to end: engine host, server, endpoint, a viewer
+
+TEST(Metrics, EndToEndScrapeMatchesTheServerAndEngine) {
+  EngineHost host(make_cornell_box(), "cornell", small_host());
+  host.step();
+  host.step();
+  Server server(host, loopback());
+  server.start();
+  MetricsEndpoint ep([&] { return format_metrics(collect_metrics(server, host)); },
+                     local_endpoint());
+  ep.start();
+
+  ViewClient c(client_of(server, "metrics-viewer"));
+  c.connect();
+  const auto deadline = std::chrono::steady_clock::now() + 30s;
+  while (!c.all_tiles_received() && std::chrono::steady_clock::now() < deadline) c.poll(50ms);
+  ASSERT_TRUE(c.all_tiles_received());
+  // The server counts a tile when its write completes; the engine is not running, so the
+  // count settles at one per tile.
+  ASSERT_TRUE(eventually([&] { return server.stats().tiles_sent >= c.tile_count(); }));
+
+  const HttpResult r = get(ep.port());
+  ASSERT_EQ(r.status, 200) << r.raw;
+  EXPECT_EQ(r.header("Content-Type"), "text/plain; version=0.0.4; charset=utf-8");
+  const Exposition x = parse_exposition(r.body);
+  ASSERT_TRUE(x.errors.empty()) << join(x.errors) << r.body;
+  const ServerStats ss = server.stats();
+  const EngineHostStats es = host.stats();
+  EXPECT_EQ(x.value("irradcast_clients"), 1.0);
+  EXPECT_GT(x.value("irradcast_tiles_sent_total"), 0.0);
+  EXPECT_EQ(x.value("irradcast_tiles_sent_total"), static_cast<double>(ss.tiles_sent));
+  EXPECT_EQ(x.value("irradcast_tiles_sent_total"), static_cast<double>(c.tile_count()));
+  EXPECT_EQ(x.value("irradcast_tiles"), static_cast<double>(host.tiles().tile_count()));
+  EXPECT_EQ(x.value("irradcast_engine_updates_total"), 2.0);
+  EXPECT_EQ(es.updates, 2u);
+  EXPECT_EQ(x.value("irradcast_connections_total"), 1.0);
+  EXPECT_GT(ss.scene_bytes_sent, c.counters().scene_bytes_downloaded);  // frames > their data
+  EXPECT_EQ(x.value("irradcast_scene_bytes_sent_total"), static_cast<double>(ss.scene_bytes_sent));
+  EXPECT_GE(x.value("irradcast_bytes_sent_total"), x.value("irradcast_tile_bytes_sent_total") +
+                                                       x.value("irradcast_scene_bytes_sent_total"));
+  EXPECT_GT(x.value("irradcast_tile_bytes_sent_total"), 0.0);
+  EXPECT_EQ(x.value("irradcast_queue_depth"), 0.0);
+  EXPECT_EQ(x.value("irradcast_engine_idle"), 0.0);
+  EXPECT_GT(x.value("irradcast_engine_update_rate"), 0.0);
+  EXPECT_GT(x.value("irradcast_engine_rays_total"), 0.0);
+  EXPECT_GT(x.value("irradcast_engine_rays_per_second"), 0.0);
+  EXPECT_GT(x.value("irradcast_engine_convergence"), 0.0);
+  EXPECT_GT(x.value("irradcast_bytes_per_texel"), 0.0);
+  EXPECT_EQ(x.value("irradcast_info", {{"scene", "cornell"}}), 1.0);
+  // Direct, then probes and scatter per bounce (2 by default).
+  ASSERT_EQ(es.passes.size(), 5u);
+  ASSERT_EQ(x.family("irradcast_engine_pass_seconds").size(), es.passes.size());
+  double pass_sum = 0.0;
+  for (const EnginePassStats& p : es.passes) {
+    const LabelMap l = {{"pass", p.pass}, {"bounce", std::to_string(p.bounce)}};
+    EXPECT_GT(x.value("irradcast_engine_pass_seconds", l), 0.0) << p.pass << p.bounce;
+    EXPECT_GT(x.value("irradcast_engine_pass_rays", l), 0.0) << p.pass << p.bounce;
+    EXPECT_GE(x.value("irradcast_engine_pass_seconds_total", l),
+              x.value("irradcast_engine_pass_seconds", l));
+    pass_sum += p.seconds_total;
+  }
+  EXPECT_LE(pass_sum, es.seconds_total * 1.0001);
+  EXPECT_EQ(es.passes[0].pass, "direct");
+  EXPECT_EQ(es.passes[1].pass, "probes");
+  EXPECT_EQ(es.passes[2].pass, "scatter");
+  EXPECT_EQ(es.passes[4].bounce, 2u);
+
+  // The viewer says Bye: the scrape shows no client and a session closed for that reason.
+  c.close();
+  ASSERT_TRUE(eventually([&] { return server.stats().clients == 0; }));
+  const Exposition y = parse_exposition(get(ep.port()).body);
+  EXPECT_EQ(y.value("irradcast_clients"), 0.0);
+  EXPECT_EQ(y.value("irradcast_sessions_closed_total", {{"reason", "bye"}}), 1.0);
+  EXPECT_EQ(y.value("irradcast_sessions_closed_total", {{"reason", "idle_timeout"}}), 0.0);
+  {  // A frame that does not parse: the session ends for that reason, though the client closes.
+    asio::io_context io;
+    tcp::socket raw(io);
+    raw.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), server.port()));
+    std::string junk("\x10\x00\x00\x00", 4);
+    for (int i = 0; i < 16; ++i) junk += static_cast<char>(0xF7 ^ (i * 37));
+    asio::write(raw, asio::buffer(junk));
+    bool closed = false;
+    read_until_closed(io, raw, 5000ms, closed);
+    EXPECT_TRUE(closed);
+  }
+  ASSERT_TRUE(eventually([&] { return server.stats().clients == 0; }));
+  const Exposition z = parse_exposition(get(ep.port()).body);
+  EXPECT_EQ(z.value("irradcast_sessions_closed_total", {{"reason", "bad_frame"}}), 1.0);
+  EXPECT_EQ(z.value("irradcast_sessions_closed_total", {{"reason", "disconnect"}}), 0.0);
+  EXPECT_EQ(z.value("irradcast_connections_total"), 2.0);
+  EXPECT_EQ(z.value("irradcast_errors_sent_total"), 1.0);
+  ep.stop();
+  server.stop();
+}
+
+TEST(Metrics, CoalescedTilesAndQueueDepthAreLive) {
+  // Enough tiles that a client capped at 1 byte/s gets only the first burst (64 KiB) and the
+  // rest waits in its queue while the engine publishes new versions.
+  EngineHost host(make_cornell_box(), "cornell", small_host(128.0f));
+  host.step();
+  Server server(host, loopback());
+  server.start();
+  asio::io_context io;
+  tcp::socket s(io);
+  s.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), server.port()));
+  wire::Envelope hello, sub;
+  hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+  hello.mutable_hello()->set_client_name("slow");
+  sub.mutable_subscribe()->set_all(true);
+  sub.mutable_subscribe()->set_max_bytes_per_s(1);
+  asio::write(s, asio::buffer(wire::encode_frame(hello) + wire::encode_frame(sub)));
+  ASSERT_TRUE(eventually([&] { return server.stats().queue_depth > 0; }));
+  const ServerStats before = server.stats();
+  EXPECT_EQ(before.queue_depth_max, before.queue_depth);  // one client: max = sum
+  EXPECT_EQ(before.tiles_coalesced, 0u);
+  const std::uint64_t first_versions = host.stats().tiles_published;
+  // Tiles still waiting get newer versions: coalesced, and counted while the session lasts.
+  // (The tile store decides which tiles get a new version after an update; within a few
+  // updates most do.)
+  for (int i = 0; i < 10 && server.stats().tiles_coalesced == 0; ++i) {
+    host.step();
+    eventually([&] { return server.stats().tiles_coalesced > 0; }, 200ms);
+  }
+  const ServerStats during = server.stats();
+  EXPECT_GT(during.tiles_coalesced, 0u);
+  EXPECT_EQ(during.clients, 1u);
+  EXPECT_GT(during.queue_depth, 0u);
+  // Each coalesced version is a new version of a tile that was waiting.
+  EXPECT_LE(during.tiles_coalesced, host.stats().tiles_published - first_versions);
+  // The session ends when the client vanishes.
+  std::error_code ignored;
+  s.close(ignored);
+  ASSERT_TRUE(eventually([&] { return server.stats().clients == 0; }));
+  const ServerStats ss = server.stats();
+  EXPECT_EQ(ss.queue_depth, 0u);
+  EXPECT_EQ(ss.queue_depth_max, 0u);
+  EXPECT_EQ(ss.sessions_closed[static_cast<std::size_t>(CloseReason::Disconnect)], 1u);
+  server.stop();
+}
+
+TEST(Metrics, StatsFrameCarriesTheNewFields) {
+  EngineHost host(make_cornell_box(), "cornell", small_host());
+  host.step();
+  host.step();
+  host.step();
+  Server server(host, loopback());
+  server.start();
+  ViewClient c(client_of(server, "stats"));
+  c.connect();
+  const auto deadline = std::chrono::steady_clock::now() + 30s;
+  while (!c.all_tiles_received() && std::chrono::steady_clock::now() < deadline) c.poll(50ms);
+  auto st = c.request_stats(5s);
+  ASSERT_TRUE(st.has_value());
+  const EngineHostStats es = host.stats();
+  ASSERT_EQ(st->pass_times_size(), 5);
+  const char* names[] = {"direct", "probes", "scatter", "probes", "scatter"};
+  const std::uint32_t bounces[] = {0, 1, 1, 2, 2};
+  for (int i = 0; i < st->pass_times_size(); ++i) {
+    const wire::PassTime& p = st->pass_times(i);
+    EXPECT_EQ(p.pass(), names[i]);
+    EXPECT_EQ(p.bounce(), bounces[i]);
+    EXPECT_GT(p.ms(), 0.0);
+    EXPECT_GT(p.rays(), 0u);
+    EXPECT_GE(p.seconds_total(), p.ms() * 1e-3);
+    EXPECT_EQ(p.rays_total(), es.passes[static_cast<std::size_t>(i)].rays_total);
+  }
+  EXPECT_GE(st->update_rate(), 0.0);
+  EXPECT_EQ(st->updates(), 3u);
+  EXPECT_EQ(st->connections(), 1u);
+  EXPECT_EQ(st->clients_refused(), 0u);
+  EXPECT_GT(st->scene_bytes_sent(), 0u);
+  EXPECT_GT(st->tile_bytes_sent(), 0u);
+  EXPECT_EQ(st->tiles_published(), es.tiles_published);
+  EXPECT_GT(st->tiles_published(), 0u);
+  EXPECT_EQ(st->rays_total(), es.rays_total);
+  EXPECT_GT(st->engine_seconds_total(), 0.0);
+  EXPECT_EQ(st->tiles(), host.tiles().tile_count());
+  EXPECT_EQ(st->texels(), es.texels);
+  EXPECT_GE(st->queue_depth_max(), st->queue_depth());
+  EXPECT_GE(st->queue_depth_total(), st->queue_depth_max());
+  EXPECT_EQ(st->sessions_closed_size(), static_cast<int>(kCloseReasons));
+  EXPECT_EQ(st->sessions_closed(0).reason(), "bye");
+  EXPECT_EQ(st->sessions_closed(0).sessions(), 0u);
+  EXPECT_EQ(st->sessions_closed(2).reason(), "idle_timeout");
+  c.close();
+  server.stop();
+}
+
+TEST(Metrics, UpdateRateCountsRecentUpdatesOnly) {
+  EngineHost host(make_cornell_box(), "cornell", small_host());
+  EXPECT_EQ(host.stats().update_rate, 0.0);
+  EXPECT_TRUE(host.stats().passes.empty());
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int i = 0; i < 3; ++i) host.step();
+  const double elapsed =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const EngineHostStats s = host.stats();
+  // 3 updates since the first began: at least 3 / elapsed (the stats came later).
+  EXPECT_GT(s.update_rate, 0.0);
+  EXPECT_LE(s.update_rate, 3.0 / elapsed * 1.01);
+  EXPECT_GT(s.update_rate, 3.0 / (elapsed + 1.0));
+  EXPECT_EQ(s.updates, 3u);
+  EXPECT_GT(s.seconds_total, 0.0);
+  EXPECT_LE(s.seconds_total, elapsed);
+  EXPECT_GT(s.rays_total, 0u);
+  std::uint64_t rays = 0;
+  for (const EnginePassStats& p : s.passes) rays += p.rays_total;
+  EXPECT_EQ(rays, s.rays_total);
+  EXPECT_GT(s.texels, 0u);
+  EXPECT_EQ(s.tiles, host.tiles().tile_count());
+}
