@@ -5,8 +5,8 @@
 // for each user count N runs irradcast-load's users (in this process, thin mode) for long enough
 // that every user downloads the scene and all tiles and then follows the refinement for a
 // measuring window. Per N it records:
-//   - tile latency (server version time stamp -> user's apply) of the tiles applied after each
-//     user's first full image (steady state) and of every live tile, p50/p95/p99;
+//   - tile latency (server version time stamp -> user's apply) of the tiles applied once every
+//     user has its first full image (steady state) and of every live tile, p50/p95/p99;
 //   - the server's CPU, from /proc/PID/task/*/stat: its network threads ("irradcast-io") apart
 //     from the engine (its thread and the TBB workers), in cores;
 //   - this process's CPU (the simulated users) in cores;
@@ -288,13 +288,13 @@ int main(int argc, char** argv) {
 
     // Plots
     plot::XYPlot lat;
-    lat.title = "Tile latency against thin users (" + o.scene + ", one server, " +
+    lat.title = "Tile latency vs thin users (" + o.scene + ", " +
                 std::to_string(std::thread::hardware_concurrency()) + " cores)";
     lat.x_label = "simulated thin users";
     lat.y_label = "tile latency, ms (server version -> user's apply)";
     lat.x_log = true;
     lat.y_log = true;
-    lat.note = "steady state: tiles applied after each user's first full image";
+    lat.note = "steady state: tiles applied once every user had its first full image";
     plot::Series p50 = series("p50", plot::kBlue, true);
     plot::Series p99 = series("p99", plot::kRed, true);
     plot::Series goal = series("goal: p99 < 100 ms", plot::kDarkGrey, false);
@@ -314,7 +314,7 @@ int main(int argc, char** argv) {
     plot::write_xy_plot((fs::path(o.out) / "fanout_latency.png").string(), lat);
 
     plot::XYPlot cpu;
-    cpu.title = "Server CPU against thin users (" + o.scene + ")";
+    cpu.title = "Server CPU vs thin users (" + o.scene + ")";
     cpu.x_label = "simulated thin users";
     cpu.y_label = "CPU, cores";
     cpu.x_log = true;

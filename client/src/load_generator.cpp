@@ -151,7 +151,19 @@ class User : public std::enable_shared_from_this<User> {
     asio::post(strand_, [self = shared_from_this()] { self->do_finish(); });
   }
 
-  LoadUserResult result() const { return result_; }
+  // After the I/O threads are joined (also for a user the run had to stop before it closed).
+  LoadUserResult result() const {
+    LoadUserResult r = result_;
+    if (r.frames > 0) r.frame_ms_mean = frame_ms_total_ / static_cast<double>(r.frames);
+    if (r.full_image) {
+      r.bytes_after_full_image = r.bytes_received - r.bytes_to_full_image;
+      const Clock::time_point end = closed_ ? closed_at_ : Clock::now();
+      r.seconds_after_full_image = std::chrono::duration<double>(end - full_image_at_).count();
+    }
+    r.tiles_held = tiles_.tiles_received();
+    r.versions_digest = versions_digest(tiles_.versions());
+    return r;
+  }
   std::vector<double> take_latencies() { return std::move(latencies_ms_); }
   std::vector<double> take_steady_latencies() { return std::move(steady_ms_); }
 
@@ -242,6 +254,7 @@ class User : public std::enable_shared_from_this<User> {
 
   void handle(const wire::Envelope& env) {
     using E = wire::Envelope;
+    if (finishing_ && env.msg_case() != E::kError) return;  // Bye is on its way
     switch (env.msg_case()) {
       case E::kWelcome:
         on_welcome(env.welcome());
@@ -272,7 +285,8 @@ class User : public std::enable_shared_from_this<User> {
     }
     welcome_ = w;
     if (w.idle_timeout_ms() > 0)
-      ping_interval_ = std::min(ping_interval_, std::chrono::milliseconds(w.idle_timeout_ms() / 3));
+      ping_interval_ = std::clamp(std::chrono::milliseconds(w.idle_timeout_ms() / 3),
+                                  std::chrono::milliseconds(100), ping_interval_);
     assembler_ = std::make_unique<wire::SceneAssembler>(w.scene_hash(), w.scene_bytes());
     wire::Envelope req;
     req.mutable_scene_request()->set_offset(0);
@@ -348,7 +362,7 @@ class User : public std::enable_shared_from_this<User> {
       const double us =
           now > t.server_time_us() ? static_cast<double>(now - t.server_time_us()) : 0.0;
       latencies_ms_.push_back(us / 1000.0);
-      if (result_.full_image) {
+      if (run_.full_image.load() == run_.options.users) {
         steady_ms_.push_back(us / 1000.0);
         ++result_.tiles_steady;
       }
@@ -445,6 +459,8 @@ class User : public std::enable_shared_from_this<User> {
                         if (ec) {
                           if (self->finishing_)
                             self->close();
+                          else if (!self->server_error_.empty())
+                            self->fail("", self->server_error_);  // counted as the Error
                           else
                             self->fail("disconnected", "write: " + ec.message());
                           return;
@@ -497,14 +513,7 @@ class User : public std::enable_shared_from_this<User> {
       t->cancel();
     socket_.shutdown(tcp::socket::shutdown_both, ec);
     socket_.close(ec);
-    if (result_.full_image) {
-      result_.bytes_after_full_image = result_.bytes_received - result_.bytes_to_full_image;
-      result_.seconds_after_full_image =
-          std::chrono::duration<double>(Clock::now() - full_image_at_).count();
-    }
-    if (result_.frames > 0) result_.frame_ms_mean = frame_ms_total_ / result_.frames;
-    result_.tiles_held = tiles_.tiles_received();
-    result_.versions_digest = versions_digest(tiles_.versions());
+    closed_at_ = Clock::now();
     out_.clear();
   }
 
@@ -519,7 +528,8 @@ class User : public std::enable_shared_from_this<User> {
   std::deque<std::string> out_;
   bool writing_ = false, finishing_ = false, closed_ = false;
   State state_ = State::Idle;
-  Clock::time_point started_ = Clock::now(), last_sent_ = Clock::now(), full_image_at_{};
+  Clock::time_point started_ = Clock::now(), last_sent_ = Clock::now(), full_image_at_{},
+                    closed_at_{};
   std::chrono::milliseconds backoff_{50}, ping_interval_{5000};
   wire::Welcome welcome_;
   std::unique_ptr<wire::SceneAssembler> assembler_;
@@ -541,6 +551,7 @@ void check(const LoadOptions& o) {
   if (o.fps < 0.0 || o.camera_hz < 0.0 || o.ramp_s < 0.0)
     throw Error("--fps, --camera-hz and --ramp must not be negative");
   if (o.threads < 0) throw Error("--threads must not be negative");
+  if (o.ramp_s >= o.duration_s) throw Error("--ramp must be shorter than --duration");
 }
 
 }  // namespace
@@ -601,7 +612,18 @@ LoadReport run_load(const LoadOptions& options,
                           ? options.threads
                           : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   std::vector<std::thread> pool;
-  for (int i = 0; i < threads; ++i) pool.emplace_back([&run] { run.io.run(); });
+  for (int i = 0; i < threads; ++i)
+    pool.emplace_back([&run] {
+      for (;;) {
+        try {
+          run.io.run();
+          return;
+        } catch (const std::exception& e) {
+          // A handler threw (a bug): count it and keep the other users going.
+          run.count_error(std::string("internal: ") + e.what());
+        }
+      }
+    });
 
   // The main thread reports progress until the end of the run.
   const auto end = run.start + std::chrono::duration_cast<Clock::duration>(

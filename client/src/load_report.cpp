@@ -54,7 +54,7 @@ std::string LoadReport::text() const {
   s << "  first full image  " << dist(full_image_ms, " ms") << "\n";
   s << "  tile latency      " << dist(tile_latency_ms, " ms") << "  (" << tiles_live
     << " live tiles of " << tiles_applied << " applied)\n";
-  s << "  after full image  " << dist(steady_tile_latency_ms, " ms") << "  ("
+  s << "  all users synced  " << dist(steady_tile_latency_ms, " ms") << "  ("
     << steady_tile_latency_ms.count << " tiles)\n";
   s << "  bytes/s per user  " << byte_dist(bytes_per_s, "/s") << "\n";
   s << "  bytes/s steady    " << byte_dist(steady_bytes_per_s, "/s") << "\n";

@@ -66,7 +66,9 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
           static_cast<double>(options_.atlas.max_lightmap_size),
           static_cast<double>(options_.tiles.tile_size),
           static_cast<double>(options_.tiles.change_threshold),
-          static_cast<double>(options_.tiles.floor_fraction)})
+          static_cast<double>(options_.tiles.floor_fraction),
+          static_cast<double>(options_.tiles.refresh_ratio),
+          static_cast<double>(options_.tiles.significance)})
       add(v);
     const std::string digest = wire::sha256(key);
     for (int i = 0; i < 8; ++i)
@@ -93,11 +95,16 @@ void EngineHost::set_listener(PublishListener listener) {
 void EngineHost::start() {
   if (thread_.joinable()) return;
   stopping_ = false;
-  if (options_.engine_nice > 0) set_tbb_worker_nice(options_.engine_nice);
   thread_ = std::thread([this] {
     set_thread_name("irradcast-eng");
-    if (options_.engine_nice > 0) set_thread_nice(options_.engine_nice);
-    run();
+    if (options_.engine_nice <= 0) {
+      run();
+      return;
+    }
+    // The updates run in an arena whose threads (this one and the TBB workers that help)
+    // are niced: the network threads come first.
+    NiceArena arena(options_.engine_nice);
+    arena.execute([this] { run(); });
   });
 }
 
@@ -139,10 +146,15 @@ void EngineHost::do_update() {
   UpdateStats u = impl_->engine->update();
   std::vector<Lightmap> maps = impl_->engine->lightmaps();
   // With the engine's own noise estimate, tiles that only changed by Monte Carlo noise wait
-  // until their refresh is worth the bytes (TileStoreOptions::refresh_ratio).
-  const std::vector<Lightmap> standard_error = impl_->engine->standard_error();
+  // until their refresh is worth the bytes (TileStoreOptions::refresh_ratio). The last update
+  // (max_updates) publishes every change beyond the threshold: final tiles are the final means.
+  const bool last = options_.max_updates > 0 && impl_->engine->updates() >= options_.max_updates;
+  std::vector<Lightmap> standard_error;
+  if (!last && options_.tiles.refresh_ratio > 1.0f)
+    standard_error = impl_->engine->standard_error();
   const TileStore::Noise noise{impl_->engine->updates(), &standard_error};
-  std::vector<std::uint32_t> changed = tiles_->publish(maps, now_us(), &noise);
+  std::vector<std::uint32_t> changed =
+      tiles_->publish(maps, now_us(), standard_error.empty() ? nullptr : &noise);
   const double bytes_per_texel = tiles_->bytes_per_texel();
   const auto ended = std::chrono::steady_clock::now();
   PublishListener listener;

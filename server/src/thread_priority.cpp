@@ -1,9 +1,7 @@
 #include "irradcast/thread_priority.h"
 
+#include <tbb/task_arena.h>
 #include <tbb/task_scheduler_observer.h>
-
-#include <atomic>
-#include <mutex>
 
 #if defined(__linux__)
 #include <pthread.h>
@@ -34,27 +32,26 @@ bool set_thread_nice(int nice) {
 #endif
 }
 
-namespace {
-
-// Installed once and never removed: TBB keeps a proxy of every observer that is observing.
-struct NiceObserver : tbb::task_scheduler_observer {
-  explicit NiceObserver(int n) : nice(n) { observe(true); }
-  void on_scheduler_entry(bool is_worker) override {
-    if (is_worker) set_thread_nice(nice.load());
-  }
-  std::atomic<int> nice;
+struct NiceArena::Impl {
+  struct Observer : tbb::task_scheduler_observer {
+    Observer(tbb::task_arena& a, int n) : tbb::task_scheduler_observer(a), nice(n) {
+      observe(true);
+    }
+    ~Observer() override { observe(false); }
+    void on_scheduler_entry(bool) override { set_thread_nice(nice); }
+    int nice;
+  };
+  explicit Impl(int n) : observer(arena, n) {}
+  tbb::task_arena arena;
+  Observer observer;
 };
 
-}  // namespace
+NiceArena::NiceArena(int nice) : impl_(std::make_unique<Impl>(nice)) {}
 
-void set_tbb_worker_nice(int nice) {
-  static std::mutex mutex;
-  static NiceObserver* observer = nullptr;
-  std::lock_guard lock(mutex);
-  if (observer)
-    observer->nice = nice;
-  else
-    observer = new NiceObserver(nice);
+NiceArena::~NiceArena() = default;
+
+void NiceArena::execute(const std::function<void()>& work) {
+  impl_->arena.execute(work);
 }
 
 }  // namespace irradcast

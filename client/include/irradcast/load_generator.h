@@ -60,7 +60,7 @@ struct LoadUserResult {
   double seconds_after_full_image = 0.0;
   std::uint64_t tiles_applied = 0;
   std::uint64_t tiles_live = 0;    // versions computed after the user subscribed
-  std::uint64_t tiles_steady = 0;  // of those, applied after the first full image
+  std::uint64_t tiles_steady = 0;  // of those, applied once every user had a full image
   std::uint64_t frames = 0;
   double frame_ms_mean = 0.0;
   std::uint64_t camera_updates = 0;
@@ -83,10 +83,12 @@ struct LoadReport {
   double elapsed_s = 0.0;
   int users = 0, connected = 0, failed = 0, scene_loaded = 0, full_image = 0;
   Percentiles scene_ms, full_image_ms;
-  Percentiles tile_latency_ms;         // every live tile
-  Percentiles steady_tile_latency_ms;  // live tiles applied after the user's first full image
-  Percentiles bytes_per_s;             // per user, over its whole connection
-  Percentiles steady_bytes_per_s;      // per user, after its first full image
+  Percentiles tile_latency_ms;  // every live tile
+  // Live tiles applied once every user of the run had its first full image: the steady state,
+  // without the initial downloads of users that joined later queued in front.
+  Percentiles steady_tile_latency_ms;
+  Percentiles bytes_per_s;         // per user, over its whole connection
+  Percentiles steady_bytes_per_s;  // per user, after its first full image
   Percentiles bytes_to_full_image;
   Percentiles frames_per_s;  // render mode
   Percentiles frame_ms;      // render mode: compose time per frame, per user mean

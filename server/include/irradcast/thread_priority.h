@@ -4,6 +4,9 @@
 // delayed by a running update (Linux: nice is per thread; elsewhere these do nothing).
 #pragma once
 
+#include <functional>
+#include <memory>
+
 namespace irradcast {
 
 // Names the calling thread (at most 15 characters show) for top, perf and /proc/PID/task.
@@ -13,9 +16,22 @@ void set_thread_name(const char* name);
 // false when the system refused.
 bool set_thread_nice(int nice);
 
-// From now on, every TBB worker thread of the process runs at `nice` when it joins the default
-// arena (a process-wide setting: in the server all TBB work is the engine's). Later calls
-// change the value for workers that join afterwards.
-void set_tbb_worker_nice(int nice);
+// A TBB arena whose threads run at `nice` while they work in it: the engine runs its updates
+// in one (EngineHost), so the TBB workers that help it are niced too. (A worker keeps its nice
+// value after it leaves: raising a thread's priority again needs privileges. In the server all
+// TBB work is the engine's.)
+class NiceArena {
+ public:
+  explicit NiceArena(int nice);
+  ~NiceArena();
+  NiceArena(const NiceArena&) = delete;
+  NiceArena& operator=(const NiceArena&) = delete;
+
+  void execute(const std::function<void()>& work);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace irradcast
