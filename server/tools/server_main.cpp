@@ -20,6 +20,7 @@
 #include "irradcast/metrics_text.h"
 #include "irradcast/net_server.h"
 #include "irradcast/progress.h"
+#include "irradcast/vulkan_device.h"
 
 namespace {
 
@@ -120,6 +121,22 @@ int run(const Options& o, sigset_t signals) {
 
 }  // namespace
 
+// --list-devices: what the engine could run on. Vulkan devices when there is a driver (the
+// Vulkan passes are issue 6's work in progress), and Embree, which is always there.
+int print_devices() {
+  std::printf("embree: the CPU (%u threads), always available\n",
+              std::thread::hardware_concurrency());
+  try {
+    const std::vector<irradcast::VulkanDeviceInfo> devices = irradcast::list_vulkan_devices();
+    if (devices.empty()) std::printf("vulkan: no device\n");
+    for (const irradcast::VulkanDeviceInfo& d : devices)
+      std::printf("vulkan: %s\n", irradcast::describe(d).c_str());
+  } catch (const irradcast::Error& e) {
+    std::printf("vulkan: not available: %s\n", e.what());
+  }
+  return 0;
+}
+
 int main(int argc, char** argv) {
   Options o;
   CLI::App app{
@@ -161,12 +178,16 @@ int main(int argc, char** argv) {
   app.add_option("--metrics-bind", o.metrics_bind,
                  "address for the metrics endpoint (default: the --bind address)");
   app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
+  bool list_devices = false;
+  app.add_flag("--list-devices", list_devices,
+               "list the compute devices (Vulkan) and exit; the engine runs on Embree (CPU)");
   o.engine.add_to(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
+  if (list_devices) return print_devices();
   // Block the stop signals in every thread (threads inherit the mask); main waits for them.
   sigset_t signals;
   sigemptyset(&signals);
