@@ -12,6 +12,7 @@
 #include <mutex>
 #include <thread>
 
+#include "irradcast/camera_message.h"
 #include "irradcast/compositor.h"
 #include "irradcast/error.h"
 #include "irradcast/frame.h"
@@ -381,19 +382,7 @@ class User : public std::enable_shared_from_this<User> {
   }
 
   void send_camera() {
-    const CameraPose c = path_.at(run_.elapsed_s());
-    wire::Envelope e;
-    wire::CameraUpdate* u = e.mutable_camera_update();
-    auto set = [](wire::Vec3* v, glm::vec3 x) {
-      v->set_x(x.x);
-      v->set_y(x.y);
-      v->set_z(x.z);
-    };
-    set(u->mutable_eye(), c.eye);
-    set(u->mutable_forward(), c.forward);
-    set(u->mutable_up(), c.up);
-    u->set_yfov(c.yfov);
-    send(e);
+    send(camera_update(path_.at(run_.elapsed_s())));
     ++result_.camera_updates;
     camera_timer_.expires_after(std::chrono::duration_cast<Clock::duration>(
         std::chrono::duration<double>(1.0 / run_.options.camera_hz)));

@@ -9,6 +9,7 @@
 #include <sstream>
 #include <thread>
 
+#include "irradcast/camera_message.h"
 #include "irradcast/compositor.h"
 #include "irradcast/error.h"
 #include "irradcast/frame.h"
@@ -329,19 +330,8 @@ std::optional<wire::Stats> ViewClient::request_stats(std::chrono::milliseconds t
 }
 
 void ViewClient::send_camera(const CameraPose& c) {
-  wire::Envelope e;
-  wire::CameraUpdate* u = e.mutable_camera_update();
-  auto set = [](wire::Vec3* v, glm::vec3 x) {
-    v->set_x(x.x);
-    v->set_y(x.y);
-    v->set_z(x.z);
-  };
-  set(u->mutable_eye(), c.eye);
-  set(u->mutable_forward(), c.forward);
-  set(u->mutable_up(), c.up);
-  u->set_yfov(c.yfov);
   try {
-    send(e);
+    send(camera_update(c));
   } catch (const ConnectionLost&) {
   }
 }
