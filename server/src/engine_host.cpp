@@ -45,9 +45,10 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
   atlas_ = build_atlas(world_, options_.atlas);
   impl_->gbuffers = rasterize_gbuffer(world_, atlas_);
   mark_hidden_texels(*impl_->rays, impl_->gbuffers);
-  impl_->engine = std::make_unique<Engine>(
-      world_, atlas_, impl_->gbuffers, *impl_->rays,
-      std::make_unique<EmbreeBackend>(*impl_->rays, *impl_->lights), options_.engine);
+  BackendChoice backend = make_backend(options_.backend, world_, *impl_->rays, *impl_->lights);
+  backend_ = backend.reason;
+  impl_->engine = std::make_unique<Engine>(world_, atlas_, impl_->gbuffers, *impl_->rays,
+                                           std::move(backend.backend), options_.engine);
   std::vector<std::pair<int, int>> sizes;
   for (const ObjectLightmap& o : atlas_.objects) sizes.emplace_back(o.width, o.height);
   tiles_ = std::make_unique<TileStore>(sizes, options_.tiles);
@@ -70,6 +71,7 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
           static_cast<double>(options_.tiles.refresh_ratio),
           static_cast<double>(options_.tiles.significance)})
       add(v);
+    key += "|" + impl_->engine->backend().describe();  // backends agree only within noise
     const std::string digest = wire::sha256(key);
     for (int i = 0; i < 8; ++i)
       tile_epoch_ =

@@ -7,6 +7,7 @@
 #include <mutex>
 
 #include "irradcast/error.h"
+#include "vulkan_handles.h"
 
 namespace irradcast {
 
@@ -303,6 +304,15 @@ std::uint32_t VulkanContext::queue_family() const {
 std::uint64_t VulkanContext::validation_messages() const {
   std::lock_guard lock(impl_->log_mutex);
   return impl_->messages;
+}
+
+void vk_check(VkResult r, const char* what) {
+  check(r, what);
+}
+
+VulkanHandles vulkan_handles(const VulkanContext& context) {
+  const VulkanContext::Impl& i = context.impl();
+  return VulkanHandles{i.physical, i.device, i.queue, i.queue_family};
 }
 
 std::vector<std::string> VulkanContext::validation_log() const {

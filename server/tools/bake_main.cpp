@@ -18,7 +18,6 @@
 #include "irradcast/builtin.h"
 #include "irradcast/camera.h"
 #include "irradcast/compositor.h"
-#include "irradcast/embree_backend.h"
 #include "irradcast/engine.h"
 #include "irradcast/error.h"
 #include "irradcast/gbuffer.h"
@@ -103,6 +102,7 @@ int run(const Options& o) {
   if (o.method != "engine" && o.method != "reference")
     throw Error("unknown --method '" + o.method + "' (expected engine or reference)");
   const EngineParams ep = o.engine.params();
+  const BackendOptions bo = o.engine.backend_options();
   std::unique_ptr<tbb::global_control> threads;
   if (o.threads > 0)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -165,7 +165,7 @@ int run(const Options& o) {
     lightmap_seconds = lm_stats.seconds;
     timings["lightmaps"] = sw.lap();
   } else {
-    Engine engine(world, atlas, gbuffers, rays, std::make_unique<EmbreeBackend>(rays, lights), ep);
+    Engine engine(world, atlas, gbuffers, rays, make_backend(bo, world, rays, lights).backend, ep);
     timings["engine_setup"] = sw.lap();
     const ProbeStats& ps = engine.probe_stats();
     if (!ep.unbiased())
@@ -204,7 +204,7 @@ int run(const Options& o) {
       passes.push_back(pass("scatter_" + std::to_string(b + 1), scatter[b]));
     }
     report["engine"] = {
-        {"backend", engine.backend().name()},
+        {"backend", engine.backend().describe()},
         {"updates", engine.updates()},
         {"texels", engine.texel_count()},
         {"cell_size", ep.cell_size},

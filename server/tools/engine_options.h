@@ -7,6 +7,7 @@
 #include <string>
 
 #include "irradcast/atlas.h"
+#include "irradcast/backend_select.h"
 #include "irradcast/engine_params.h"
 
 namespace irradcast::tools {
@@ -25,6 +26,9 @@ struct EngineOptions {
   float texels_per_scene = 256.0f;
   int max_lightmap_size = 1024;
   std::uint64_t seed = 1;
+  std::string backend = "auto";
+  int vulkan_device = -1;
+  bool vulkan_validation = false;
 
   void add_to(CLI::App& app) {
     app.add_option("--cell-size", cell_size, "engine: radiance cell size (fraction of the scene)");
@@ -52,6 +56,13 @@ struct EngineOptions {
     app.add_option("--max-lightmap-size", max_lightmap_size, "per-object lightmap size cap")
         ->check(CLI::Range(8, 16384));
     app.add_option("--seed", seed, "random seed (same seed, same images)");
+    app.add_option("--backend", backend,
+                   "engine: auto (a Vulkan GPU if one opens, else Embree) | vulkan | embree");
+    app.add_option("--vulkan-device", vulkan_device,
+                   "engine: Vulkan device index from --list-devices (default: the best)")
+        ->check(CLI::Range(0, 1024));
+    app.add_flag("--vulkan-validation", vulkan_validation,
+                 "engine: run Vulkan with the Khronos validation layer (slow; for debugging)");
   }
 
   // Throws irradcast::Error naming a bad value.
@@ -70,6 +81,15 @@ struct EngineOptions {
     p.seed = seed;
     p.validate();
     return p;
+  }
+
+  // Throws irradcast::Error naming a bad --backend.
+  BackendOptions backend_options() const {
+    BackendOptions b;
+    b.kind = parse_backend(backend);
+    b.vulkan_device = vulkan_device;
+    b.vulkan_validation = vulkan_validation;
+    return b;
   }
 
   AtlasOptions atlas() const {

@@ -54,6 +54,7 @@ int run(const Options& o, sigset_t signals) {
                                                     static_cast<std::size_t>(o.threads));
   EngineHostOptions ho;
   ho.engine = o.engine.params();
+  ho.backend = o.engine.backend_options();
   ho.atlas = o.engine.atlas();
   ho.tiles.tile_size = o.tile_size;
   ho.tiles.change_threshold = o.tile_threshold;

@@ -29,6 +29,9 @@ class LightSampler {
   bool empty() const { return triangles_.empty() && world_->lights.empty(); }
   const std::vector<EmissiveTriangle>& emissive_triangles() const { return triangles_; }
   float total_area_power() const { return total_power_; }
+  // Per emissive triangle: cumulative pick probability (the last is 1) and pick probability.
+  const std::vector<float>& pick_cdf() const { return cdf_; }
+  const std::vector<float>& pick_pdf() const { return pick_pdf_; }
 
   // One-sample estimate of the direct irradiance at p (unit normal n, geometric normal ng for
   // the ray offset) from the area lights: picks a triangle by power and a uniform point on it

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "irradcast/atlas.h"
+#include "irradcast/backend_select.h"
 #include "irradcast/engine_params.h"
 #include "irradcast/scene.h"
 #include "irradcast/scene_package.h"
@@ -29,6 +30,7 @@ struct UpdateStats;
 
 struct EngineHostOptions {
   EngineParams engine;
+  BackendOptions backend;  // which TraceBackend runs the passes
   AtlasOptions atlas;
   TileStoreOptions tiles;
   std::uint32_t max_updates = 0;  // stop refining after this many updates (0 = never)
@@ -88,6 +90,8 @@ class EngineHost {
   void step();
 
   const std::string& scene_id() const { return scene_id_; }
+  // Which backend runs the passes and why (make_backend's reason line).
+  const std::string& backend() const { return backend_; }
   const Scene& scene() const { return scene_; }
   const World& world() const { return world_; }
   const Atlas& atlas() const { return atlas_; }
@@ -113,6 +117,7 @@ class EngineHost {
 
   Scene scene_;
   std::string scene_id_;
+  std::string backend_;
   EngineHostOptions options_;
   World world_;
   Atlas atlas_;

@@ -1,5 +1,5 @@
-// The one interface the GI engine's passes run behind: an Embree (CPU) backend today, a Vulkan
-// compute backend next. A backend owns its acceleration structure; the engine owns the data
+// The one interface the GI engine's passes run behind: an Embree (CPU) backend and a Vulkan
+// compute backend (backend_select.h picks one). A backend owns its acceleration structure; the engine owns the data
 // (texels, probes, accumulated estimates) and calls one pass at a time.
 #pragma once
 
@@ -82,6 +82,8 @@ class TraceBackend {
  public:
   virtual ~TraceBackend() = default;
   virtual std::string name() const = 0;
+  // The name and the device it runs on ("vulkan on NVIDIA H100 ..."), for logs and reports.
+  virtual std::string describe() const { return name(); }
 
   // Direct irradiance per texel (one update's estimate).
   virtual PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) = 0;

@@ -54,6 +54,7 @@ class VulkanContext {
   std::vector<std::string> validation_log() const;
 
   struct Impl;
+  const Impl& impl() const { return *impl_; }
 
  private:
   std::unique_ptr<Impl> impl_;

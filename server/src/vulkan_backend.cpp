@@ -1,0 +1,687 @@
+#include "irradcast/vulkan_backend.h"
+
+#include <vulkan/vulkan.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cstring>
+#include <functional>
+#include <mutex>
+#include <string>
+
+#include "direct.spv.h"
+#include "gather.spv.h"
+#include "irradcast/error.h"
+#include "irradcast/gpu_bvh.h"
+#include "scatter.spv.h"
+#include "vulkan_handles.h"
+
+namespace irradcast {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// The storage buffers, in shaders/common.glsl's binding order.
+enum Binding : int {
+  kNodes,
+  kTris,
+  kTriAttr,
+  kObjects,
+  kMaterials,
+  kTexHeaders,
+  kTexTexels,
+  kEmissive,
+  kPunctual,
+  kTexels,
+  kUnits,
+  kProbes,
+  kProbeWeights,
+  kPrev,
+  kProbeRadiance,
+  kResult,
+  kBindings
+};
+
+enum PipelineId : int { kDirectPipeline, kGatherPipeline, kScatterPipeline, kPipelines };
+
+enum Flags : std::uint32_t { kFlagArea = 1, kFlagUnbiased = 2, kFlagFixed = 4, kFlagProbes = 8 };
+
+// shaders/common.glsl's push constant block (std430 offsets).
+struct PushConstants {
+  std::uint32_t base = 0, count = 0, update = 0, bounce = 0;
+  std::uint32_t seed_lo = 0, seed_hi = 0, samples = 0, flags = 0;
+  float epsilon = 0.0f, range = 0.0f, extent = 0.0f;
+  std::uint32_t punctual_count = 0;
+  float bounds_lo[3] = {0.0f, 0.0f, 0.0f};
+  std::uint32_t emissive_count = 0;
+  float bounds_hi[3] = {0.0f, 0.0f, 0.0f};
+  std::int32_t probe_res = 0;
+};
+static_assert(sizeof(PushConstants) == 80);
+
+struct Buffer {
+  VkBuffer buffer = VK_NULL_HANDLE;
+  VkDeviceMemory memory = VK_NULL_HANDLE;
+  VkDeviceSize size = 0;
+  void* mapped = nullptr;  // persistently mapped when host-visible and coherent
+};
+
+template <typename T>
+std::uint32_t bits(T v) {
+  static_assert(sizeof(T) == 4);
+  std::uint32_t u;
+  std::memcpy(&u, &v, 4);
+  return u;
+}
+
+float as_float(std::uint32_t u) {
+  float f;
+  std::memcpy(&f, &u, 4);
+  return f;
+}
+
+float as_float(std::int32_t i) {
+  return as_float(static_cast<std::uint32_t>(i));
+}
+
+// What the engine's own data was last uploaded from (it does not change while an engine lives).
+struct EngineKey {
+  const void* atlas = nullptr;
+  const void* texels = nullptr;
+  std::size_t texel_count = 0;
+  const void* units = nullptr;
+  std::size_t unit_count = 0;
+  const void* probes = nullptr;
+  std::size_t probe_count = 0;
+  const void* weights = nullptr;
+  std::size_t weight_count = 0;
+  bool operator==(const EngineKey&) const = default;
+};
+
+}  // namespace
+
+struct VulkanBackend::Impl {
+  Impl(const World& w, const RayScene& r, const LightSampler& l, VulkanContextOptions o)
+      : context(o), vk(vulkan_handles(context)), world(&w), rays(&r), lights(&l) {
+    vkGetPhysicalDeviceMemoryProperties(vk.physical, &memory);
+    vkGetPhysicalDeviceProperties(vk.physical, &properties);
+    discrete = properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU;
+    if (properties.limits.maxPerStageDescriptorStorageBuffers < kBindings)
+      throw Error("Vulkan: " + context.device().name + " allows " +
+                  std::to_string(properties.limits.maxPerStageDescriptorStorageBuffers) +
+                  " storage buffers per shader stage; the passes need " +
+                  std::to_string(static_cast<int>(kBindings)));
+    max_groups = std::min<std::uint32_t>(properties.limits.maxComputeWorkGroupCount[0], 65535u);
+    create_pipelines();
+    create_commands();
+    for (int b = 0; b < kBindings; ++b) create(device_buffers[b], 16, false);
+    upload_scene();
+  }
+
+  ~Impl() {
+    if (vk.device == VK_NULL_HANDLE) return;
+    vkDeviceWaitIdle(vk.device);
+    for (int b = 0; b < kBindings; ++b) {
+      destroy(device_buffers[b]);
+      destroy(staging[b]);
+    }
+    if (fence) vkDestroyFence(vk.device, fence, nullptr);
+    if (command_pool) vkDestroyCommandPool(vk.device, command_pool, nullptr);
+    for (VkPipeline p : pipelines)
+      if (p) vkDestroyPipeline(vk.device, p, nullptr);
+    if (pipeline_layout) vkDestroyPipelineLayout(vk.device, pipeline_layout, nullptr);
+    if (descriptor_pool) vkDestroyDescriptorPool(vk.device, descriptor_pool, nullptr);
+    if (set_layout) vkDestroyDescriptorSetLayout(vk.device, set_layout, nullptr);
+  }
+
+  // ---- set-up
+
+  void create_pipelines() {
+    std::array<VkDescriptorSetLayoutBinding, kBindings> layout_bindings{};
+    for (int b = 0; b < kBindings; ++b) {
+      layout_bindings[b].binding = static_cast<std::uint32_t>(b);
+      layout_bindings[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+      layout_bindings[b].descriptorCount = 1;
+      layout_bindings[b].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
+    }
+    VkDescriptorSetLayoutCreateInfo sl{};
+    sl.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
+    sl.bindingCount = kBindings;
+    sl.pBindings = layout_bindings.data();
+    vk_check(vkCreateDescriptorSetLayout(vk.device, &sl, nullptr, &set_layout),
+             "vkCreateDescriptorSetLayout");
+    VkPushConstantRange range{VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(PushConstants)};
+    VkPipelineLayoutCreateInfo pl{};
+    pl.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
+    pl.setLayoutCount = 1;
+    pl.pSetLayouts = &set_layout;
+    pl.pushConstantRangeCount = 1;
+    pl.pPushConstantRanges = &range;
+    vk_check(vkCreatePipelineLayout(vk.device, &pl, nullptr, &pipeline_layout),
+             "vkCreatePipelineLayout");
+    VkDescriptorPoolSize size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, kBindings};
+    VkDescriptorPoolCreateInfo dp{};
+    dp.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
+    dp.maxSets = 1;
+    dp.poolSizeCount = 1;
+    dp.pPoolSizes = &size;
+    vk_check(vkCreateDescriptorPool(vk.device, &dp, nullptr, &descriptor_pool),
+             "vkCreateDescriptorPool");
+    VkDescriptorSetAllocateInfo da{};
+    da.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
+    da.descriptorPool = descriptor_pool;
+    da.descriptorSetCount = 1;
+    da.pSetLayouts = &set_layout;
+    vk_check(vkAllocateDescriptorSets(vk.device, &da, &descriptor_set), "vkAllocateDescriptorSets");
+
+    const std::pair<const std::uint32_t*, std::size_t> code[kPipelines] = {
+        {irradcast_direct_spv, sizeof(irradcast_direct_spv)},
+        {irradcast_gather_spv, sizeof(irradcast_gather_spv)},
+        {irradcast_scatter_spv, sizeof(irradcast_scatter_spv)}};
+    for (int p = 0; p < kPipelines; ++p) {
+      VkShaderModuleCreateInfo sm{};
+      sm.sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO;
+      sm.codeSize = code[p].second;
+      sm.pCode = code[p].first;
+      VkShaderModule module = VK_NULL_HANDLE;
+      vk_check(vkCreateShaderModule(vk.device, &sm, nullptr, &module), "vkCreateShaderModule");
+      VkComputePipelineCreateInfo cp{};
+      cp.sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO;
+      cp.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+      cp.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+      cp.stage.module = module;
+      cp.stage.pName = "main";
+      cp.layout = pipeline_layout;
+      VkResult r = vkCreateComputePipelines(vk.device, VK_NULL_HANDLE, 1, &cp, nullptr, &pipelines[p]);
+      vkDestroyShaderModule(vk.device, module, nullptr);
+      vk_check(r, "vkCreateComputePipelines");
+    }
+  }
+
+  void create_commands() {
+    VkCommandPoolCreateInfo cp{};
+    cp.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
+    cp.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+    cp.queueFamilyIndex = vk.queue_family;
+    vk_check(vkCreateCommandPool(vk.device, &cp, nullptr, &command_pool), "vkCreateCommandPool");
+    VkCommandBufferAllocateInfo ca{};
+    ca.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
+    ca.commandPool = command_pool;
+    ca.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    ca.commandBufferCount = 1;
+    vk_check(vkAllocateCommandBuffers(vk.device, &ca, &commands), "vkAllocateCommandBuffers");
+    VkFenceCreateInfo fi{};
+    fi.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
+    vk_check(vkCreateFence(vk.device, &fi, nullptr, &fence), "vkCreateFence");
+  }
+
+  // ---- buffers
+
+  int memory_type(std::uint32_t allowed, VkMemoryPropertyFlags want) const {
+    for (std::uint32_t i = 0; i < memory.memoryTypeCount; ++i)
+      if ((allowed & (1u << i)) && (memory.memoryTypes[i].propertyFlags & want) == want)
+        return static_cast<int>(i);
+    return -1;
+  }
+
+  // A storage buffer the shaders read: device-local on a discrete GPU (filled through staging),
+  // host-visible device memory elsewhere (written in place). Staging buffers are host memory.
+  void create(Buffer& b, VkDeviceSize size, bool staging_buffer) {
+    VkBufferCreateInfo bi{};
+    bi.sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO;
+    bi.size = size;
+    bi.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
+               VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    bi.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+    vk_check(vkCreateBuffer(vk.device, &bi, nullptr, &b.buffer), "vkCreateBuffer");
+    VkMemoryRequirements req;
+    vkGetBufferMemoryRequirements(vk.device, b.buffer, &req);
+    const VkMemoryPropertyFlags host =
+        VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    const VkMemoryPropertyFlags local = VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
+    std::vector<VkMemoryPropertyFlags> prefs;
+    if (staging_buffer)
+      prefs = {host | VK_MEMORY_PROPERTY_HOST_CACHED_BIT, host};
+    else if (discrete)
+      prefs = {local, host};
+    else
+      prefs = {local | host, host, local};
+    VkResult last = VK_ERROR_OUT_OF_DEVICE_MEMORY;
+    for (VkMemoryPropertyFlags want : prefs) {
+      int type = memory_type(req.memoryTypeBits, want);
+      if (type < 0) continue;
+      VkMemoryAllocateInfo ai{};
+      ai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
+      ai.allocationSize = req.size;
+      ai.memoryTypeIndex = static_cast<std::uint32_t>(type);
+      last = vkAllocateMemory(vk.device, &ai, nullptr, &b.memory);
+      if (last != VK_SUCCESS) continue;
+      vk_check(vkBindBufferMemory(vk.device, b.buffer, b.memory, 0), "vkBindBufferMemory");
+      b.size = size;
+      const VkMemoryPropertyFlags got = memory.memoryTypes[type].propertyFlags;
+      if ((got & host) == host)
+        vk_check(vkMapMemory(vk.device, b.memory, 0, VK_WHOLE_SIZE, 0, &b.mapped), "vkMapMemory");
+      return;
+    }
+    vkDestroyBuffer(vk.device, b.buffer, nullptr);
+    b.buffer = VK_NULL_HANDLE;
+    vk_check(last, ("vkAllocateMemory (" + std::to_string(size >> 20) + " MiB)").c_str());
+  }
+
+  void destroy(Buffer& b) {
+    if (b.memory) {
+      if (b.mapped) vkUnmapMemory(vk.device, b.memory);
+      vkFreeMemory(vk.device, b.memory, nullptr);
+    }
+    if (b.buffer) vkDestroyBuffer(vk.device, b.buffer, nullptr);
+    b = Buffer{};
+  }
+
+  void ensure(int binding, VkDeviceSize bytes) {
+    Buffer& b = device_buffers[binding];
+    if (b.size >= bytes) return;
+    destroy(b);
+    create(b, bytes, false);
+    descriptors_dirty = true;
+  }
+
+  // Writes `bytes` into a binding: in place when mapped, else into its staging buffer with a
+  // copy recorded before the next dispatch.
+  void write(int binding, VkDeviceSize bytes, const std::function<void(void*)>& fill) {
+    bytes = std::max<VkDeviceSize>(bytes, 16);
+    ensure(binding, bytes);
+    if (device_buffers[binding].mapped) {
+      fill(device_buffers[binding].mapped);
+      return;
+    }
+    if (staging[binding].size < bytes) {
+      destroy(staging[binding]);
+      create(staging[binding], bytes, true);
+    }
+    fill(staging[binding].mapped);
+    uploads.emplace_back(binding, bytes);
+  }
+
+  template <typename T>
+  void write(int binding, const std::vector<T>& data) {
+    write(binding, data.size() * sizeof(T), [&](void* dst) {
+      if (!data.empty()) std::memcpy(dst, data.data(), data.size() * sizeof(T));
+    });
+  }
+
+  // ---- the scene and the engine's data
+
+  void upload_scene() {
+    const GpuBvh bvh = build_gpu_bvh(*world);
+    write(kNodes, bvh.nodes);
+    write(kTris, bvh.triangles);
+    const Scene& scene = *world->scene;
+    const int textures = static_cast<int>(scene.textures.size());
+    auto texture = [&](int t) { return as_float(t >= 0 && t < textures ? t : -1); };
+    std::vector<glm::vec4> mats;
+    std::vector<Material> all(scene.materials.begin(), scene.materials.end());
+    all.push_back(Material{});  // World::material's fallback
+    for (const Material& m : all) {
+      mats.emplace_back(m.base_color, texture(m.base_color_texture));
+      mats.emplace_back(m.is_emissive() ? m.emission() : glm::vec3(0.0f),
+                        texture(m.emissive_texture));
+    }
+    write(kMaterials, mats);
+    std::vector<glm::uvec4> headers;
+    std::vector<std::uint32_t> texels;
+    for (const Texture& t : scene.textures) {
+      headers.emplace_back(static_cast<std::uint32_t>(texels.size()), t.width, t.height, 0u);
+      const std::size_t n = static_cast<std::size_t>(t.width) * t.height;
+      const std::size_t at = texels.size();
+      texels.resize(at + n);
+      if (n > 0 && t.rgba8.size() >= 4 * n) std::memcpy(&texels[at], t.rgba8.data(), 4 * n);
+    }
+    write(kTexHeaders, headers);
+    write(kTexTexels, texels);
+
+    std::vector<glm::vec4> em;
+    const auto& tris = lights->emissive_triangles();
+    for (std::size_t k = 0; k < tris.size(); ++k) {
+      const EmissiveTriangle& e = tris[k];
+      const WorldObject& o = world->objects[e.object];
+      const Material& m = world->material(e.object, e.triangle);
+      em.emplace_back(e.p0, 0.0f);
+      em.emplace_back(e.e1, 0.0f);
+      em.emplace_back(e.e2, e.double_sided ? 1.0f : 0.0f);
+      em.emplace_back(e.normal, e.area);
+      em.emplace_back(lights->pick_cdf()[k], lights->pick_pdf()[k],
+                      as_float(material_index(e.object, e.triangle)), 0.0f);
+      const int set = m.emissive_uv;
+      em.emplace_back(o.uv(set, e.triangle, 0.0f, 0.0f), o.uv(set, e.triangle, 1.0f, 0.0f));
+      em.emplace_back(o.uv(set, e.triangle, 0.0f, 1.0f), glm::vec2(0.0f));
+    }
+    write(kEmissive, em);
+    emissive_count = static_cast<std::uint32_t>(tris.size());
+
+    std::vector<glm::vec4> pl;
+    for (const WorldLight& l : world->lights) {
+      float type = l.type == Light::Type::Directional ? 0.0f
+                   : l.type == Light::Type::Spot      ? 2.0f
+                                                      : 1.0f;
+      pl.emplace_back(l.position, type);
+      pl.emplace_back(l.direction, l.range);
+      pl.emplace_back(l.intensity, l.cos_inner);
+      pl.emplace_back(l.cos_outer, 0.0f, 0.0f, 0.0f);
+    }
+    write(kPunctual, pl);
+    punctual_count = static_cast<std::uint32_t>(world->lights.size());
+  }
+
+  std::uint32_t material_index(int object, std::uint32_t t) const {
+    const Mesh& mesh = *world->objects[object].source;
+    const std::size_t materials = world->scene->materials.size();
+    std::uint32_t m = t < mesh.triangle_material.size() ? mesh.triangle_material[t] : ~0u;
+    return m < materials ? m : static_cast<std::uint32_t>(materials);
+  }
+
+  void prepare(const PassInput& in) {
+    EngineKey key{&in.atlas,          in.texels.position.data(), in.texels.size(),
+                  in.unit_texels.data(), in.unit_texels.size(),  in.probes.position.data(),
+                  in.probes.count(),  in.probe_weights.data(),   in.probe_weights.size()};
+    if (key == engine_key) return;
+    if (in.atlas.objects.size() != world->objects.size())
+      throw Error("Vulkan backend: the atlas has " + std::to_string(in.atlas.objects.size()) +
+                  " objects, the world " + std::to_string(world->objects.size()));
+    // Per object: triangle base, lightmap offset and size; per triangle: uv corners, material.
+    std::vector<glm::uvec4> objects;
+    std::vector<glm::vec4> attr;
+    std::uint32_t lightmap_texels = 0;
+    object_offsets.clear();
+    for (const WorldObject& o : world->objects) {
+      const ObjectLightmap& lm = in.atlas.objects[o.object];
+      objects.emplace_back(static_cast<std::uint32_t>(attr.size() / 4), lightmap_texels,
+                           static_cast<std::uint32_t>(lm.width),
+                           static_cast<std::uint32_t>(lm.height));
+      object_offsets.push_back(lightmap_texels);
+      lightmap_texels += static_cast<std::uint32_t>(lm.width * lm.height);
+      const auto& tris = o.triangles();
+      for (std::uint32_t t = 0; t < tris.size(); ++t) {
+        const std::size_t c = 3 * static_cast<std::size_t>(t);
+        const glm::vec2 zero(0.0f);
+        glm::vec2 l0 = c + 2 < lm.corner_uv.size() ? lm.corner_uv[c] : zero;
+        glm::vec2 l1 = c + 2 < lm.corner_uv.size() ? lm.corner_uv[c + 1] : zero;
+        glm::vec2 l2 = c + 2 < lm.corner_uv.size() ? lm.corner_uv[c + 2] : zero;
+        const int set = world->material(o.object, t).base_color_uv;
+        attr.emplace_back(l0, l1);
+        attr.emplace_back(l2, o.uv(set, t, 0.0f, 0.0f));
+        attr.emplace_back(o.uv(set, t, 1.0f, 0.0f), o.uv(set, t, 0.0f, 1.0f));
+        attr.emplace_back(as_float(material_index(o.object, t)), 0.0f, 0.0f, 0.0f);
+      }
+    }
+    lightmap_total = lightmap_texels;
+    write(kObjects, objects);
+    write(kTriAttr, attr);
+    const SurfaceTexels& st = in.texels;
+    write(kTexels, st.size() * 3 * sizeof(glm::vec4), [&](void* dst) {
+      auto* v = static_cast<glm::vec4*>(dst);
+      for (std::size_t i = 0; i < st.size(); ++i) {
+        v[3 * i] = glm::vec4(st.position[i], 0.0f);
+        v[3 * i + 1] = glm::vec4(st.normal[i], 0.0f);
+        v[3 * i + 2] = glm::vec4(st.geo_normal[i], 0.0f);
+      }
+    });
+    write(kUnits, in.unit_texels);
+    std::vector<glm::vec4> probes;
+    for (std::size_t p = 0; p < in.probes.count(); ++p)
+      probes.emplace_back(in.probes.position[p], in.probes.usable[p] ? 1.0f : 0.0f);
+    write(kProbes, probes);
+    write(kProbeWeights, in.probe_weights.size() * 20 * sizeof(std::uint32_t), [&](void* dst) {
+      auto* w = static_cast<std::uint32_t*>(dst);
+      for (std::size_t i = 0; i < in.probe_weights.size(); ++i) {
+        const ProbeWeights& pw = in.probe_weights[i];
+        std::uint32_t* o = w + 20 * i;
+        for (int k = 0; k < 8; ++k) {
+          const bool used = k < pw.count;
+          o[k] = used ? pw.probe[k] : 0u;
+          o[8 + k] = used ? bits(pw.weight[k]) : 0u;
+        }
+        o[16] = pw.count;
+        o[17] = o[18] = o[19] = 0;
+      }
+    });
+    engine_key = key;
+  }
+
+  void write_previous(const RadianceField& prev) {
+    const std::vector<Lightmap>& maps = *prev.irradiance;
+    if (maps.size() != object_offsets.size())
+      throw Error("Vulkan backend: " + std::to_string(maps.size()) +
+                  " lightmaps for " + std::to_string(object_offsets.size()) + " objects");
+    write(kPrev, static_cast<VkDeviceSize>(lightmap_total) * sizeof(glm::vec4), [&](void* dst) {
+      auto* v = static_cast<glm::vec4*>(dst);
+      for (std::size_t o = 0; o < maps.size(); ++o) {
+        const std::size_t n = std::min<std::size_t>(
+            maps[o].texels.size(),
+            (o + 1 < object_offsets.size() ? object_offsets[o + 1] : lightmap_total) -
+                object_offsets[o]);
+        for (std::size_t i = 0; i < n; ++i)
+          v[object_offsets[o] + i] = glm::vec4(maps[o].texels[i], 0.0f);
+      }
+    });
+  }
+
+  PushConstants constants(const PassInput& in) const {
+    PushConstants pc;
+    pc.update = in.update;
+    pc.bounce = in.bounce;
+    pc.seed_lo = static_cast<std::uint32_t>(in.params.seed);
+    pc.seed_hi = static_cast<std::uint32_t>(in.params.seed >> 32);
+    pc.epsilon = rays->epsilon();
+    pc.extent = in.world.bounds.max_extent();
+    pc.range = in.params.unbiased() ? 3.4e38f : in.params.tracing_range * pc.extent;
+    pc.punctual_count = punctual_count;
+    pc.emissive_count = emissive_count;
+    for (int a = 0; a < 3; ++a) {
+      pc.bounds_lo[a] = in.world.bounds.lo[a];
+      pc.bounds_hi[a] = in.world.bounds.hi[a];
+    }
+    pc.probe_res = in.probes.resolution;
+    if (emissive_count > 0) pc.flags |= kFlagArea;
+    if (in.params.unbiased()) pc.flags |= kFlagUnbiased;
+    if (in.params.distant_point == DistantPoint::FixedDistance) pc.flags |= kFlagFixed;
+    if (!in.probe_weights.empty()) pc.flags |= kFlagProbes;
+    return pc;
+  }
+
+  // Records the pending uploads, `count` items of one pass and the read-back of `count`
+  // results, submits and waits; the results land in `out`.
+  void run(PipelineId pipeline, PushConstants pc, std::uint32_t count,
+           std::vector<glm::vec3>& out, std::size_t out_size) {
+    const VkDeviceSize result_bytes = std::max<VkDeviceSize>(out_size * sizeof(glm::vec4), 16);
+    ensure(kResult, result_bytes);
+    const bool readback = device_buffers[kResult].mapped == nullptr;
+    if (readback && staging[kResult].size < result_bytes) {
+      destroy(staging[kResult]);
+      create(staging[kResult], result_bytes, true);
+    }
+    if (descriptors_dirty) update_descriptors();
+
+    VkCommandBufferBeginInfo begin{};
+    begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+    begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    vk_check(vkResetCommandBuffer(commands, 0), "vkResetCommandBuffer");
+    vk_check(vkBeginCommandBuffer(commands, &begin), "vkBeginCommandBuffer");
+    for (auto [binding, bytes] : uploads) {
+      VkBufferCopy region{0, 0, bytes};
+      vkCmdCopyBuffer(commands, staging[binding].buffer, device_buffers[binding].buffer, 1,
+                      &region);
+    }
+    if (!uploads.empty())
+      barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+              VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
+    vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipelines[pipeline]);
+    vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_layout, 0, 1,
+                            &descriptor_set, 0, nullptr);
+    pc.count = count;
+    const std::uint32_t chunk = max_groups * 64u;
+    for (std::uint32_t base = 0; base < count; base += chunk) {
+      pc.base = base;
+      vkCmdPushConstants(commands, pipeline_layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(pc),
+                         &pc);
+      const std::uint32_t items = std::min(chunk, count - base);
+      vkCmdDispatch(commands, (items + 63u) / 64u, 1, 1);
+    }
+    if (readback) {
+      barrier(VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+              VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
+      VkBufferCopy region{0, 0, result_bytes};
+      vkCmdCopyBuffer(commands, device_buffers[kResult].buffer, staging[kResult].buffer, 1,
+                      &region);
+      barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+              VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
+    } else {
+      barrier(VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+              VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
+    }
+    vk_check(vkEndCommandBuffer(commands), "vkEndCommandBuffer");
+    VkSubmitInfo submit{};
+    submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+    submit.commandBufferCount = 1;
+    submit.pCommandBuffers = &commands;
+    vk_check(vkResetFences(vk.device, 1, &fence), "vkResetFences");
+    vk_check(vkQueueSubmit(vk.queue, 1, &submit, fence), "vkQueueSubmit");
+    uploads.clear();
+    vk_check(vkWaitForFences(vk.device, 1, &fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
+    const auto* src = static_cast<const glm::vec4*>(readback ? staging[kResult].mapped
+                                                             : device_buffers[kResult].mapped);
+    out.resize(out_size);
+    for (std::size_t i = 0; i < out_size; ++i) out[i] = glm::vec3(src[i]);
+  }
+
+  void barrier(VkPipelineStageFlags src_stage, VkAccessFlags src, VkPipelineStageFlags dst_stage,
+               VkAccessFlags dst) {
+    VkMemoryBarrier mb{};
+    mb.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+    mb.srcAccessMask = src;
+    mb.dstAccessMask = dst;
+    vkCmdPipelineBarrier(commands, src_stage, dst_stage, 0, 1, &mb, 0, nullptr, 0, nullptr);
+  }
+
+  void update_descriptors() {
+    std::array<VkDescriptorBufferInfo, kBindings> infos{};
+    std::array<VkWriteDescriptorSet, kBindings> writes{};
+    for (int b = 0; b < kBindings; ++b) {
+      infos[b] = VkDescriptorBufferInfo{device_buffers[b].buffer, 0, VK_WHOLE_SIZE};
+      writes[b].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+      writes[b].dstSet = descriptor_set;
+      writes[b].dstBinding = static_cast<std::uint32_t>(b);
+      writes[b].descriptorCount = 1;
+      writes[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+      writes[b].pBufferInfo = &infos[b];
+    }
+    vkUpdateDescriptorSets(vk.device, kBindings, writes.data(), 0, nullptr);
+    descriptors_dirty = false;
+  }
+
+  VulkanContext context;
+  VulkanHandles vk;
+  const World* world;
+  const RayScene* rays;
+  const LightSampler* lights;
+  VkPhysicalDeviceMemoryProperties memory{};
+  VkPhysicalDeviceProperties properties{};
+  bool discrete = false;
+  std::uint32_t max_groups = 65535;
+  VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
+  VkPipelineLayout pipeline_layout = VK_NULL_HANDLE;
+  VkDescriptorPool descriptor_pool = VK_NULL_HANDLE;
+  VkDescriptorSet descriptor_set = VK_NULL_HANDLE;
+  VkPipeline pipelines[kPipelines] = {};
+  VkCommandPool command_pool = VK_NULL_HANDLE;
+  VkCommandBuffer commands = VK_NULL_HANDLE;
+  VkFence fence = VK_NULL_HANDLE;
+  Buffer device_buffers[kBindings];
+  Buffer staging[kBindings];
+  std::vector<std::pair<int, VkDeviceSize>> uploads;
+  bool descriptors_dirty = true;
+  std::uint32_t punctual_count = 0, emissive_count = 0;
+  EngineKey engine_key;
+  std::vector<std::uint32_t> object_offsets;
+  std::uint32_t lightmap_total = 0;
+  std::mutex mutex;  // one pass at a time
+};
+
+VulkanBackend::VulkanBackend(const World& world, const RayScene& rays, const LightSampler& lights,
+                             VulkanContextOptions options)
+    : impl_(std::make_unique<Impl>(world, rays, lights, options)) {}
+
+VulkanBackend::~VulkanBackend() = default;
+
+std::string VulkanBackend::describe() const {
+  const VulkanDeviceInfo& d = device();
+  return "vulkan on " + d.name + " (" + d.type + ", Vulkan " + d.api_version + ")";
+}
+
+const VulkanDeviceInfo& VulkanBackend::device() const {
+  return impl_->context.device();
+}
+
+std::uint64_t VulkanBackend::validation_messages() const {
+  return impl_->context.validation_messages();
+}
+
+std::vector<std::string> VulkanBackend::validation_log() const {
+  return impl_->context.validation_log();
+}
+
+PassResult VulkanBackend::direct(const PassInput& in, std::vector<glm::vec3>& out) {
+  std::lock_guard lock(impl_->mutex);
+  const auto start = Clock::now();
+  impl_->prepare(in);
+  PushConstants pc = impl_->constants(in);
+  pc.samples = static_cast<std::uint32_t>(in.params.direct_samples);
+  const auto items = static_cast<std::uint32_t>(in.unit_texels.size());
+  impl_->run(kDirectPipeline, pc, items, out, in.texels.size());
+  PassResult r;
+  r.rays = static_cast<std::uint64_t>(in.unit_texels.size()) *
+           (impl_->punctual_count + (impl_->emissive_count > 0 ? pc.samples : 0u));
+  r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  return r;
+}
+
+PassResult VulkanBackend::gather_probes(const PassInput& in, const RadianceField& prev,
+                                        std::vector<glm::vec3>& out) {
+  std::lock_guard lock(impl_->mutex);
+  const auto start = Clock::now();
+  impl_->prepare(in);
+  impl_->write_previous(prev);
+  PushConstants pc = impl_->constants(in);
+  const std::size_t items = in.probes.count() * in.probes.texels_per_probe();
+  impl_->run(kGatherPipeline, pc, static_cast<std::uint32_t>(items), out, items);
+  std::size_t usable = 0;
+  for (std::uint8_t u : in.probes.usable) usable += u ? 1 : 0;
+  PassResult r;
+  r.rays = usable * in.probes.texels_per_probe();
+  r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  return r;
+}
+
+PassResult VulkanBackend::scatter(const PassInput& in, const RadianceField& prev,
+                                  const std::vector<glm::vec3>& probe_radiance,
+                                  std::vector<glm::vec3>& out) {
+  std::lock_guard lock(impl_->mutex);
+  const auto start = Clock::now();
+  impl_->prepare(in);
+  impl_->write_previous(prev);
+  impl_->write(kProbeRadiance, probe_radiance.size() * sizeof(glm::vec4), [&](void* dst) {
+    auto* v = static_cast<glm::vec4*>(dst);
+    for (std::size_t i = 0; i < probe_radiance.size(); ++i)
+      v[i] = glm::vec4(probe_radiance[i], 0.0f);
+  });
+  PushConstants pc = impl_->constants(in);
+  pc.samples = static_cast<std::uint32_t>(in.params.indirect_samples);
+  const auto items = static_cast<std::uint32_t>(in.unit_texels.size());
+  impl_->run(kScatterPipeline, pc, items, out, in.texels.size());
+  PassResult r;
+  r.rays = static_cast<std::uint64_t>(in.unit_texels.size()) * pc.samples;
+  r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  return r;
+}
+
+}  // namespace irradcast
