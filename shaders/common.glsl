@@ -12,7 +12,7 @@ const uint EMPTY = 0xFFFFFFFFu;
 // 4 vec4 per node: (lo0, child0) (hi0, child1) (lo1, count0) (hi1, count1). count 0: the child
 // is an inner node; EMPTY: no child; otherwise a leaf of `count` triangles from index `child`.
 layout(std430, binding = 0) readonly buffer Nodes { vec4 nodes[]; };
-// 3 vec4 per triangle in BVH order: (v0, object) (e1, triangle in object) (e2, -).
+// 3 vec4 per triangle in BVH order: (v0, object) (v1, triangle in object) (v2, -).
 layout(std430, binding = 1) readonly buffer Tris { vec4 tris[]; };
 // 4 vec4 per triangle, objects[o].x + t: lightmap uv corners (0,1) | (2, base uv 0) |
 // base uv (1,2) | (material, -, -, -).
@@ -151,22 +151,44 @@ bool hit_box(vec3 lo, vec3 hi, vec3 o, vec3 inv, float tmin, float tmax, out flo
   return tnear <= tfar;
 }
 
-// Moller-Trumbore; (u, v) as Embree's: p = (1-u-v) p0 + u p1 + v p2.
-bool hit_triangle(uint i, vec3 o, vec3 d, float tmin, float tmax, out vec3 tuv) {
-  vec3 v0 = tris[3 * i].xyz, e1 = tris[3 * i + 1].xyz, e2 = tris[3 * i + 2].xyz;
-  vec3 p = cross(d, e2);
-  float det = dot(e1, p);
+// Watertight ray/triangle test (Woop, Benthin and Wald 2013): the ray is sheared onto +z, so
+// the edge functions of an edge shared by two triangles are computed from the same numbers and
+// no ray slips between them (Embree's robust mode gives the same guarantee). (u, v) as Embree's:
+// p = (1-u-v) p0 + u p1 + v p2.
+struct ShearedRay {
+  vec3 o;
+  int kx, ky, kz;
+  vec3 s;  // (Sx, Sy, Sz)
+};
+
+ShearedRay shear(vec3 o, vec3 d) {
+  ShearedRay r;
+  r.o = o;
+  vec3 a = abs(d);
+  r.kz = a.x > a.y ? (a.x > a.z ? 0 : 2) : (a.y > a.z ? 1 : 2);
+  r.kx = (r.kz + 1) % 3;
+  r.ky = (r.kx + 1) % 3;
+  if (d[r.kz] < 0.0) {
+    int t = r.kx;
+    r.kx = r.ky;
+    r.ky = t;
+  }
+  r.s = vec3(d[r.kx] / d[r.kz], d[r.ky] / d[r.kz], 1.0 / d[r.kz]);
+  return r;
+}
+
+bool hit_triangle(uint i, ShearedRay r, float tmin, float tmax, out vec3 tuv) {
+  vec3 a = tris[3 * i].xyz - r.o, b = tris[3 * i + 1].xyz - r.o, c = tris[3 * i + 2].xyz - r.o;
+  float ax = a[r.kx] - r.s.x * a[r.kz], ay = a[r.ky] - r.s.y * a[r.kz];
+  float bx = b[r.kx] - r.s.x * b[r.kz], by = b[r.ky] - r.s.y * b[r.kz];
+  float cx = c[r.kx] - r.s.x * c[r.kz], cy = c[r.ky] - r.s.y * c[r.kz];
+  float u = cx * by - cy * bx, v = ax * cy - ay * cx, w = bx * ay - by * ax;
+  if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) return false;
+  float det = u + v + w;
   if (det == 0.0) return false;
-  float inv = 1.0 / det;
-  vec3 s = o - v0;
-  float u = dot(s, p) * inv;
-  if (u < 0.0 || u > 1.0) return false;
-  vec3 q = cross(s, e1);
-  float v = dot(d, q) * inv;
-  if (v < 0.0 || u + v > 1.0) return false;
-  float t = dot(e2, q) * inv;
+  float t = (u * a[r.kz] + v * b[r.kz] + w * c[r.kz]) * r.s.z / det;
   if (!(t > tmin && t < tmax)) return false;
-  tuv = vec3(t, u, v);
+  tuv = vec3(t, v / det, w / det);
   return true;
 }
 
@@ -179,6 +201,7 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit) {
   h.v = 0.0;
   h.t = tmax;
   vec3 inv = safe_inverse(d);
+  ShearedRay sheared = shear(o, d);
   uint stack[48];
   int sp = 0;
   uint node = 0u;
@@ -196,7 +219,7 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit) {
       hit[k] = false;  // a leaf: its triangles now, never on the stack
       for (uint i = child[k]; i < child[k] + count[k]; ++i) {
         vec3 tuv;
-        if (hit_triangle(i, o, d, tmin, h.t, tuv)) {
+        if (hit_triangle(i, sheared, tmin, h.t, tuv)) {
           h.object = int(floatBitsToUint(tris[3 * i].w));
           h.triangle = floatBitsToUint(tris[3 * i + 1].w);
           h.t = tuv.x;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <string>
 
+#include "engine_setup.h"
 #include "irradcast/atlas.h"
 #include "irradcast/builtin.h"
 #include "irradcast/camera.h"
@@ -21,47 +22,8 @@
 
 using namespace irradcast;
 
-namespace {
-
-// A scene with everything the engine needs, at a low lightmap density so tests stay fast.
-struct EngineSetup {
-  EngineSetup(Scene s, float texels_per_scene)
-      : scene(std::move(s)), world(World::build(scene)), rays(world), lights(world) {
-    Progress::set_enabled(false);
-    AtlasOptions ao;
-    ao.texels_per_scene = texels_per_scene;
-    atlas = build_atlas(world, ao);
-    gbuffers = rasterize_gbuffer(world, atlas);
-    hidden = mark_hidden_texels(rays, gbuffers);
-  }
-  std::unique_ptr<Engine> engine(EngineParams p) const {
-    return std::make_unique<Engine>(world, atlas, gbuffers, rays,
-                                    std::make_unique<EmbreeBackend>(rays, lights), p);
-  }
-  Scene scene;
-  World world;
-  RayScene rays;
-  LightSampler lights;
-  Atlas atlas;
-  std::vector<TexelGBuffer> gbuffers;
-  std::size_t hidden = 0;
-};
-
-// Mean over all valid texels of the luminance of a set of lightmaps.
-double mean_valid(const EngineSetup& s, const std::vector<Lightmap>& maps) {
-  double sum = 0.0;
-  std::size_t n = 0;
-  for (std::size_t o = 0; o < maps.size(); ++o)
-    for (std::size_t i = 0; i < maps[o].texels.size(); ++i)
-      if (s.gbuffers[o].valid(i)) {
-        const glm::vec3& e = maps[o].texels[i];
-        sum += (e.x + e.y + e.z) / 3.0;
-        ++n;
-      }
-  return sum / static_cast<double>(n);
-}
-
-}  // namespace
+using test::EngineSetup;
+using test::mean_valid;
 
 class EngineFurnace : public ::testing::TestWithParam<std::tuple<float, float>> {};
 

@@ -14,8 +14,8 @@ BackendKind parse_backend(const std::string& name) {
   throw Error("unknown backend '" + name + "' (expected auto, vulkan or embree)");
 }
 
-BackendChoice make_backend(const BackendOptions& options, const World& world,
-                           const RayScene& rays, const LightSampler& lights) {
+BackendChoice make_backend(const BackendOptions& options, const World& world, const RayScene& rays,
+                           const LightSampler& lights) {
   BackendChoice c;
   VulkanContextOptions vo;
   vo.device = options.vulkan_device;
@@ -43,8 +43,9 @@ BackendChoice make_backend(const BackendOptions& options, const World& world,
             chosen = static_cast<int>(d.index);
       }
       if (chosen < 0) {
-        why = "no Vulkan GPU (only CPU implementations such as lavapipe, which are slower than "
-              "Embree on the same cores; --backend vulkan uses them)";
+        why =
+            "no Vulkan GPU (only CPU implementations such as lavapipe, which are slower than "
+            "Embree on the same cores; --backend vulkan uses them)";
       } else {
         vo.device = chosen;
         auto v = std::make_unique<VulkanBackend>(world, rays, lights, vo);

@@ -124,21 +124,38 @@ bool hit_box(glm::vec3 lo, glm::vec3 hi, glm::vec3 o, glm::vec3 inv, float tmin,
   return tnear <= tfar;
 }
 
-bool hit_triangle(const GpuTriangle& tri, glm::vec3 o, glm::vec3 d, float tmin, float tmax,
+// shaders/common.glsl's watertight test, line for line.
+struct ShearedRay {
+  glm::vec3 o;
+  int kx, ky, kz;
+  glm::vec3 s;
+};
+
+ShearedRay shear(glm::vec3 o, glm::vec3 d) {
+  ShearedRay r;
+  r.o = o;
+  glm::vec3 a = glm::abs(d);
+  r.kz = a.x > a.y ? (a.x > a.z ? 0 : 2) : (a.y > a.z ? 1 : 2);
+  r.kx = (r.kz + 1) % 3;
+  r.ky = (r.kx + 1) % 3;
+  if (d[r.kz] < 0.0f) std::swap(r.kx, r.ky);
+  r.s = glm::vec3(d[r.kx] / d[r.kz], d[r.ky] / d[r.kz], 1.0f / d[r.kz]);
+  return r;
+}
+
+bool hit_triangle(const GpuTriangle& tri, const ShearedRay& r, float tmin, float tmax,
                   glm::vec3& tuv) {
-  glm::vec3 p = glm::cross(d, tri.e2);
-  float det = glm::dot(tri.e1, p);
+  const glm::vec3 a = tri.v0 - r.o, b = tri.v1 - r.o, c = tri.v2 - r.o;
+  const float ax = a[r.kx] - r.s.x * a[r.kz], ay = a[r.ky] - r.s.y * a[r.kz];
+  const float bx = b[r.kx] - r.s.x * b[r.kz], by = b[r.ky] - r.s.y * b[r.kz];
+  const float cx = c[r.kx] - r.s.x * c[r.kz], cy = c[r.ky] - r.s.y * c[r.kz];
+  const float u = cx * by - cy * bx, v = ax * cy - ay * cx, w = bx * ay - by * ax;
+  if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return false;
+  const float det = u + v + w;
   if (det == 0.0f) return false;
-  float inv = 1.0f / det;
-  glm::vec3 s = o - tri.v0;
-  float u = glm::dot(s, p) * inv;
-  if (u < 0.0f || u > 1.0f) return false;
-  glm::vec3 q = glm::cross(s, tri.e1);
-  float v = glm::dot(d, q) * inv;
-  if (v < 0.0f || u + v > 1.0f) return false;
-  float t = glm::dot(tri.e2, q) * inv;
+  const float t = (u * a[r.kz] + v * b[r.kz] + w * c[r.kz]) * r.s.z / det;
   if (!(t > tmin && t < tmax)) return false;
-  tuv = glm::vec3(t, u, v);
+  tuv = glm::vec3(t, v / det, w / det);
   return true;
 }
 
@@ -153,8 +170,8 @@ GpuBvh build_gpu_bvh(const World& world) {
       glm::vec3 a = o.positions[tris[t].x], b = o.positions[tris[t].y], c = o.positions[tris[t].z];
       GpuTriangle g;
       g.v0 = a;
-      g.e1 = b - a;
-      g.e2 = c - a;
+      g.v1 = b;
+      g.v2 = c;
       g.object = static_cast<std::uint32_t>(o.object);
       g.triangle = t;
       glm::vec3 lo = glm::min(a, glm::min(b, c)), hi = glm::max(a, glm::max(b, c));
@@ -206,8 +223,8 @@ GpuBvh build_gpu_bvh(const World& world) {
     RTCError e = rtcGetDeviceError(device);
     rtcReleaseBVH(bvh);
     rtcReleaseDevice(device);
-    throw Error("GPU BVH: rtcBuildBVH failed (Embree error " +
-                std::to_string(static_cast<int>(e)) + ")");
+    throw Error("GPU BVH: rtcBuildBVH failed (Embree error " + std::to_string(static_cast<int>(e)) +
+                ")");
   }
   Flattener f{source, out};
   out.nodes.reserve(prims.size());
@@ -237,6 +254,7 @@ Hit GpuBvh::intersect(const Ray& ray) const {
     return std::fabs(x) < tiny ? (x < 0.0f ? -tiny : tiny) : x;
   };
   const glm::vec3 inv = 1.0f / glm::vec3(safe(d.x), safe(d.y), safe(d.z));
+  const ShearedRay sheared = shear(o, d);
   std::uint32_t stack[48];
   int sp = 0;
   std::uint32_t node = 0;
@@ -252,7 +270,7 @@ Hit GpuBvh::intersect(const Ray& ray) const {
       hit[k] = false;
       for (std::uint32_t i = child[k]; i < child[k] + count[k]; ++i) {
         glm::vec3 tuv;
-        if (hit_triangle(triangles[i], o, d, ray.tmin, tmax, tuv)) {
+        if (hit_triangle(triangles[i], sheared, ray.tmin, tmax, tuv)) {
           h.object = static_cast<int>(triangles[i].object);
           h.triangle = triangles[i].triangle;
           h.t = tmax = tuv.x;

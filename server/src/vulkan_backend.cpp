@@ -193,7 +193,8 @@ struct VulkanBackend::Impl {
       cp.stage.module = module;
       cp.stage.pName = "main";
       cp.layout = pipeline_layout;
-      VkResult r = vkCreateComputePipelines(vk.device, VK_NULL_HANDLE, 1, &cp, nullptr, &pipelines[p]);
+      VkResult r =
+          vkCreateComputePipelines(vk.device, VK_NULL_HANDLE, 1, &cp, nullptr, &pipelines[p]);
       vkDestroyShaderModule(vk.device, module, nullptr);
       vk_check(r, "vkCreateComputePipelines");
     }
@@ -381,9 +382,15 @@ struct VulkanBackend::Impl {
   }
 
   void prepare(const PassInput& in) {
-    EngineKey key{&in.atlas,          in.texels.position.data(), in.texels.size(),
-                  in.unit_texels.data(), in.unit_texels.size(),  in.probes.position.data(),
-                  in.probes.count(),  in.probe_weights.data(),   in.probe_weights.size()};
+    EngineKey key{&in.atlas,
+                  in.texels.position.data(),
+                  in.texels.size(),
+                  in.unit_texels.data(),
+                  in.unit_texels.size(),
+                  in.probes.position.data(),
+                  in.probes.count(),
+                  in.probe_weights.data(),
+                  in.probe_weights.size()};
     if (key == engine_key) return;
     if (in.atlas.objects.size() != world->objects.size())
       throw Error("Vulkan backend: the atlas has " + std::to_string(in.atlas.objects.size()) +
@@ -451,8 +458,8 @@ struct VulkanBackend::Impl {
   void write_previous(const RadianceField& prev) {
     const std::vector<Lightmap>& maps = *prev.irradiance;
     if (maps.size() != object_offsets.size())
-      throw Error("Vulkan backend: " + std::to_string(maps.size()) +
-                  " lightmaps for " + std::to_string(object_offsets.size()) + " objects");
+      throw Error("Vulkan backend: " + std::to_string(maps.size()) + " lightmaps for " +
+                  std::to_string(object_offsets.size()) + " objects");
     write(kPrev, static_cast<VkDeviceSize>(lightmap_total) * sizeof(glm::vec4), [&](void* dst) {
       auto* v = static_cast<glm::vec4*>(dst);
       for (std::size_t o = 0; o < maps.size(); ++o) {
@@ -491,8 +498,8 @@ struct VulkanBackend::Impl {
 
   // Records the pending uploads, `count` items of one pass and the read-back of `count`
   // results, submits and waits; the results land in `out`.
-  void run(PipelineId pipeline, PushConstants pc, std::uint32_t count,
-           std::vector<glm::vec3>& out, std::size_t out_size) {
+  void run(PipelineId pipeline, PushConstants pc, std::uint32_t count, std::vector<glm::vec3>& out,
+           std::size_t out_size) {
     const VkDeviceSize result_bytes = std::max<VkDeviceSize>(out_size * sizeof(glm::vec4), 16);
     ensure(kResult, result_bytes);
     const bool readback = device_buffers[kResult].mapped == nullptr;

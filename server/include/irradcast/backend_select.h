@@ -33,7 +33,7 @@ struct BackendChoice {
 
 // Makes the backend (and logs the choice). `rays` and `lights` must outlive it. Throws
 // irradcast::Error when kind is Vulkan and no Vulkan device can be opened.
-BackendChoice make_backend(const BackendOptions& options, const World& world,
-                           const RayScene& rays, const LightSampler& lights);
+BackendChoice make_backend(const BackendOptions& options, const World& world, const RayScene& rays,
+                           const LightSampler& lights);
 
 }  // namespace irradcast

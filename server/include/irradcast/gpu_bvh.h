@@ -28,13 +28,14 @@ struct GpuBvhNode {
 };
 static_assert(sizeof(GpuBvhNode) == 64);
 
-// A triangle in BVH order: v0, e1 = v1 - v0, e2 = v2 - v0, with its object and index there.
+// A triangle in BVH order, its corners as the world has them (the watertight test needs the
+// shared vertices of neighbours bit for bit), with its object and its index there.
 struct GpuTriangle {
   glm::vec3 v0;
   std::uint32_t object;
-  glm::vec3 e1;
+  glm::vec3 v1;
   std::uint32_t triangle;
-  glm::vec3 e2;
+  glm::vec3 v2;
   std::uint32_t pad = 0;
 };
 static_assert(sizeof(GpuTriangle) == 48);

@@ -1,6 +1,6 @@
 // The one interface the GI engine's passes run behind: an Embree (CPU) backend and a Vulkan
-// compute backend (backend_select.h picks one). A backend owns its acceleration structure; the engine owns the data
-// (texels, probes, accumulated estimates) and calls one pass at a time.
+// compute backend (backend_select.h picks one). A backend owns its acceleration structure; the
+// engine owns the data (texels, probes, accumulated estimates) and calls one pass at a time.
 #pragma once
 
 #include <cstdint>
