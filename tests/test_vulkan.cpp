@@ -46,6 +46,7 @@ TEST(Vulkan, ListDevicesNamesVulkanAndEmbreeAndSaysWhyVulkanIsMissing) {
   EXPECT_EQ(ok.status, 0) << ok.output;
   EXPECT_NE(ok.output.find("embree: the CPU"), std::string::npos) << ok.output;
   EXPECT_NE(ok.output.find("vulkan: ["), std::string::npos) << ok.output;
+  EXPECT_NE(ok.output.find("--backend auto: "), std::string::npos) << ok.output;
   // No driver: the loader finds no ICD.
   const test::CliResult none =
       test::run_cli(std::string("VK_ICD_FILENAMES=/nonexistent/icd.json ") + IRRADCAST_SERVER_EXE,
@@ -55,5 +56,7 @@ TEST(Vulkan, ListDevicesNamesVulkanAndEmbreeAndSaysWhyVulkanIsMissing) {
   EXPECT_NE(
       none.output.find("vulkan: not available: vkCreateInstance: VK_ERROR_INCOMPATIBLE_DRIVER"),
       std::string::npos)
+      << none.output;
+  EXPECT_NE(none.output.find("--backend auto: embree (no Vulkan GPU)"), std::string::npos)
       << none.output;
 }

@@ -246,6 +246,21 @@ TEST(BackendChoice, ParsesNamesAndRejectsOthers) {
   }
 }
 
+TEST(BackendChoice, AutoTakesTheBestGpuAndNeverACpuImplementation) {
+  auto device = [](const char* type, bool compute) {
+    VulkanDeviceInfo d;
+    d.type = type;
+    d.compute = compute;
+    return d;
+  };
+  EXPECT_EQ(auto_vulkan_device({}), -1);
+  EXPECT_EQ(auto_vulkan_device({device("CPU", true)}), -1);
+  EXPECT_EQ(auto_vulkan_device({device("CPU", true), device("integrated GPU", true),
+                                device("discrete GPU", true)}),
+            2);
+  EXPECT_EQ(auto_vulkan_device({device("discrete GPU", false), device("virtual GPU", true)}), 1);
+}
+
 TEST(BackendChoice, AutoPrefersEmbreeToACpuVulkanDeviceAndVulkanCanBeAskedFor) {
   EngineSetup s(make_cornell_box(), 16.0f);
   BackendOptions o;

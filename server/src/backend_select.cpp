@@ -7,6 +7,23 @@
 
 namespace irradcast {
 
+int auto_vulkan_device(const std::vector<VulkanDeviceInfo>& devices) {
+  auto rank = [](const std::string& type) {
+    return type == "discrete GPU"     ? 0
+           : type == "integrated GPU" ? 1
+           : type == "virtual GPU"    ? 2
+                                      : 3;
+  };
+  int chosen = -1;
+  for (std::size_t i = 0; i < devices.size(); ++i) {
+    const VulkanDeviceInfo& d = devices[i];
+    if (!d.compute || d.type == "CPU") continue;
+    if (chosen < 0 || rank(d.type) < rank(devices[static_cast<std::size_t>(chosen)].type))
+      chosen = static_cast<int>(i);
+  }
+  return chosen;
+}
+
 BackendKind parse_backend(const std::string& name) {
   if (name == "auto") return BackendKind::Auto;
   if (name == "vulkan") return BackendKind::Vulkan;
@@ -33,15 +50,7 @@ BackendChoice make_backend(const BackendOptions& options, const World& world, co
     try {
       // Find a GPU first: opening lavapipe only to put it aside would cost its start-up.
       int chosen = options.vulkan_device;
-      if (chosen < 0) {
-        auto rank = [](const std::string& type) {
-          return type == "discrete GPU" ? 0 : type == "integrated GPU" ? 1 : 2;
-        };
-        for (const VulkanDeviceInfo& d : list_vulkan_devices())
-          if (d.compute && d.type != "CPU" &&
-              (chosen < 0 || rank(d.type) < rank(list_vulkan_devices()[chosen].type)))
-            chosen = static_cast<int>(d.index);
-      }
+      if (chosen < 0) chosen = auto_vulkan_device(list_vulkan_devices());
       if (chosen < 0) {
         why =
             "no Vulkan GPU (only CPU implementations such as lavapipe, which are slower than "

@@ -133,8 +133,9 @@ void EngineHost::run() {
     try {
       do_update();
     } catch (const std::exception& e) {
-      // The engine's input was validated at construction; a failure here is a bug. Keep the
-      // last published tiles and stop refining rather than take the service down.
+      // The engine's input was validated at construction; a failure here is a bug or a lost
+      // device (VK_ERROR_DEVICE_LOST). Keep the last published tiles and stop refining rather
+      // than take the service down.
       log::error("engine", std::string("update failed, refinement stopped: ") + e.what());
       std::lock_guard lock(mutex_);
       stats_.idle = true;

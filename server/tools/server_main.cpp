@@ -122,19 +122,28 @@ int run(const Options& o, sigset_t signals) {
 
 }  // namespace
 
-// --list-devices: what the engine could run on. Vulkan devices when there is a driver (the
-// Vulkan passes are issue 6's work in progress), and Embree, which is always there.
+// --list-devices: what the engine could run on (Vulkan devices when there is a driver, and
+// Embree, which is always there) and which one --backend auto takes.
 int print_devices() {
   std::printf("embree: the CPU (%u threads), always available\n",
               std::thread::hardware_concurrency());
+  std::string auto_choice = "embree (no Vulkan GPU)";
   try {
     const std::vector<irradcast::VulkanDeviceInfo> devices = irradcast::list_vulkan_devices();
     if (devices.empty()) std::printf("vulkan: no device\n");
     for (const irradcast::VulkanDeviceInfo& d : devices)
       std::printf("vulkan: %s\n", irradcast::describe(d).c_str());
+    const int best = irradcast::auto_vulkan_device(devices);
+    if (best >= 0)
+      auto_choice = "vulkan device " + std::to_string(best) + " (" +
+                    devices[static_cast<std::size_t>(best)].name + ")";
+    else if (!devices.empty())
+      auto_choice =
+          "embree (the Vulkan devices are CPU implementations; --backend vulkan uses them)";
   } catch (const irradcast::Error& e) {
     std::printf("vulkan: not available: %s\n", e.what());
   }
+  std::printf("--backend auto: %s\n", auto_choice.c_str());
   return 0;
 }
 

@@ -8,10 +8,12 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "irradcast/lights.h"
 #include "irradcast/ray_scene.h"
 #include "irradcast/trace_backend.h"
+#include "irradcast/vulkan_device.h"
 
 namespace irradcast {
 
@@ -19,6 +21,11 @@ enum class BackendKind { Auto, Vulkan, Embree };
 
 // "auto" | "vulkan" | "embree"; throws irradcast::Error naming the bad value.
 BackendKind parse_backend(const std::string& name);
+
+// The device --backend auto runs on: the best Vulkan GPU with compute (discrete, integrated,
+// virtual, other), as an index into `devices`; -1 when there is none. CPU implementations
+// (lavapipe) are never picked.
+int auto_vulkan_device(const std::vector<VulkanDeviceInfo>& devices);
 
 struct BackendOptions {
   BackendKind kind = BackendKind::Auto;
