@@ -102,11 +102,13 @@ struct EngineKey {
 }  // namespace
 
 struct VulkanBackend::Impl {
-  Impl(const World& w, const RayScene& r, const LightSampler& l, VulkanContextOptions o)
+  Impl(const World& w, const RayScene& r, const LightSampler& l, VulkanContextOptions o,
+       bool force_staging)
       : context(o), vk(vulkan_handles(context)), world(&w), rays(&r), lights(&l) {
     vkGetPhysicalDeviceMemoryProperties(vk.physical, &memory);
     vkGetPhysicalDeviceProperties(vk.physical, &properties);
-    discrete = properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU;
+    discrete = properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU || force_staging;
+    staging_only = force_staging;
     if (properties.limits.maxPerStageDescriptorStorageBuffers < kBindings)
       throw Error("Vulkan: " + context.device().name + " allows " +
                   std::to_string(properties.limits.maxPerStageDescriptorStorageBuffers) +
@@ -261,7 +263,7 @@ struct VulkanBackend::Impl {
       vk_check(vkBindBufferMemory(vk.device, b.buffer, b.memory, 0), "vkBindBufferMemory");
       b.size = size;
       const VkMemoryPropertyFlags got = memory.memoryTypes[type].propertyFlags;
-      if ((got & host) == host)
+      if ((got & host) == host && (staging_buffer || !staging_only))
         vk_check(vkMapMemory(vk.device, b.memory, 0, VK_WHOLE_SIZE, 0, &b.mapped), "vkMapMemory");
       return;
     }
@@ -553,8 +555,11 @@ struct VulkanBackend::Impl {
     submit.pCommandBuffers = &commands;
     vk_check(vkResetFences(vk.device, 1, &fence), "vkResetFences");
     vk_check(vkQueueSubmit(vk.queue, 1, &submit, fence), "vkQueueSubmit");
-    uploads.clear();
     vk_check(vkWaitForFences(vk.device, 1, &fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
+    // Scene and engine data are written once: their staging copies are not needed again.
+    for (auto [binding, bytes] : uploads)
+      if (binding != kPrev && binding != kProbeRadiance) destroy(staging[binding]);
+    uploads.clear();
     const auto* src = static_cast<const glm::vec4*>(readback ? staging[kResult].mapped
                                                              : device_buffers[kResult].mapped);
     out.resize(out_size);
@@ -594,6 +599,7 @@ struct VulkanBackend::Impl {
   VkPhysicalDeviceMemoryProperties memory{};
   VkPhysicalDeviceProperties properties{};
   bool discrete = false;
+  bool staging_only = false;  // never write device buffers in place (tests the discrete path)
   std::uint32_t max_groups = 65535;
   VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
   VkPipelineLayout pipeline_layout = VK_NULL_HANDLE;
@@ -615,8 +621,8 @@ struct VulkanBackend::Impl {
 };
 
 VulkanBackend::VulkanBackend(const World& world, const RayScene& rays, const LightSampler& lights,
-                             VulkanContextOptions options)
-    : impl_(std::make_unique<Impl>(world, rays, lights, options)) {}
+                             VulkanContextOptions options, bool force_staging)
+    : impl_(std::make_unique<Impl>(world, rays, lights, options, force_staging)) {}
 
 VulkanBackend::~VulkanBackend() = default;
 

@@ -19,8 +19,10 @@ class VulkanBackend final : public TraceBackend {
  public:
   // Opens the device, builds the BVH and uploads the scene. `rays` (for its ray offset) and
   // `lights` must outlive the backend. Throws irradcast::Error naming what failed.
+  // force_staging: device-local buffers filled and read through staging copies, as on a
+  // discrete GPU, even where device memory is host-visible (tests that path on lavapipe).
   VulkanBackend(const World& world, const RayScene& rays, const LightSampler& lights,
-                VulkanContextOptions options = {});
+                VulkanContextOptions options = {}, bool force_staging = false);
   ~VulkanBackend() override;
 
   std::string name() const override { return "vulkan"; }
