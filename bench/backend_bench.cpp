@@ -8,6 +8,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -193,16 +194,24 @@ int main(int argc, char** argv) {
         if (secs.size() == 2) std::printf(" %12.2f", secs[1] / secs[0]);
         std::printf("\n");
       };
-      for (const PassTotals& p : runs.front().passes) {
+      for (const PassTotals& p : runs.front().passes)
         row(p.pass, [&](const BackendRun& r) {
           for (const PassTotals& q : r.passes)
             if (q.pass == p.pass) return std::pair<double, double>(q.seconds, q.rays);
           return std::pair<double, double>(0.0, 0.0);
         });
-        chart.categories.push_back(spec + "\n" + p.pass);
-        for (std::size_t k = 0; k < runs.size(); ++k)
+      // The chart: per pass kind (bounces summed) and the whole update.
+      for (const char* kind : {"direct", "probes", "scatter", "update"}) {
+        chart.categories.push_back(spec + "\n" + kind);
+        for (std::size_t k = 0; k < runs.size(); ++k) {
+          double secs = 0.0, rays = 0.0;
           for (const PassTotals& q : runs[k].passes)
-            if (q.pass == p.pass) chart.values[k].push_back(q.rays / q.seconds / 1e6);
+            if (std::string(kind) == "update" || q.pass.rfind(kind, 0) == 0) {
+              secs += q.seconds;
+              rays += static_cast<double>(q.rays);
+            }
+          chart.values[k].push_back(secs > 0.0 ? rays / secs / 1e6 : 0.0);
+        }
       }
       row("update", [&](const BackendRun& r) {
         std::uint64_t rays = 0;
@@ -210,14 +219,15 @@ int main(int argc, char** argv) {
         return std::pair<double, double>(r.update_seconds, static_cast<double>(rays));
       });
       for (const BackendRun& r : runs)
-        std::printf("%-10s set-up %-8s %.2f s (%s)\n", spec.c_str(), r.name.c_str(),
-                    r.setup_seconds, r.describe.c_str());
+        std::printf("%-10s set-up + %d warm-up update(s) %-8s %.2f s (%s)\n", spec.c_str(), warmup,
+                    r.name.c_str(), r.setup_seconds, r.describe.c_str());
       std::fflush(stdout);
       results.push_back(scene_json);
     }
     std::ofstream(json_path) << results.dump(2) << "\n";
     chart.note = "the same engine, scene and parameters on each backend; updates interleaved";
     chart.value_decimals = 1;
+    chart.width = std::max(900, 100 * static_cast<int>(chart.categories.size()) + 200);
     const std::string png = (fs::path(out) / "backend_rays.png").string();
     plot::write_bar_chart(png, chart);
     std::printf("wrote %s and %s\n", json_path.c_str(), png.c_str());
