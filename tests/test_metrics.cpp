@@ -344,6 +344,7 @@ bool eventually(F condition, std::chrono::milliseconds limit = 10000ms) {
 TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   MetricsSnapshot m;
   m.scene = "odd \"scene\" \\ name\nline two";
+  m.backend = "vulkan on \"GPU\" (discrete GPU, Vulkan 1.3.277)";
   ServerStats& s = m.server;
   s.clients = 3;
   s.connections = 17;
@@ -400,7 +401,7 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
     checked.insert(p);
     EXPECT_EQ(std::strtod(p->value.c_str(), nullptr), want) << name << " = " << p->value;
   };
-  u("irradcast_info", 1, {{"scene", m.scene}});  // the label value came back unescaped
+  u("irradcast_info", 1, {{"scene", m.scene}, {"backend", m.backend}});  // came back unescaped
   d("irradcast_uptime_seconds", s.uptime_seconds);
   u("irradcast_clients", 3);
   u("irradcast_connections_total", 17);
@@ -680,7 +681,9 @@ TEST(Metrics, EndToEndScrapeMatchesTheServerAndEngine) {
   EXPECT_GT(x.value("irradcast_engine_rays_per_second"), 0.0);
   EXPECT_GT(x.value("irradcast_engine_convergence"), 0.0);
   EXPECT_GT(x.value("irradcast_bytes_per_texel"), 0.0);
-  EXPECT_EQ(x.value("irradcast_info", {{"scene", "cornell"}}), 1.0);
+  EXPECT_EQ(x.value("irradcast_info", {{"scene", "cornell"}, {"backend", host.backend_name()}}),
+            1.0);
+  EXPECT_FALSE(host.backend_name().empty());
   // Direct, then probes and scatter per bounce (2 by default).
   ASSERT_EQ(es.passes.size(), 5u);
   ASSERT_EQ(x.family("irradcast_engine_pass_seconds").size(), es.passes.size());
@@ -810,6 +813,7 @@ TEST(Metrics, StatsFrameCarriesTheNewFields) {
   EXPECT_GT(st->engine_seconds_total(), 0.0);
   EXPECT_EQ(st->tiles(), host.tiles().tile_count());
   EXPECT_EQ(st->texels(), es.texels);
+  EXPECT_EQ(st->backend(), host.backend_name());
   EXPECT_GE(st->queue_depth_max(), st->queue_depth());
   EXPECT_GE(st->queue_depth_total(), st->queue_depth_max());
   EXPECT_EQ(st->sessions_closed_size(), static_cast<int>(kCloseReasons));

@@ -71,7 +71,8 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
           static_cast<double>(options_.tiles.refresh_ratio),
           static_cast<double>(options_.tiles.significance)})
       add(v);
-    key += "|" + impl_->engine->backend().describe();  // backends agree only within noise
+    backend_name_ = impl_->engine->backend().describe();
+    key += "|" + backend_name_;  // backends agree only within noise
     const std::string digest = wire::sha256(key);
     for (int i = 0; i < 8; ++i)
       tile_epoch_ =

@@ -120,6 +120,7 @@ std::string format_metric_value(double value) {
 MetricsSnapshot collect_metrics(const Server& server, const EngineHost& host) {
   MetricsSnapshot m;
   m.scene = host.scene_id();
+  m.backend = host.backend_name();
   m.server = server.stats();
   m.engine = host.stats();
   return m;
@@ -129,8 +130,9 @@ std::string format_metrics(const MetricsSnapshot& m) {
   const ServerStats& s = m.server;
   const EngineHostStats& e = m.engine;
   Writer w;
-  w.family("irradcast_info", "gauge", "Always 1; the label names the scene being served.");
-  w.sample({{"scene", m.scene}}, std::uint64_t{1});
+  w.family("irradcast_info", "gauge",
+           "Always 1; the labels name the scene being served and the engine's backend.");
+  w.sample({{"scene", m.scene}, {"backend", m.backend}}, std::uint64_t{1});
   w.gauge("irradcast_uptime_seconds", "Seconds since the server started.", s.uptime_seconds);
 
   // Clients and connections.

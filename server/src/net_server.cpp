@@ -391,6 +391,7 @@ class Session : public std::enable_shared_from_this<Session> {
     }
     s->set_tiles(es.tiles);
     s->set_texels(es.texels);
+    s->set_backend(server_->host.backend_name());
     send(e);
   }
 

@@ -92,6 +92,8 @@ class EngineHost {
   const std::string& scene_id() const { return scene_id_; }
   // Which backend runs the passes and why (make_backend's reason line).
   const std::string& backend() const { return backend_; }
+  // The backend and its device ("embree", "vulkan on NVIDIA ... (discrete GPU, ...)").
+  const std::string& backend_name() const { return backend_name_; }
   const Scene& scene() const { return scene_; }
   const World& world() const { return world_; }
   const Atlas& atlas() const { return atlas_; }
@@ -118,6 +120,7 @@ class EngineHost {
   Scene scene_;
   std::string scene_id_;
   std::string backend_;
+  std::string backend_name_;
   EngineHostOptions options_;
   World world_;
   Atlas atlas_;

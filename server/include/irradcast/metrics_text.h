@@ -14,7 +14,8 @@
 namespace irradcast {
 
 struct MetricsSnapshot {
-  std::string scene;  // the scene id: the label of irradcast_info
+  std::string scene;    // the scene id: a label of irradcast_info
+  std::string backend;  // the engine's backend and device (TraceBackend::describe()): another
   ServerStats server;
   EngineHostStats engine;
 };
