@@ -154,6 +154,7 @@ std::vector<Envelope> all_messages() {
     m->add_sessions_closed()->set_reason("bye");
     m->set_tiles(480);
     m->set_texels(118000);
+    m->set_backend("vulkan on llvmpipe (CPU, Vulkan 1.3.230)");
     out.push_back(e);
   }
   {
