@@ -69,9 +69,11 @@ uint pcg_hash(uint v) {
   return (w >> 22u) ^ w;
 }
 
+// The update number has a hash round of its own: packed into one word with the pass it would
+// wrap after 2^16 updates and repeat old samples.
 uint rng_init(uint item, uint stream) {
-  uint pass = (pc.update << 16) ^ (stream << 8) ^ pc.bounce;
-  return pcg_hash(item ^ pcg_hash(pc.seed_lo ^ pcg_hash(pc.seed_hi ^ pcg_hash(pass))));
+  uint pass = pcg_hash(pc.update ^ pcg_hash((stream << 8) | pc.bounce));
+  return pcg_hash(item ^ pcg_hash(pc.seed_lo ^ pcg_hash(pc.seed_hi ^ pass)));
 }
 
 float next_float(inout uint s) {
@@ -143,9 +145,12 @@ vec3 safe_inverse(vec3 d) {
                     abs(d.z) < tiny ? (d.z < 0.0 ? -tiny : tiny) : d.z);
 }
 
+// Slab test, made conservative against rounding (the far distance grows by 2 gamma(3) as in
+// pbrt, with room for the reciprocal's few ULP): a box must never cull a hit that the watertight
+// triangle test would accept, on flat axis-aligned boxes (walls, floors) least of all.
 bool hit_box(vec3 lo, vec3 hi, vec3 o, vec3 inv, float tmin, float tmax, out float tnear) {
   vec3 t0 = (lo - o) * inv, t1 = (hi - o) * inv;
-  vec3 tn = min(t0, t1), tf = max(t0, t1);
+  vec3 tn = min(t0, t1), tf = max(t0, t1) * 1.0000025;
   tnear = max(max(tn.x, tn.y), max(tn.z, tmin));
   float tfar = min(min(tf.x, tf.y), min(tf.z, tmax));
   return tnear <= tfar;
@@ -268,7 +273,11 @@ vec3 sample_texture(int tex, vec2 uv) {
   float x = uv.x * float(w) - 0.5, y = uv.y * float(h) - 0.5;
   float fx = floor(x), fy = floor(y);
   float ax = x - fx, ay = y - fy;
-  int x0 = int(mod(fx, float(w))), y0 = int(mod(fy, float(h)));
+  // REPEAT: fx - w floor(fx / w) may round to w (or just below 0); fold it back.
+  int x0 = int(fx - float(w) * floor(fx / float(w)));
+  int y0 = int(fy - float(h) * floor(fy / float(h)));
+  x0 = x0 >= w ? x0 - w : (x0 < 0 ? x0 + w : x0);
+  y0 = y0 >= h ? y0 - h : (y0 < 0 ? y0 + h : y0);
   x0 = clamp(x0, 0, w - 1);
   y0 = clamp(y0, 0, h - 1);
   int x1 = x0 + 1 == w ? 0 : x0 + 1, y1 = y0 + 1 == h ? 0 : y0 + 1;

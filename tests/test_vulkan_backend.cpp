@@ -152,8 +152,12 @@ class VulkanParity : public ::testing::TestWithParam<ParityCase> {};
 //     Some texels always differ: those whose centre sits where two touching boxes meet (the
 //     rooms' walls and pillars) see coincident faces, and which of two faces at the same t a ray
 //     reports is arbitrary in both backends (0.5% of rooms:2's texels, 0.2% Embree vs Embree);
-//   - the scene's mean irradiance within 1% + 2 x Embree's own difference (a global bias: a
-//     factor, a missed bounce).
+//   - the scene's mean irradiance within 1% (unbiased) or 3% (biased) (a global bias: a factor,
+//     a missed bounce). The scene mean is far noisier than any texel suggests: every texel sees
+//     the same few emitters and, in biased mode, the same 64 probes. Over 12 seeds of 8 updates
+//     on cornell, one run's mean differs between the backends by 0.8% RMS in biased mode and
+//     0.2% in unbiased mode, with no bias (Vulkan/Embree - 1 = +0.002% +- 0.24% and
+//     +0.05% +- 0.08% over the 12); the bounds are about 4 of those.
 TEST_P(VulkanParity, LightmapsAgreeWithEmbreeWithinMonteCarloNoise) {
   const ParityCase& c = GetParam();
   EngineSetup s(c.scene(), c.texels_per_scene);
@@ -182,7 +186,7 @@ TEST_P(VulkanParity, LightmapsAgreeWithEmbreeWithinMonteCarloNoise) {
   EXPECT_GT(d.texels, 1000u);
   EXPECT_LT(d.rms_z, 1.3 * noise.rms_z + 0.1) << "Embree vs Embree: " << noise.rms_z;
   EXPECT_LT(d.outliers, 3.0 * noise.outliers + 0.003) << "Embree vs Embree: " << noise.outliers;
-  EXPECT_LT(std::fabs(d.mean_relative), 0.01 + 2.0 * std::fabs(noise.mean_relative))
+  EXPECT_LT(std::fabs(d.mean_relative), std::isinf(c.range) ? 0.01 : 0.03)
       << "Embree vs Embree: " << noise.mean_relative;
   EXPECT_EQ(v->validation_messages(), 0u) << first_message(*v);
 }

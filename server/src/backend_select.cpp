@@ -61,7 +61,7 @@ BackendChoice make_backend(const BackendOptions& options, const World& world, co
         c.reason = v->describe() + " (--backend auto)";
         c.backend = std::move(v);
       }
-    } catch (const Error& e) {
+    } catch (const std::exception& e) {  // Error, or bad_alloc on a huge scene
       why = e.what();
     }
     if (!c.backend) c.reason = "embree (--backend auto: " + why + ")";

@@ -118,7 +118,7 @@ struct Flattener {
 bool hit_box(glm::vec3 lo, glm::vec3 hi, glm::vec3 o, glm::vec3 inv, float tmin, float tmax,
              float& tnear) {
   glm::vec3 t0 = (lo - o) * inv, t1 = (hi - o) * inv;
-  glm::vec3 tn = glm::min(t0, t1), tf = glm::max(t0, t1);
+  glm::vec3 tn = glm::min(t0, t1), tf = glm::max(t0, t1) * 1.0000025f;  // conservative
   tnear = std::max(std::max(tn.x, tn.y), std::max(tn.z, tmin));
   float tfar = std::min(std::min(tf.x, tf.y), std::min(tf.z, tmax));
   return tnear <= tfar;

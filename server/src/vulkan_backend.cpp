@@ -6,6 +6,7 @@
 #include <array>
 #include <chrono>
 #include <cstring>
+#include <exception>
 #include <functional>
 #include <mutex>
 #include <string>
@@ -114,14 +115,26 @@ struct VulkanBackend::Impl {
                   std::to_string(properties.limits.maxPerStageDescriptorStorageBuffers) +
                   " storage buffers per shader stage; the passes need " +
                   std::to_string(static_cast<int>(kBindings)));
+    if (properties.apiVersion < VK_API_VERSION_1_1)
+      throw Error("Vulkan: " + context.device().name + " supports Vulkan " +
+                  context.device().api_version + "; the passes need 1.1");
     max_groups = std::min<std::uint32_t>(properties.limits.maxComputeWorkGroupCount[0], 65535u);
-    create_pipelines();
-    create_commands();
-    for (int b = 0; b < kBindings; ++b) create(device_buffers[b], 16, false);
-    upload_scene();
+    max_buffer =
+        std::min<VkDeviceSize>(properties.limits.maxStorageBufferRange, VkDeviceSize{1} << 32);
+    try {
+      create_pipelines();
+      create_commands();
+      for (int b = 0; b < kBindings; ++b) create(device_buffers[b], 16, false);
+      upload_scene();
+    } catch (...) {
+      release();  // ~Impl does not run for a constructor that throws
+      throw;
+    }
   }
 
-  ~Impl() {
+  ~Impl() { release(); }
+
+  void release() {
     if (vk.device == VK_NULL_HANDLE) return;
     vkDeviceWaitIdle(vk.device);
     for (int b = 0; b < kBindings; ++b) {
@@ -130,11 +143,18 @@ struct VulkanBackend::Impl {
     }
     if (fence) vkDestroyFence(vk.device, fence, nullptr);
     if (command_pool) vkDestroyCommandPool(vk.device, command_pool, nullptr);
-    for (VkPipeline p : pipelines)
+    for (VkPipeline& p : pipelines) {
       if (p) vkDestroyPipeline(vk.device, p, nullptr);
+      p = VK_NULL_HANDLE;
+    }
     if (pipeline_layout) vkDestroyPipelineLayout(vk.device, pipeline_layout, nullptr);
     if (descriptor_pool) vkDestroyDescriptorPool(vk.device, descriptor_pool, nullptr);
     if (set_layout) vkDestroyDescriptorSetLayout(vk.device, set_layout, nullptr);
+    fence = VK_NULL_HANDLE;
+    command_pool = VK_NULL_HANDLE;
+    pipeline_layout = VK_NULL_HANDLE;
+    descriptor_pool = VK_NULL_HANDLE;
+    set_layout = VK_NULL_HANDLE;
   }
 
   // ---- set-up
@@ -231,6 +251,10 @@ struct VulkanBackend::Impl {
   // A storage buffer the shaders read: device-local on a discrete GPU (filled through staging),
   // host-visible device memory elsewhere (written in place). Staging buffers are host memory.
   void create(Buffer& b, VkDeviceSize size, bool staging_buffer) {
+    if (!staging_buffer && size > max_buffer)
+      throw Error("Vulkan: a " + std::to_string(size >> 20) + " MiB storage buffer exceeds " +
+                  context.device().name + "'s limit of " + std::to_string(max_buffer >> 20) +
+                  " MiB (maxStorageBufferRange); use --backend embree or a lower lightmap density");
     VkBufferCreateInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO;
     bi.size = size;
@@ -258,8 +282,10 @@ struct VulkanBackend::Impl {
       ai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
       ai.allocationSize = req.size;
       ai.memoryTypeIndex = static_cast<std::uint32_t>(type);
-      last = vkAllocateMemory(vk.device, &ai, nullptr, &b.memory);
+      VkDeviceMemory allocated = VK_NULL_HANDLE;
+      last = vkAllocateMemory(vk.device, &ai, nullptr, &allocated);
       if (last != VK_SUCCESS) continue;
+      b.memory = allocated;
       vk_check(vkBindBufferMemory(vk.device, b.buffer, b.memory, 0), "vkBindBufferMemory");
       b.size = size;
       const VkMemoryPropertyFlags got = memory.memoryTypes[type].propertyFlags;
@@ -457,7 +483,12 @@ struct VulkanBackend::Impl {
     engine_key = key;
   }
 
-  void write_previous(const RadianceField& prev) {
+  // The previous bounce's lightmaps: the gather and the scatter of one bounce read the same
+  // ones, so the scatter does not upload them again.
+  void write_previous(const RadianceField& prev, const PassInput& in) {
+    const PrevKey key{prev.irradiance, in.update, in.bounce};
+    if (key == prev_key) return;
+    prev_key = key;
     const std::vector<Lightmap>& maps = *prev.irradiance;
     if (maps.size() != object_offsets.size())
       throw Error("Vulkan backend: " + std::to_string(maps.size()) + " lightmaps for " +
@@ -528,13 +559,13 @@ struct VulkanBackend::Impl {
     vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_layout, 0, 1,
                             &descriptor_set, 0, nullptr);
     pc.count = count;
-    const std::uint32_t chunk = max_groups * 64u;
-    for (std::uint32_t base = 0; base < count; base += chunk) {
-      pc.base = base;
+    const std::uint64_t chunk = std::uint64_t{max_groups} * 64u;
+    for (std::uint64_t base = 0; base < count; base += chunk) {
+      pc.base = static_cast<std::uint32_t>(base);
       vkCmdPushConstants(commands, pipeline_layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(pc),
                          &pc);
-      const std::uint32_t items = std::min(chunk, count - base);
-      vkCmdDispatch(commands, (items + 63u) / 64u, 1, 1);
+      const std::uint64_t items = std::min<std::uint64_t>(chunk, count - base);
+      vkCmdDispatch(commands, static_cast<std::uint32_t>((items + 63u) / 64u), 1, 1);
     }
     if (readback) {
       barrier(VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
@@ -600,6 +631,7 @@ struct VulkanBackend::Impl {
   VkPhysicalDeviceProperties properties{};
   bool discrete = false;
   bool staging_only = false;  // never write device buffers in place (tests the discrete path)
+  VkDeviceSize max_buffer = VkDeviceSize{1} << 27;  // the largest storage buffer a shader may see
   std::uint32_t max_groups = 65535;
   VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
   VkPipelineLayout pipeline_layout = VK_NULL_HANDLE;
@@ -614,7 +646,27 @@ struct VulkanBackend::Impl {
   std::vector<std::pair<int, VkDeviceSize>> uploads;
   bool descriptors_dirty = true;
   std::uint32_t punctual_count = 0, emissive_count = 0;
+  struct PrevKey {
+    const void* maps = nullptr;
+    std::uint32_t update = ~0u, bounce = ~0u;
+    bool operator==(const PrevKey&) const = default;
+  };
+
+  // A pass that throws may leave buffers half written: upload everything again next time.
+  struct ForgetOnThrow {
+    Impl* impl;
+    int exceptions = std::uncaught_exceptions();
+    ~ForgetOnThrow() {
+      if (std::uncaught_exceptions() > exceptions) {
+        impl->engine_key = EngineKey{};
+        impl->prev_key = PrevKey{};
+        impl->uploads.clear();
+      }
+    }
+  };
+
   EngineKey engine_key;
+  PrevKey prev_key;
   std::vector<std::uint32_t> object_offsets;
   std::uint32_t lightmap_total = 0;
   std::mutex mutex;  // one pass at a time
@@ -645,6 +697,7 @@ std::vector<std::string> VulkanBackend::validation_log() const {
 
 PassResult VulkanBackend::direct(const PassInput& in, std::vector<glm::vec3>& out) {
   std::lock_guard lock(impl_->mutex);
+  Impl::ForgetOnThrow guard{impl_.get()};
   const auto start = Clock::now();
   impl_->prepare(in);
   PushConstants pc = impl_->constants(in);
@@ -661,11 +714,13 @@ PassResult VulkanBackend::direct(const PassInput& in, std::vector<glm::vec3>& ou
 PassResult VulkanBackend::gather_probes(const PassInput& in, const RadianceField& prev,
                                         std::vector<glm::vec3>& out) {
   std::lock_guard lock(impl_->mutex);
+  Impl::ForgetOnThrow guard{impl_.get()};
   const auto start = Clock::now();
   impl_->prepare(in);
-  impl_->write_previous(prev);
+  impl_->write_previous(prev, in);
   PushConstants pc = impl_->constants(in);
   const std::size_t items = in.probes.count() * in.probes.texels_per_probe();
+  if (items > 0xFFFFFFFFu) throw Error("Vulkan backend: too many probe texels for one pass");
   impl_->run(kGatherPipeline, pc, static_cast<std::uint32_t>(items), out, items);
   std::size_t usable = 0;
   for (std::uint8_t u : in.probes.usable) usable += u ? 1 : 0;
@@ -679,9 +734,10 @@ PassResult VulkanBackend::scatter(const PassInput& in, const RadianceField& prev
                                   const std::vector<glm::vec3>& probe_radiance,
                                   std::vector<glm::vec3>& out) {
   std::lock_guard lock(impl_->mutex);
+  Impl::ForgetOnThrow guard{impl_.get()};
   const auto start = Clock::now();
   impl_->prepare(in);
-  impl_->write_previous(prev);
+  impl_->write_previous(prev, in);
   impl_->write(kProbeRadiance, probe_radiance.size() * sizeof(glm::vec4), [&](void* dst) {
     auto* v = static_cast<glm::vec4*>(dst);
     for (std::size_t i = 0; i < probe_radiance.size(); ++i)
