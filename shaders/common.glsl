@@ -39,6 +39,9 @@ layout(std430, binding = 12) readonly buffer ProbeWeights { uint probe_weights[]
 layout(std430, binding = 13) readonly buffer Prev { vec4 prev[]; };  // E_prev, every lightmap
 layout(std430, binding = 14) readonly buffer ProbeRadiance { vec4 probe_radiance[]; };
 layout(std430, binding = 15) writeonly buffer Result { vec4 result[]; };
+// 3 vec4 per triangle, objects[o].x + t: the corners' shading normals; w of the first is 0 when
+// the mesh has none (the geometric normal is used). Read by the reference path tracer.
+layout(std430, binding = 16) readonly buffer TriNormals { vec4 tri_normals[]; };
 
 const uint FLAG_AREA = 1u, FLAG_UNBIASED = 2u, FLAG_FIXED = 4u, FLAG_PROBES = 8u;
 
@@ -136,6 +139,7 @@ struct Hit {
   int object;  // -1: miss
   uint triangle;
   float u, v, t;
+  uint prim;  // index in tris[] (BVH order)
 };
 
 vec3 safe_inverse(vec3 d) {
@@ -205,6 +209,7 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit) {
   h.u = 0.0;
   h.v = 0.0;
   h.t = tmax;
+  h.prim = 0u;
   vec3 inv = safe_inverse(d);
   ShearedRay sheared = shear(o, d);
   uint stack[48];
@@ -227,6 +232,7 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit) {
         if (hit_triangle(i, sheared, tmin, h.t, tuv)) {
           h.object = int(floatBitsToUint(tris[3 * i].w));
           h.triangle = floatBitsToUint(tris[3 * i + 1].w);
+          h.prim = i;
           h.t = tuv.x;
           h.u = tuv.y;
           h.v = tuv.z;

@@ -12,6 +12,8 @@
 #include "irradcast/backend_select.h"
 #include "irradcast/builtin.h"
 #include "irradcast/error.h"
+#include "irradcast/path_tracer.h"
+#include "irradcast/reference_lightmaps.h"
 #include "irradcast/sampling.h"
 #include "irradcast/vulkan_backend.h"
 #include "scene_builders.h"
@@ -241,6 +243,48 @@ TEST(VulkanBackend, DeterministicAndTheStagingPathGivesTheSameBits) {
   ASSERT_EQ(la.size(), lb.size());
   for (std::size_t o = 0; o < la.size(); ++o) EXPECT_EQ(la[o].texels, lb[o].texels) << o;
   EXPECT_GT(test::mean_valid(s, la), 0.0);
+}
+
+// The reference path tracer's lightmaps on the device against the CPU's (PathTracer), the
+// control being the CPU against itself with another seed: per texel, the RMS luminance
+// difference (relative to the scene mean) at most 1.25 x the control's; the scene mean within
+// 1.5% (the CPU against itself with another seed: 0.18% here).
+TEST(VulkanReference, LightmapsAgreeWithTheCpuPathTracer) {
+  EngineSetup s(textured_cornell(), 24.0f);
+  const int spp = 32, bounces = 2;
+  auto v = vulkan(s);
+  ReferenceLightmapStats vs;
+  const auto gpu = v->reference_lightmaps(s.gbuffers, spp, bounces, 5, &vs);
+  auto cpu_maps = [&](std::uint64_t seed) {
+    PathTracer tracer(s.world, s.rays, s.lights, PathTracerOptions{bounces, true, seed});
+    return reference_lightmaps(s.world, tracer, s.gbuffers, spp);
+  };
+  const auto cpu = cpu_maps(5), cpu2 = cpu_maps(6);
+  auto compare = [&](const std::vector<Lightmap>& a, const std::vector<Lightmap>& b) {
+    double d2 = 0.0, sa = 0.0, sb = 0.0;
+    std::size_t n = 0;
+    for (std::size_t o = 0; o < a.size(); ++o)
+      for (std::size_t i = 0; i < a[o].texels.size(); ++i) {
+        if (!s.gbuffers[o].valid(i)) continue;
+        const double ya = luminance(a[o].texels[i]), yb = luminance(b[o].texels[i]);
+        d2 += (ya - yb) * (ya - yb);
+        sa += ya;
+        sb += yb;
+        ++n;
+      }
+    return std::make_pair(std::sqrt(d2 / static_cast<double>(n)) / (sb / static_cast<double>(n)),
+                          sa / sb - 1.0);
+  };
+  const auto [rms, mean] = compare(gpu, cpu);
+  const auto [rms_control, mean_control] = compare(cpu2, cpu);
+  RecordProperty("rms_vulkan_cpu", std::to_string(rms));
+  RecordProperty("rms_cpu_cpu", std::to_string(rms_control));
+  RecordProperty("mean_vulkan_cpu", std::to_string(mean));
+  RecordProperty("mean_cpu_cpu", std::to_string(mean_control));
+  EXPECT_LT(rms, 1.25 * rms_control) << "CPU vs CPU: " << rms_control;
+  EXPECT_LT(std::fabs(mean), 0.015) << "CPU vs CPU: " << mean_control;
+  EXPECT_GT(vs.rays, 0u);
+  EXPECT_EQ(v->validation_messages(), 0u) << first_message(*v);
 }
 
 TEST(VulkanBackend, ReportsItsDeviceAndRays) {

@@ -15,6 +15,8 @@
 #include "gather.spv.h"
 #include "irradcast/error.h"
 #include "irradcast/gpu_bvh.h"
+#include "irradcast/progress.h"
+#include "reference.spv.h"
 #include "scatter.spv.h"
 #include "vulkan_handles.h"
 
@@ -41,10 +43,17 @@ enum Binding : int {
   kPrev,
   kProbeRadiance,
   kResult,
+  kTriNormals,
   kBindings
 };
 
-enum PipelineId : int { kDirectPipeline, kGatherPipeline, kScatterPipeline, kPipelines };
+enum PipelineId : int {
+  kDirectPipeline,
+  kGatherPipeline,
+  kScatterPipeline,
+  kReferencePipeline,
+  kPipelines
+};
 
 enum Flags : std::uint32_t { kFlagArea = 1, kFlagUnbiased = 2, kFlagFixed = 4, kFlagProbes = 8 };
 
@@ -200,7 +209,8 @@ struct VulkanBackend::Impl {
     const std::pair<const std::uint32_t*, std::size_t> code[kPipelines] = {
         {irradcast_direct_spv, sizeof(irradcast_direct_spv)},
         {irradcast_gather_spv, sizeof(irradcast_gather_spv)},
-        {irradcast_scatter_spv, sizeof(irradcast_scatter_spv)}};
+        {irradcast_scatter_spv, sizeof(irradcast_scatter_spv)},
+        {irradcast_reference_spv, sizeof(irradcast_reference_spv)}};
     for (int p = 0; p < kPipelines; ++p) {
       VkShaderModuleCreateInfo sm{};
       sm.sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO;
@@ -400,6 +410,17 @@ struct VulkanBackend::Impl {
     }
     write(kPunctual, pl);
     punctual_count = static_cast<std::uint32_t>(world->lights.size());
+
+    std::vector<glm::vec4> normals;
+    for (const WorldObject& o : world->objects) {
+      const bool has = !o.normals.empty();
+      for (const glm::uvec3& t : o.triangles())
+        for (int k = 0; k < 3; ++k)
+          normals.emplace_back(has ? o.normals[t[k]] : glm::vec3(0.0f),
+                               k == 0 && has ? 1.0f : 0.0f);
+    }
+    write(kTriNormals, normals);
+    write_surfaces(nullptr);
   }
 
   std::uint32_t material_index(int object, std::uint32_t t) const {
@@ -409,27 +430,17 @@ struct VulkanBackend::Impl {
     return m < materials ? m : static_cast<std::uint32_t>(materials);
   }
 
-  void prepare(const PassInput& in) {
-    EngineKey key{&in.atlas,
-                  in.texels.position.data(),
-                  in.texels.size(),
-                  in.unit_texels.data(),
-                  in.unit_texels.size(),
-                  in.probes.position.data(),
-                  in.probes.count(),
-                  in.probe_weights.data(),
-                  in.probe_weights.size()};
-    if (key == engine_key) return;
-    if (in.atlas.objects.size() != world->objects.size())
-      throw Error("Vulkan backend: the atlas has " + std::to_string(in.atlas.objects.size()) +
-                  " objects, the world " + std::to_string(world->objects.size()));
-    // Per object: triangle base, lightmap offset and size; per triangle: uv corners, material.
+  // Per object: triangle base, lightmap offset and size; per triangle: lightmap and base-colour
+  // uv corners, material. Without an atlas (the reference path tracer reads no lightmap) the
+  // lightmap fields are zero.
+  void write_surfaces(const Atlas* atlas) {
     std::vector<glm::uvec4> objects;
     std::vector<glm::vec4> attr;
     std::uint32_t lightmap_texels = 0;
     object_offsets.clear();
+    const ObjectLightmap none;
     for (const WorldObject& o : world->objects) {
-      const ObjectLightmap& lm = in.atlas.objects[o.object];
+      const ObjectLightmap& lm = atlas ? atlas->objects[o.object] : none;
       objects.emplace_back(static_cast<std::uint32_t>(attr.size() / 4), lightmap_texels,
                            static_cast<std::uint32_t>(lm.width),
                            static_cast<std::uint32_t>(lm.height));
@@ -452,6 +463,23 @@ struct VulkanBackend::Impl {
     lightmap_total = lightmap_texels;
     write(kObjects, objects);
     write(kTriAttr, attr);
+  }
+
+  void prepare(const PassInput& in) {
+    EngineKey key{&in.atlas,
+                  in.texels.position.data(),
+                  in.texels.size(),
+                  in.unit_texels.data(),
+                  in.unit_texels.size(),
+                  in.probes.position.data(),
+                  in.probes.count(),
+                  in.probe_weights.data(),
+                  in.probe_weights.size()};
+    if (key == engine_key) return;
+    if (in.atlas.objects.size() != world->objects.size())
+      throw Error("Vulkan backend: the atlas has " + std::to_string(in.atlas.objects.size()) +
+                  " objects, the world " + std::to_string(world->objects.size()));
+    write_surfaces(&in.atlas);
     const SurfaceTexels& st = in.texels;
     write(kTexels, st.size() * 3 * sizeof(glm::vec4), [&](void* dst) {
       auto* v = static_cast<glm::vec4*>(dst);
@@ -532,7 +560,7 @@ struct VulkanBackend::Impl {
   // Records the pending uploads, `count` items of one pass and the read-back of `count`
   // results, submits and waits; the results land in `out`.
   void run(PipelineId pipeline, PushConstants pc, std::uint32_t count, std::vector<glm::vec3>& out,
-           std::size_t out_size) {
+           std::size_t out_size, double* w_sum = nullptr) {
     const VkDeviceSize result_bytes = std::max<VkDeviceSize>(out_size * sizeof(glm::vec4), 16);
     ensure(kResult, result_bytes);
     const bool readback = device_buffers[kResult].mapped == nullptr;
@@ -595,6 +623,8 @@ struct VulkanBackend::Impl {
                                                              : device_buffers[kResult].mapped);
     out.resize(out_size);
     for (std::size_t i = 0; i < out_size; ++i) out[i] = glm::vec3(src[i]);
+    if (w_sum)
+      for (std::size_t i = 0; i < out_size; ++i) *w_sum += src[i].w;
   }
 
   void barrier(VkPipelineStageFlags src_stage, VkAccessFlags src, VkPipelineStageFlags dst_stage,
@@ -751,6 +781,83 @@ PassResult VulkanBackend::scatter(const PassInput& in, const RadianceField& prev
   r.rays = static_cast<std::uint64_t>(in.unit_texels.size()) * pc.samples;
   r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return r;
+}
+
+}  // namespace irradcast
+
+namespace irradcast {
+
+std::vector<Lightmap> VulkanBackend::reference_lightmaps(const std::vector<TexelGBuffer>& gbuffers,
+                                                         int samples, int indirect_bounces,
+                                                         std::uint64_t seed,
+                                                         ReferenceLightmapStats* stats) {
+  if (samples <= 0) throw Error("samples per texel must be positive");
+  if (indirect_bounces < 0) throw Error("indirect bounces must be >= 0");
+  const World& world = *impl_->world;
+  if (gbuffers.size() != world.objects.size())
+    throw Error("reference lightmaps: G-buffers do not match the scene's objects");
+  std::lock_guard lock(impl_->mutex);
+  Impl::ForgetOnThrow guard{impl_.get()};
+  const auto start = Clock::now();
+  // The valid texels, with the geometric normal on the shading normal's side (as the CPU's
+  // reference_lightmaps), in the engine's texel buffer: the engine's data goes up again after.
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> where;  // (object, texel)
+  for (std::size_t o = 0; o < gbuffers.size(); ++o)
+    for (std::size_t i = 0; i < gbuffers[o].size(); ++i)
+      if (gbuffers[o].valid(i))
+        where.emplace_back(static_cast<std::uint32_t>(o), static_cast<std::uint32_t>(i));
+  if (where.size() > 0xFFFFFFFFu) throw Error("Vulkan backend: too many texels for one pass");
+  impl_->engine_key = EngineKey{};
+  impl_->write(kTexels, where.size() * 3 * sizeof(glm::vec4), [&](void* dst) {
+    auto* v = static_cast<glm::vec4*>(dst);
+    for (std::size_t k = 0; k < where.size(); ++k) {
+      const auto [o, i] = where[k];
+      const TexelGBuffer& g = gbuffers[o];
+      const glm::vec3 n = g.normal[i];
+      glm::vec3 ng = world.objects[o].geometric_normal(static_cast<std::uint32_t>(g.triangle[i]));
+      if (glm::dot(ng, n) < 0.0f) ng = -ng;
+      v[3 * k] = glm::vec4(g.position[i], 0.0f);
+      v[3 * k + 1] = glm::vec4(n, 0.0f);
+      v[3 * k + 2] = glm::vec4(ng, 0.0f);
+    }
+  });
+  PushConstants pc;
+  pc.seed_lo = static_cast<std::uint32_t>(seed);
+  pc.seed_hi = static_cast<std::uint32_t>(seed >> 32);
+  pc.bounce = static_cast<std::uint32_t>(indirect_bounces);
+  pc.epsilon = impl_->rays->epsilon();
+  pc.punctual_count = impl_->punctual_count;
+  pc.emissive_count = impl_->emissive_count;
+  if (impl_->emissive_count > 0) pc.flags |= kFlagArea;
+  // Batches of paths, so that progress shows and no single dispatch runs for long.
+  const int batch = 16;
+  std::vector<glm::dvec3> sum(where.size(), glm::dvec3(0.0));
+  std::vector<glm::vec3> out;
+  double rays = 0.0;
+  Progress progress("reference lightmaps (vulkan)", static_cast<std::uint64_t>(samples),
+                    "samples per texel");
+  for (int done = 0, chunk = 0; done < samples; done += batch, ++chunk) {
+    const int n = std::min(batch, samples - done);
+    pc.update = static_cast<std::uint32_t>(chunk);
+    pc.samples = static_cast<std::uint32_t>(n);
+    impl_->run(kReferencePipeline, pc, static_cast<std::uint32_t>(where.size()), out, where.size(),
+               &rays);
+    for (std::size_t k = 0; k < where.size(); ++k) sum[k] += glm::dvec3(out[k]) * double(n);
+    progress.advance(static_cast<std::uint64_t>(n));
+  }
+  progress.finish();
+  std::vector<Lightmap> maps(gbuffers.size());
+  for (std::size_t o = 0; o < gbuffers.size(); ++o)
+    maps[o] = Lightmap(gbuffers[o].width, gbuffers[o].height);
+  for (std::size_t k = 0; k < where.size(); ++k)
+    maps[where[k].first].texels[where[k].second] = glm::vec3(sum[k] / double(samples));
+  for (std::size_t o = 0; o < gbuffers.size(); ++o)
+    dilate(maps[o].texels, maps[o].width, maps[o].height, gbuffers[o].kind);
+  if (stats) {
+    stats->rays = static_cast<std::uint64_t>(rays);
+    stats->seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  }
+  return maps;
 }
 
 }  // namespace irradcast

@@ -31,6 +31,7 @@
 #include "irradcast/reference_lightmaps.h"
 #include "irradcast/texel_validity.h"
 #include "irradcast/tonemap.h"
+#include "irradcast/vulkan_backend.h"
 #include "irradcast/world.h"
 
 namespace fs = std::filesystem;
@@ -160,7 +161,14 @@ int run(const Options& o) {
   double lightmap_seconds = 0.0;
   if (o.method == "reference") {
     ReferenceLightmapStats lm_stats;
-    maps = reference_lightmaps(world, tracer, gbuffers, o.lightmap_spp, &lm_stats);
+    // The per-texel path tracer on the chosen backend: the device's reference.comp, or Embree.
+    BackendChoice choice = make_backend(bo, world, rays, lights);
+    report["reference_backend"] = choice.backend->describe();
+    if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get()))
+      maps = vulkan->reference_lightmaps(gbuffers, o.lightmap_spp, o.engine.bounces, o.engine.seed,
+                                         &lm_stats);
+    else
+      maps = reference_lightmaps(world, tracer, gbuffers, o.lightmap_spp, &lm_stats);
     lightmap_rays = lm_stats.rays;
     lightmap_seconds = lm_stats.seconds;
     timings["lightmaps"] = sw.lap();

@@ -2,7 +2,8 @@
 // to SPIR-V at build time and embedded), tracing rays through a BVH in storage buffers built by
 // build_gpu_bvh. No ray-tracing extensions, so Mesa's lavapipe and real GPUs run the same code.
 // Same estimators, sample counts and ray offsets as EmbreeBackend; its own random numbers, so
-// the two agree within Monte Carlo noise, not bit for bit.
+// the two agree within Monte Carlo noise, not bit for bit. The reference path tracer's lightmaps
+// run here too (reference.comp).
 #pragma once
 
 #include <memory>
@@ -10,6 +11,7 @@
 
 #include "irradcast/lights.h"
 #include "irradcast/ray_scene.h"
+#include "irradcast/reference_lightmaps.h"
 #include "irradcast/trace_backend.h"
 #include "irradcast/vulkan_device.h"
 
@@ -38,6 +40,13 @@ class VulkanBackend final : public TraceBackend {
   PassResult scatter(const PassInput& in, const RadianceField& prev,
                      const std::vector<glm::vec3>& probe_radiance,
                      std::vector<glm::vec3>& out) override;
+
+  // The reference path tracer's lightmaps (reference_lightmaps with PathTracer, next-event
+  // estimation) on the device: `samples` paths per valid texel, `indirect_bounces` bounces,
+  // dilated into the gutters. Same estimator as the CPU's; its own random numbers.
+  std::vector<Lightmap> reference_lightmaps(const std::vector<TexelGBuffer>& gbuffers, int samples,
+                                            int indirect_bounces, std::uint64_t seed,
+                                            ReferenceLightmapStats* stats = nullptr);
 
  private:
   struct Impl;
