@@ -15,7 +15,7 @@ layout(std430, binding = 0) readonly buffer Nodes { vec4 nodes[]; };
 // 3 vec4 per triangle in BVH order: (v0, object) (v1, triangle in object) (v2, -).
 layout(std430, binding = 1) readonly buffer Tris { vec4 tris[]; };
 // 4 vec4 per triangle, objects[o].x + t: lightmap uv corners (0,1) | (2, base uv 0) |
-// base uv (1,2) | (material, -, -, -).
+// base uv (1,2) | (material, its index in emissive[] or -1, -, -).
 layout(std430, binding = 2) readonly buffer TriAttr { vec4 tri_attr[]; };
 // Per object: first triangle in tri_attr, first lightmap texel in prev[], width, height.
 layout(std430, binding = 3) readonly buffer Objects { uvec4 objects[]; };
@@ -44,6 +44,7 @@ layout(std430, binding = 15) writeonly buffer Result { vec4 result[]; };
 layout(std430, binding = 16) readonly buffer TriNormals { vec4 tri_normals[]; };
 
 const uint FLAG_AREA = 1u, FLAG_UNBIASED = 2u, FLAG_FIXED = 4u, FLAG_PROBES = 8u;
+const uint FLAG_CAMERA = 16u;
 
 layout(push_constant) uniform Params {
   uint base;     // first item of this dispatch

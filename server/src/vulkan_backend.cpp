@@ -13,6 +13,7 @@
 
 #include "direct.spv.h"
 #include "gather.spv.h"
+#include "irradcast/camera.h"
 #include "irradcast/error.h"
 #include "irradcast/gpu_bvh.h"
 #include "irradcast/progress.h"
@@ -55,7 +56,13 @@ enum PipelineId : int {
   kPipelines
 };
 
-enum Flags : std::uint32_t { kFlagArea = 1, kFlagUnbiased = 2, kFlagFixed = 4, kFlagProbes = 8 };
+enum Flags : std::uint32_t {
+  kFlagArea = 1,
+  kFlagUnbiased = 2,
+  kFlagFixed = 4,
+  kFlagProbes = 8,
+  kFlagCamera = 16
+};
 
 // shaders/common.glsl's push constant block (std430 offsets).
 struct PushConstants {
@@ -411,6 +418,18 @@ struct VulkanBackend::Impl {
     write(kPunctual, pl);
     punctual_count = static_cast<std::uint32_t>(world->lights.size());
 
+    // Per triangle (global index, objects in order): its entry in the emissive list or -1.
+    std::vector<std::size_t> base;
+    std::size_t triangles = 0;
+    for (const WorldObject& o : world->objects) {
+      base.push_back(triangles);
+      triangles += o.triangles().size();
+    }
+    emissive_of.assign(triangles, -1);
+    for (std::size_t k = 0; k < tris.size(); ++k)
+      emissive_of[base[static_cast<std::size_t>(tris[k].object)] + tris[k].triangle] =
+          static_cast<std::int32_t>(k);
+
     std::vector<glm::vec4> normals;
     for (const WorldObject& o : world->objects) {
       const bool has = !o.normals.empty();
@@ -457,7 +476,10 @@ struct VulkanBackend::Impl {
         attr.emplace_back(l0, l1);
         attr.emplace_back(l2, o.uv(set, t, 0.0f, 0.0f));
         attr.emplace_back(o.uv(set, t, 1.0f, 0.0f), o.uv(set, t, 0.0f, 1.0f));
-        attr.emplace_back(as_float(material_index(o.object, t)), 0.0f, 0.0f, 0.0f);
+        const std::size_t global = attr.size() / 4;
+        attr.emplace_back(as_float(material_index(o.object, t)),
+                          as_float(global < emissive_of.size() ? emissive_of[global] : -1), 0.0f,
+                          0.0f);
       }
     }
     lightmap_total = lightmap_texels;
@@ -627,6 +649,41 @@ struct VulkanBackend::Impl {
       for (std::size_t i = 0; i < out_size; ++i) *w_sum += src[i].w;
   }
 
+  // The reference path tracer over `items` items already in the texel buffer (texels, or with
+  // camera set, primary rays): `samples` paths each, in batches of 16 (a progress line, no
+  // long dispatch). Returns each item's mean.
+  std::vector<glm::dvec3> paths(std::size_t items, int samples, int bounces, std::uint64_t seed,
+                                bool camera, const char* what, const char* unit,
+                                ReferenceLightmapStats* stats) {
+    if (items > 0xFFFFFFFFu) throw Error("Vulkan backend: too many items for one pass");
+    PushConstants pc;
+    pc.seed_lo = static_cast<std::uint32_t>(seed);
+    pc.seed_hi = static_cast<std::uint32_t>(seed >> 32);
+    pc.bounce = static_cast<std::uint32_t>(bounces);
+    pc.epsilon = rays->epsilon();
+    pc.punctual_count = punctual_count;
+    pc.emissive_count = emissive_count;
+    if (emissive_count > 0) pc.flags |= kFlagArea;
+    if (camera) pc.flags |= kFlagCamera;
+    const int batch = 16;
+    std::vector<glm::dvec3> sum(items, glm::dvec3(0.0));
+    std::vector<glm::vec3> out;
+    double ray_count = 0.0;
+    Progress progress(what, static_cast<std::uint64_t>(samples), unit);
+    for (int done = 0, chunk = 0; done < samples; done += batch, ++chunk) {
+      const int n = std::min(batch, samples - done);
+      pc.update = static_cast<std::uint32_t>(chunk);
+      pc.samples = static_cast<std::uint32_t>(n);
+      run(kReferencePipeline, pc, static_cast<std::uint32_t>(items), out, items, &ray_count);
+      for (std::size_t k = 0; k < items; ++k) sum[k] += glm::dvec3(out[k]) * double(n);
+      progress.advance(static_cast<std::uint64_t>(n));
+    }
+    progress.finish();
+    for (glm::dvec3& v : sum) v /= double(samples);
+    if (stats) stats->rays = static_cast<std::uint64_t>(ray_count);
+    return sum;
+  }
+
   void barrier(VkPipelineStageFlags src_stage, VkAccessFlags src, VkPipelineStageFlags dst_stage,
                VkAccessFlags dst) {
     VkMemoryBarrier mb{};
@@ -698,6 +755,7 @@ struct VulkanBackend::Impl {
   EngineKey engine_key;
   PrevKey prev_key;
   std::vector<std::uint32_t> object_offsets;
+  std::vector<std::int32_t> emissive_of;  // per triangle: index in the emissive list, or -1
   std::uint32_t lightmap_total = 0;
   std::mutex mutex;  // one pass at a time
 };
@@ -821,43 +879,50 @@ std::vector<Lightmap> VulkanBackend::reference_lightmaps(const std::vector<Texel
       v[3 * k + 2] = glm::vec4(ng, 0.0f);
     }
   });
-  PushConstants pc;
-  pc.seed_lo = static_cast<std::uint32_t>(seed);
-  pc.seed_hi = static_cast<std::uint32_t>(seed >> 32);
-  pc.bounce = static_cast<std::uint32_t>(indirect_bounces);
-  pc.epsilon = impl_->rays->epsilon();
-  pc.punctual_count = impl_->punctual_count;
-  pc.emissive_count = impl_->emissive_count;
-  if (impl_->emissive_count > 0) pc.flags |= kFlagArea;
-  // Batches of paths, so that progress shows and no single dispatch runs for long.
-  const int batch = 16;
-  std::vector<glm::dvec3> sum(where.size(), glm::dvec3(0.0));
-  std::vector<glm::vec3> out;
-  double rays = 0.0;
-  Progress progress("reference lightmaps (vulkan)", static_cast<std::uint64_t>(samples),
-                    "samples per texel");
-  for (int done = 0, chunk = 0; done < samples; done += batch, ++chunk) {
-    const int n = std::min(batch, samples - done);
-    pc.update = static_cast<std::uint32_t>(chunk);
-    pc.samples = static_cast<std::uint32_t>(n);
-    impl_->run(kReferencePipeline, pc, static_cast<std::uint32_t>(where.size()), out, where.size(),
-               &rays);
-    for (std::size_t k = 0; k < where.size(); ++k) sum[k] += glm::dvec3(out[k]) * double(n);
-    progress.advance(static_cast<std::uint64_t>(n));
-  }
-  progress.finish();
+  const std::vector<glm::dvec3> sum =
+      impl_->paths(where.size(), samples, indirect_bounces, seed, false,
+                   "reference lightmaps (vulkan)", "samples per texel", stats);
   std::vector<Lightmap> maps(gbuffers.size());
   for (std::size_t o = 0; o < gbuffers.size(); ++o)
     maps[o] = Lightmap(gbuffers[o].width, gbuffers[o].height);
   for (std::size_t k = 0; k < where.size(); ++k)
-    maps[where[k].first].texels[where[k].second] = glm::vec3(sum[k] / double(samples));
+    maps[where[k].first].texels[where[k].second] = glm::vec3(sum[k]);
   for (std::size_t o = 0; o < gbuffers.size(); ++o)
     dilate(maps[o].texels, maps[o].width, maps[o].height, gbuffers[o].kind);
-  if (stats) {
-    stats->rays = static_cast<std::uint64_t>(rays);
-    stats->seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  }
+  if (stats) stats->seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return maps;
+}
+
+ImageRGB VulkanBackend::render_reference(const CameraPose& camera, int width, int height,
+                                         int samples, int indirect_bounces, std::uint64_t seed,
+                                         ReferenceLightmapStats* stats) {
+  if (width <= 0 || height <= 0) throw Error("image size must be positive");
+  if (samples <= 0) throw Error("samples per pixel must be positive");
+  if (indirect_bounces < 0) throw Error("indirect bounces must be >= 0");
+  std::lock_guard lock(impl_->mutex);
+  Impl::ForgetOnThrow guard{impl_.get()};
+  const auto start = Clock::now();
+  const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  impl_->engine_key = EngineKey{};
+  impl_->write(kTexels, n * 3 * sizeof(glm::vec4), [&](void* dst) {
+    auto* v = static_cast<glm::vec4*>(dst);
+    for (int y = 0; y < height; ++y)
+      for (int x = 0; x < width; ++x) {
+        const std::size_t k = static_cast<std::size_t>(y) * width + x;
+        // Through the pixel centre, like the compositor and PathTracer::render.
+        const Ray r = camera_ray(camera, width, height, static_cast<float>(x) + 0.5f,
+                                 static_cast<float>(y) + 0.5f);
+        v[3 * k] = glm::vec4(r.origin, 0.0f);
+        v[3 * k + 1] = glm::vec4(r.direction, 0.0f);
+        v[3 * k + 2] = glm::vec4(0.0f);
+      }
+  });
+  const std::vector<glm::dvec3> sum =
+      impl_->paths(n, samples, indirect_bounces, seed, true, "reference (vulkan)", "spp", stats);
+  ImageRGB image(width, height);
+  for (std::size_t k = 0; k < n; ++k) image.pixels[k] = glm::vec3(sum[k]);
+  if (stats) stats->seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  return image;
 }
 
 }  // namespace irradcast

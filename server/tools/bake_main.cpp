@@ -258,11 +258,22 @@ int run(const Options& o) {
   json rate = {{"lightmaps", lightmap_rays / std::max(1e-9, lightmap_seconds)},
                {"compose", cs.rays / std::max(1e-9, cs.seconds)}};
   if (o.reference_spp > 0) {
-    Progress progress("reference", static_cast<std::uint64_t>(o.reference_spp), "spp");
     PathTracer::RenderStats rs;
-    ImageRGB ref = tracer.render(
-        camera, o.width, o.height, o.reference_spp, [&](int, int) { progress.advance(1); }, &rs);
-    progress.finish();
+    ImageRGB ref;
+    BackendChoice choice = make_backend(bo, world, rays, lights);
+    report["reference_view_backend"] = choice.backend->describe();
+    if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get())) {
+      ReferenceLightmapStats vs;
+      ref = vulkan->render_reference(camera, o.width, o.height, o.reference_spp, o.engine.bounces,
+                                     o.engine.seed, &vs);
+      rs.rays = vs.rays;
+      rs.seconds = vs.seconds;
+    } else {
+      Progress progress("reference", static_cast<std::uint64_t>(o.reference_spp), "spp");
+      ref = tracer.render(
+          camera, o.width, o.height, o.reference_spp, [&](int, int) { progress.advance(1); }, &rs);
+      progress.finish();
+    }
     timings["reference"] = sw.lap();
     write_exr((fs::path(o.out) / "reference.exr").string(), ref);
     // The reference uses the view's exposure so the two PNGs compare by eye.

@@ -9,6 +9,7 @@
 #include <memory>
 #include <string>
 
+#include "irradcast/image.h"
 #include "irradcast/lights.h"
 #include "irradcast/ray_scene.h"
 #include "irradcast/reference_lightmaps.h"
@@ -47,6 +48,11 @@ class VulkanBackend final : public TraceBackend {
   std::vector<Lightmap> reference_lightmaps(const std::vector<TexelGBuffer>& gbuffers, int samples,
                                             int indirect_bounces, std::uint64_t seed,
                                             ReferenceLightmapStats* stats = nullptr);
+  // The reference path tracer's view (PathTracer::render): `samples` paths per pixel through
+  // the pixel centres, `indirect_bounces` bounces.
+  ImageRGB render_reference(const CameraPose& camera, int width, int height, int samples,
+                            int indirect_bounces, std::uint64_t seed,
+                            ReferenceLightmapStats* stats = nullptr);
 
  private:
   struct Impl;
