@@ -3,7 +3,8 @@
 // side in one run: the same scene, atlas, probes and parameters, updates interleaved (one
 // update on each backend in turn) so that machine load drifts hit both alike. Reports per pass
 // time and rays/s per backend and their ratio, the backend set-up time (BVH, upload, shader
-// compilation) apart; writes JSON and a PNG bar chart (docs/BENCHMARKS.md, "Backends").
+// compilation) apart, and the reference path tracer's lightmaps on each backend; writes JSON
+// and a PNG bar chart (docs/BENCHMARKS.md, "Backends").
 #include <tbb/global_control.h>
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -26,9 +27,12 @@
 #include "irradcast/gbuffer.h"
 #include "irradcast/lights.h"
 #include "irradcast/log.h"
+#include "irradcast/path_tracer.h"
 #include "irradcast/progress.h"
 #include "irradcast/ray_scene.h"
+#include "irradcast/reference_lightmaps.h"
 #include "irradcast/texel_validity.h"
+#include "irradcast/vulkan_backend.h"
 #include "irradcast/world.h"
 #include "plot.h"
 
@@ -96,7 +100,7 @@ int main(int argc, char** argv) {
   std::string json_path;
   float texels_per_scene = 256.0f;
   float range = 0.3f;
-  int updates = 4, warmup = 1, threads = 0, vulkan_device = -1;
+  int updates = 4, warmup = 1, threads = 0, vulkan_device = -1, reference_spp = 16;
   app.add_option("--scenes", scenes_text, "scenes, comma separated");
   app.add_option("--backends", backends_text, "backends, comma separated: embree, vulkan");
   app.add_option("--vulkan-device", vulkan_device, "Vulkan device index (--list-devices)");
@@ -106,6 +110,9 @@ int main(int argc, char** argv) {
   app.add_option("--updates", updates, "timed updates per backend")->check(CLI::Range(1, 1000));
   app.add_option("--warmup", warmup, "untimed updates first (uploads, shader compilation)")
       ->check(CLI::Range(0, 100));
+  app.add_option("--reference-spp", reference_spp,
+                 "reference lightmaps per backend, paths per texel (0: skip)")
+      ->check(CLI::Range(0, 100000));
   app.add_option("--threads", threads, "TBB threads for Embree and the host (0: all cores)");
   app.add_option("--out", out, "directory for the JSON and the PNG chart");
   app.add_option("--json", json_path, "JSON results file (default OUT/backend.json)");
@@ -221,6 +228,32 @@ int main(int argc, char** argv) {
       for (const BackendRun& r : runs)
         std::printf("%-10s set-up + %d warm-up update(s) %-8s %.2f s (%s)\n", spec.c_str(), warmup,
                     r.name.c_str(), r.setup_seconds, r.describe.c_str());
+      // The reference path tracer's lightmaps on each backend (set-up not timed).
+      if (reference_spp > 0) {
+        const int bounces = params.indirect_bounces;
+        for (const std::string& b : backends) {
+          ReferenceLightmapStats st;
+          std::string device = "embree";
+          if (parse_backend(b) == BackendKind::Vulkan) {
+            VulkanContextOptions vo;
+            vo.device = vulkan_device;
+            VulkanBackend v(world, rays, lights, vo);
+            device = v.describe();
+            v.reference_lightmaps(gbuffers, 1, bounces, 2);  // warm-up: shader compilation
+            v.reference_lightmaps(gbuffers, reference_spp, bounces, 1, &st);
+          } else {
+            PathTracer tracer(world, rays, lights, PathTracerOptions{bounces, true, 1});
+            reference_lightmaps(world, tracer, gbuffers, reference_spp, &st);
+          }
+          std::printf("%-10s reference lightmaps %-8s %d spp: %.2f s, %.2f Mrays/s\n", spec.c_str(),
+                      b.c_str(), reference_spp, st.seconds, st.rays / st.seconds / 1e6);
+          scene_json["reference"].push_back({{"backend", b},
+                                             {"device", device},
+                                             {"samples_per_texel", reference_spp},
+                                             {"seconds", st.seconds},
+                                             {"rays", st.rays}});
+        }
+      }
       std::fflush(stdout);
       results.push_back(scene_json);
     }

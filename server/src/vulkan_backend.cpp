@@ -267,7 +267,7 @@ struct VulkanBackend::Impl {
 
   // A storage buffer the shaders read: device-local on a discrete GPU (filled through staging),
   // host-visible device memory elsewhere (written in place). Staging buffers are host memory.
-  void create(Buffer& b, VkDeviceSize size, bool staging_buffer) {
+  void create(Buffer& b, VkDeviceSize size, bool staging_buffer, bool read_back = false) {
     if (!staging_buffer && size > max_buffer)
       throw Error("Vulkan: a " + std::to_string(size >> 20) + " MiB storage buffer exceeds " +
                   context.device().name + "'s limit of " + std::to_string(max_buffer >> 20) +
@@ -284,13 +284,18 @@ struct VulkanBackend::Impl {
     const VkMemoryPropertyFlags host =
         VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
     const VkMemoryPropertyFlags local = VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
+    const VkMemoryPropertyFlags cached = VK_MEMORY_PROPERTY_HOST_CACHED_BIT;
     std::vector<VkMemoryPropertyFlags> prefs;
     if (staging_buffer)
-      prefs = {host | VK_MEMORY_PROPERTY_HOST_CACHED_BIT, host};
+      prefs = {host | cached, host};
     else if (discrete)
       prefs = {local, host};
     else
-      prefs = {local | host, host, local};
+      // The result is read by the host: cached memory reads fast there (integrated GPUs often
+      // have an uncached host-visible device-local type too, which is slow to read).
+      prefs = read_back ? std::vector<VkMemoryPropertyFlags>{local | host | cached, host | cached,
+                                                             local | host, host, local}
+                        : std::vector<VkMemoryPropertyFlags>{local | host, host, local};
     VkResult last = VK_ERROR_OUT_OF_DEVICE_MEMORY;
     for (VkMemoryPropertyFlags want : prefs) {
       int type = memory_type(req.memoryTypeBits, want);
@@ -328,7 +333,7 @@ struct VulkanBackend::Impl {
     Buffer& b = device_buffers[binding];
     if (b.size >= bytes) return;
     destroy(b);
-    create(b, bytes, false);
+    create(b, bytes, false, binding == kResult);
     descriptors_dirty = true;
   }
 
