@@ -227,6 +227,16 @@ std::vector<TexelGBuffer> rasterize_gbuffer(const World& world, const Atlas& atl
   return out;
 }
 
+void rasterize_gbuffer(const World& world, const Atlas& atlas, std::vector<TexelGBuffer>& gbuffers,
+                       const std::vector<std::uint8_t>& which) {
+  if (atlas.objects.size() != world.objects.size() || gbuffers.size() != world.objects.size())
+    throw Error("rasterize_gbuffer: the atlas or G-buffers do not match the scene's objects");
+  tbb::parallel_for(std::size_t(0), atlas.objects.size(), [&](std::size_t oi) {
+    if (oi < which.size() && which[oi])
+      gbuffers[oi] = rasterize_object(world, oi, atlas.objects[oi]);
+  });
+}
+
 void dilate(std::vector<glm::vec3>& texels, int width, int height,
             const std::vector<TexelKind>& valid, int rings) {
   const std::size_t size =

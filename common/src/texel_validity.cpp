@@ -13,6 +13,12 @@ namespace irradcast {
 
 std::size_t mark_hidden_texels(const RayScene& rays, std::vector<TexelGBuffer>& gbuffers,
                                const TexelValidityOptions& options) {
+  return mark_hidden_texels(rays, gbuffers, std::vector<std::uint8_t>(gbuffers.size(), 1), options);
+}
+
+std::size_t mark_hidden_texels(const RayScene& rays, std::vector<TexelGBuffer>& gbuffers,
+                               const std::vector<std::uint8_t>& which,
+                               const TexelValidityOptions& options) {
   const World& world = rays.world();
   if (gbuffers.size() != world.objects.size())
     throw Error("texel validity: G-buffers do not match the scene's objects");
@@ -29,6 +35,7 @@ std::size_t mark_hidden_texels(const RayScene& rays, std::vector<TexelGBuffer>& 
   const int limit = static_cast<int>(options.hidden_fraction * static_cast<float>(options.rays));
   std::atomic<std::size_t> marked{0};
   for (std::size_t o = 0; o < gbuffers.size(); ++o) {
+    if (o >= which.size() || !which[o]) continue;
     TexelGBuffer& g = gbuffers[o];
     const WorldObject& obj = world.objects[o];
     tbb::parallel_for(

@@ -316,7 +316,9 @@ UpdateStats Engine::update() {
     // read other texels and are kept.
     queue_.clear();
     queue_pos_ = 0;
-    std::fill(bounce_samples_.begin(), bounce_samples_.end(), 0u);
+    const auto keep = static_cast<std::uint32_t>(params_.edit_keep);
+    for (std::size_t i = 0; i < bounce_samples_.size(); ++i)
+      bounce_samples_[i] = restarted_[i] ? 0u : std::min(bounce_samples_[i], keep);
     probe_samples_ = 0;
     ++generation_;
   }
@@ -394,6 +396,7 @@ std::vector<glm::vec3> Engine::shown() const {
   const float tau = params_.edit_blend;
   const auto cutoff = static_cast<std::uint32_t>(std::ceil(std::log(100.0f) * tau));
   for (std::size_t i = 0; i < sum.size(); ++i) {
+    if (i < restarted_.size() && !restarted_[i]) continue;
     const std::uint32_t n = samples_[i];
     if (n >= cutoff) continue;
     const float w = n == 0 ? 1.0f : std::exp(-static_cast<float>(n) / tau);
@@ -473,18 +476,30 @@ bool segment_hits(const Bounds& box, glm::vec3 a, glm::vec3 b) {
 }  // namespace
 
 void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPose>& cameras) {
-  // What every texel shows now, and the old component means, by (object, texel) so that they
-  // survive the rebuild; texels that were not valid before read the old dilated lightmaps.
+  auto lap_start = std::chrono::steady_clock::now();
+  change_timings_.clear();
+  auto lap = [&](const char* what) {
+    const auto now = std::chrono::steady_clock::now();
+    change_timings_ += std::string(change_timings_.empty() ? "" : ", ") + what + " " +
+                       std::to_string(static_cast<int>(
+                           1e3 * std::chrono::duration<double>(now - lap_start).count())) +
+                       " ms";
+    lap_start = now;
+  };
+  // What every texel shows now and its old component means, found again by (object, texel)
+  // after the rebuild; texels that were not valid before read the old dilated lightmaps.
   const std::vector<glm::vec3> shown_before = shown();
-  std::vector<std::vector<Lightmap>> old_maps;
-  old_maps.push_back(to_lightmaps(shown_before));
-  for (const auto& m : mean_) old_maps.push_back(to_lightmaps(m));
-
+  const std::vector<std::vector<glm::vec3>> mean_before = mean_;
+  const SurfaceTexels texels_before = texels_;
+  const std::vector<std::uint32_t> samples_before = samples_, bounce_before = bounce_samples_;
+  const std::vector<double> total_mean_before = total_mean_, total_m2_before = total_m2_;
+  const std::vector<std::uint8_t> restarted_before = restarted_;
   if (change.geometry || change.surfaces) {
     build_texels(*gbuffers_);
     for (std::size_t i = 0; i < texels_.size(); ++i)
       texels_.cell.push_back(static_cast<std::uint32_t>(probes_.cell_index(texels_.position[i])));
   }
+  lap("texels");
   if (change.geometry && !params_.unbiased()) {
     // Probes in cells a moved object touches (before or after) are placed again.
     std::vector<std::size_t> again;
@@ -502,24 +517,61 @@ void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPo
         }
     }
     place_probes(again);
+    lap(("probes (" + std::to_string(again.size()) + ")").c_str());
   }
   if ((change.geometry || change.surfaces) && !params_.unbiased()) build_probe_weights();
   if (change.geometry || change.surfaces) build_dispatch();
+  lap("probe weights");
 
   // Every texel restarts; its means keep the old values until its first new sample.
   const std::size_t n = texels_.size();
+  std::vector<std::vector<std::int32_t>> old_index(world_->objects.size());
+  for (std::size_t o = 0; o < old_index.size(); ++o)
+    old_index[o].assign((*gbuffers_)[o].size(), -1);
+  for (std::size_t i = 0; i < texels_before.size(); ++i)
+    old_index[texels_before.object[i]][texels_before.texel[i]] = static_cast<std::int32_t>(i);
   before_.resize(n);
   for (auto& m : mean_) m.resize(n);
+  std::vector<std::uint32_t> missing;
+  std::vector<std::int32_t> old_of(n, -1);
   for (std::size_t i = 0; i < n; ++i) {
-    const std::uint32_t o = texels_.object[i], t = texels_.texel[i];
-    before_[i] = old_maps[0][o].texels[t];
-    for (std::size_t b = 0; b < mean_.size(); ++b) mean_[b][i] = old_maps[b + 1][o].texels[t];
+    const std::int32_t j = old_index[texels_.object[i]][texels_.texel[i]];
+    old_of[i] = j;
+    if (j < 0) {
+      missing.push_back(static_cast<std::uint32_t>(i));
+      continue;
+    }
+    before_[i] = shown_before[static_cast<std::size_t>(j)];
+    for (std::size_t b = 0; b < mean_.size(); ++b)
+      mean_[b][i] = mean_before[b][static_cast<std::size_t>(j)];
   }
-  samples_.assign(n, 0);
-  bounce_samples_.assign(n, 0);
-  total_mean_.assign(n, 0.0);
-  total_m2_.assign(n, 0.0);
-  probe_samples_ = 0;
+  if (!missing.empty()) {
+    // Newly valid texels (uncovered by a moved object): the old dilated lightmaps there.
+    auto dilated = [&](const std::vector<glm::vec3>& values) {
+      std::vector<Lightmap> maps(world_->objects.size());
+      for (std::size_t o = 0; o < maps.size(); ++o)
+        maps[o] = Lightmap((*gbuffers_)[o].width, (*gbuffers_)[o].height);
+      std::vector<std::vector<TexelKind>> kinds(maps.size());
+      for (std::size_t o = 0; o < maps.size(); ++o)
+        kinds[o].assign(maps[o].texels.size(), TexelKind::Empty);
+      for (std::size_t i = 0; i < texels_before.size(); ++i) {
+        maps[texels_before.object[i]].texels[texels_before.texel[i]] = values[i];
+        kinds[texels_before.object[i]][texels_before.texel[i]] = TexelKind::Covered;
+      }
+      tbb::parallel_for(std::size_t(0), maps.size(), [&](std::size_t o) {
+        dilate(maps[o].texels, maps[o].width, maps[o].height, kinds[o]);
+      });
+      return maps;
+    };
+    const std::vector<Lightmap> shown_maps = dilated(shown_before);
+    for (std::uint32_t i : missing)
+      before_[i] = shown_maps[texels_.object[i]].texels[texels_.texel[i]];
+    for (std::size_t b = 0; b < mean_.size(); ++b) {
+      const std::vector<Lightmap> maps = dilated(mean_before[b]);
+      for (std::uint32_t i : missing)
+        mean_[b][i] = maps[texels_.object[i]].texels[texels_.texel[i]];
+    }
+  }
 
   // Priority: affected (near a region, sees a changed light, or in a shadow that moved), then
   // the rest; within each, texels a viewer's camera sees first.
@@ -570,6 +622,31 @@ void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPo
     }
     tier[i] = static_cast<std::uint8_t>((affected ? 0 : 2) + (visible ? 0 : 1));
   });
+  lap("priorities");
+  // Affected texels (and texels that were not valid before) restart: their new estimate
+  // replaces the old one, which they show blended away (EngineParams::edit_blend). The others
+  // keep their estimate with the weight of at most edit_keep samples, so new samples soon
+  // outweigh it wherever the edit changed their light after all.
+  samples_.assign(n, 0);
+  bounce_samples_.assign(n, 0);
+  total_mean_.assign(n, 0.0);
+  total_m2_.assign(n, 0.0);
+  restarted_.assign(n, 1);
+  const auto keep = static_cast<std::uint32_t>(params_.edit_keep);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::int32_t j = old_of[i];
+    // A changed light changes the indirect light everywhere it reaches: all restart then.
+    if (tier[i] < 2 || j < 0 || keep == 0 || !change.light_points.empty()) continue;
+    const auto k = static_cast<std::size_t>(j);
+    const std::uint32_t had = samples_before[k];
+    if (had == 0) continue;
+    restarted_[i] = k < restarted_before.size() ? restarted_before[k] : 0;
+    samples_[i] = std::min(had, keep);
+    bounce_samples_[i] = std::min(bounce_before[k], keep);
+    total_mean_[i] = total_mean_before[k];
+    total_m2_[i] = had > 1 ? total_m2_before[k] * (samples_[i] - 1.0) / (had - 1.0) : 0.0;
+  }
+  probe_samples_ = std::min(probe_samples_, keep);
   queue_.clear();
   queue_pos_ = 0;
   for (std::uint8_t t = 0; t < 4; ++t)
@@ -577,6 +654,7 @@ void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPo
       if (tier[i] == t) queue_.push_back(i);
   ++generation_;
   backend_->scene_changed();
+  lap("backend");
 }
 
 }  // namespace irradcast

@@ -183,15 +183,54 @@ void EngineHost::apply_edits() {
   }
 
   // World, ray scene (refit + top level), lights, G-buffers.
+  std::string timings;
+  auto lap_start = std::chrono::steady_clock::now();
+  auto lap = [&](const std::string& what) {
+    const auto now = std::chrono::steady_clock::now();
+    timings += (timings.empty() ? "" : ", ") + what + " " +
+               std::to_string(
+                   static_cast<int>(1e3 * std::chrono::duration<double>(now - lap_start).count())) +
+               " ms";
+    lap_start = now;
+  };
   const std::vector<int> moved = world_.update(scene_);
+  lap("world");
   impl_->rays->update(moved);
+  lap("ray scene");
   *impl_->lights = LightSampler(world_);
   const bool geometry = !moved.empty();
   const bool surfaces = !effect.materials.empty();
   if (geometry || surfaces) {
-    impl_->gbuffers = rasterize_gbuffer(world_, atlas_);
-    mark_hidden_texels(*impl_->rays, impl_->gbuffers);
+    // G-buffers again for what moved, what uses a changed material, and what lies near a moved
+    // object (its texels may have been buried in it, or be now): hidden texels are marked
+    // again on exactly those.
+    std::vector<std::uint8_t> which(world_.objects.size(), 0);
+    std::vector<Bounds> near;
+    for (int o : moved) {
+      which[static_cast<std::size_t>(o)] = 1;
+      near.push_back(boxes_before[static_cast<std::size_t>(o)]);
+      near.push_back(object_box(world_.objects[static_cast<std::size_t>(o)]));
+    }
+    std::vector<bool> changed_material(scene_.materials.size(), false);
+    for (int m : effect.materials) changed_material[static_cast<std::size_t>(m)] = true;
+    const float margin = 0.02f * world_.bounds.max_extent();
+    for (std::size_t o = 0; o < world_.objects.size(); ++o) {
+      const WorldObject& obj = world_.objects[o];
+      for (std::uint32_t m : obj.source->triangle_material)
+        if (m < changed_material.size() && changed_material[m]) {
+          which[o] = 1;
+          break;
+        }
+      const Bounds box = object_box(obj);
+      for (const Bounds& b : near)
+        if (glm::all(glm::lessThanEqual(box.lo, b.hi + margin)) &&
+            glm::all(glm::lessThanEqual(b.lo - margin, box.hi)))
+          which[o] = 1;
+    }
+    rasterize_gbuffer(world_, atlas_, impl_->gbuffers, which);
+    mark_hidden_texels(*impl_->rays, impl_->gbuffers, which);
   }
+  lap("lights and G-buffers");
 
   SceneChange change;
   change.geometry = geometry;
@@ -236,11 +275,14 @@ void EngineHost::apply_edits() {
   } else {
     for (const WorldLight& l : world_.lights) change.other_lights.push_back(l.position);
   }
+  lap("regions");
   impl_->engine->scene_changed(change, cameras);
+  lap("engine (" + impl_->engine->change_timings() + ")");
 
   const std::uint64_t revision = applied.back().revision;
   auto package = std::make_shared<const wire::ScenePackage>(
       wire::make_scene_package(scene_, atlas_, revision));
+  lap("package");
   std::uint64_t epoch = 0;
   {
     std::lock_guard lock(mutex_);
@@ -269,6 +311,7 @@ void EngineHost::apply_edits() {
                           std::to_string(effect.materials.size()) + " materials) in " +
                           std::to_string(static_cast<int>(ms)) + " ms; " +
                           std::to_string(impl_->engine->stale_texels()) + " texels to refresh");
+  log::info("engine", "edit " + std::to_string(revision) + " took: " + timings);
   const std::uint64_t at = now_us();
   for (AppliedEdit& a : applied) {
     a.package = package;
@@ -377,16 +420,19 @@ void EngineHost::do_update() {
                                      update_ends_.size() > kMaxUpdateEnds))
       update_ends_.pop_front();
     stats_.stale_texels = impl_->engine->stale_texels();
-    if (last) {
-      stats_.idle = true;
-      log::info("engine", "reached " + std::to_string(options_.max_updates) +
-                              " updates; the lightmaps are final");
-    }
     listener = listener_;
   }
   log::debug("engine", "update " + std::to_string(impl_->engine->updates()) + ": " +
                            std::to_string(changed.size()) + " tiles changed");
   if (listener && !changed.empty()) listener(changed);
+  if (last) {
+    // Idle only once the listener has queued the final tiles: whoever sees "idle" and an
+    // empty queue then really has every final tile.
+    std::lock_guard lock(mutex_);
+    stats_.idle = true;
+    log::info("engine", "reached " + std::to_string(options_.max_updates) +
+                            " updates; the lightmaps are final");
+  }
   cv_.notify_all();
 }
 

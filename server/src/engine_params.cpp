@@ -19,6 +19,7 @@ void EngineParams::validate() const {
     throw Error("probe_resolution must be in 2..64");
   if (!(edit_blend >= 0.0f && edit_blend <= 64.0f))
     throw Error("edit_blend must be in [0, 64] (updates; 0 = no blending)");
+  if (edit_keep < 0 || edit_keep > 1 << 20) throw Error("edit_keep must be in 0..2^20");
   if (!(edit_batch > 0.0f && edit_batch <= 1.0f))
     throw Error("edit_batch must be in (0, 1] (a fraction of the texels)");
   if (std::ceil(1.0f / cell_size) > 256.0f)

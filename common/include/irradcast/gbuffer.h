@@ -44,6 +44,9 @@ struct TexelGBuffer {
 // triangle's lightmap centroid is always valid (zero-area triangles get just that one).
 // Parallel over objects and bands of rows; deterministic.
 std::vector<TexelGBuffer> rasterize_gbuffer(const World& world, const Atlas& atlas);
+// Rasterizes again only the objects with which[o] != 0 (after a scene edit), in place.
+void rasterize_gbuffer(const World& world, const Atlas& atlas, std::vector<TexelGBuffer>& gbuffers,
+                       const std::vector<std::uint8_t>& which);
 
 // Fills the empty texels of a lightmap from their valid neighbours, ring by ring (each pass
 // averages the already-filled 8-neighbours), so bilinear lookups never read unfilled texels.

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "irradcast/gbuffer.h"
@@ -24,6 +25,10 @@ struct TexelValidityOptions {
 // double-sided materials do not count (they are meant to be seen). Deterministic, parallel.
 // Returns the number of texels marked.
 std::size_t mark_hidden_texels(const RayScene& rays, std::vector<TexelGBuffer>& gbuffers,
+                               const TexelValidityOptions& options = {});
+// Only the objects with which[o] != 0 (after an edit: the G-buffers rasterized again).
+std::size_t mark_hidden_texels(const RayScene& rays, std::vector<TexelGBuffer>& gbuffers,
+                               const std::vector<std::uint8_t>& which,
                                const TexelValidityOptions& options = {});
 
 }  // namespace irradcast

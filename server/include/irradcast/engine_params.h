@@ -30,6 +30,9 @@ struct EngineParams {
   // old value entirely once that weight is below 1 %.
   float edit_blend = 1.0f;
   float edit_batch = 0.25f;
+  // Texels an edit does not affect keep their estimate, weighted as at most this many samples
+  // (0: every texel restarts).
+  int edit_keep = 8;
 
   bool unbiased() const { return !(tracing_range < std::numeric_limits<float>::infinity()); }
   // Throws irradcast::Error naming the bad parameter.
