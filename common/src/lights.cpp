@@ -10,6 +10,7 @@ namespace irradcast {
 LightSampler::LightSampler(const World& world) : world_(&world) {
   std::vector<float> power;
   for (const WorldObject& o : world.objects) {
+    if (!o.visible) continue;
     const auto& tris = o.triangles();
     for (std::uint32_t t = 0; t < tris.size(); ++t) {
       const Material& m = world.material(o.object, t);

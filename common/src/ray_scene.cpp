@@ -58,17 +58,28 @@ void fill_ray(RTCRay& r, const Ray& ray) {
 
 struct RayScene::Impl {
   RTCScene scene = nullptr;
+  std::vector<RTCGeometry> geometries;  // per object, retained
+  bool editable = false;
 };
 
-RayScene::RayScene(const World& world) : impl_(std::make_unique<Impl>()), world_(&world) {
+RayScene::RayScene(const World& world, bool editable)
+    : impl_(std::make_unique<Impl>()), world_(&world) {
   float extent = world.bounds.max_extent();
   epsilon_ = 1e-4f * (extent > 0.0f ? extent : 1.0f);
   RTCDevice device = shared_device();
+  impl_->editable = editable;
   impl_->scene = rtcNewScene(device);
-  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);
-  rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
+  if (editable) {
+    // Two-level: per-geometry BVHs (built at HIGH quality) under a top level rebuilt per commit.
+    rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_LOW);
+    rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_DYNAMIC);
+  } else {
+    rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);
+    rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
+  }
   for (const WorldObject& o : world.objects) {
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    if (editable) rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_HIGH);
     auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
         geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), o.positions.size()));
     const auto& tris = o.triangles();
@@ -80,15 +91,45 @@ RayScene::RayScene(const World& world) : impl_(std::make_unique<Impl>()), world_
     }
     std::memcpy(vb, o.positions.data(), o.positions.size() * sizeof(glm::vec3));
     std::memcpy(ib, tris.data(), tris.size() * sizeof(glm::uvec3));
+    if (!o.visible) rtcDisableGeometry(geom);
     rtcCommitGeometry(geom);
     rtcAttachGeometryByID(impl_->scene, geom, static_cast<unsigned>(o.object));
-    rtcReleaseGeometry(geom);
+    impl_->geometries.push_back(geom);  // keeps our reference for update()
   }
   rtcCommitScene(impl_->scene);
 }
 
 RayScene::~RayScene() {
-  if (impl_ && impl_->scene) rtcReleaseScene(impl_->scene);
+  if (!impl_) return;
+  for (RTCGeometry g : impl_->geometries) rtcReleaseGeometry(g);
+  if (impl_->scene) rtcReleaseScene(impl_->scene);
+}
+
+bool RayScene::editable() const {
+  return impl_->editable;
+}
+
+void RayScene::update(const std::vector<int>& objects) {
+  if (objects.empty()) return;
+  for (int index : objects) {
+    if (index < 0 || static_cast<std::size_t>(index) >= impl_->geometries.size())
+      throw Error("ray scene: no object " + std::to_string(index) + " to update");
+    const WorldObject& o = world_->objects[static_cast<std::size_t>(index)];
+    RTCGeometry geom = impl_->geometries[static_cast<std::size_t>(index)];
+    auto* vb = static_cast<float*>(rtcGetGeometryBufferData(geom, RTC_BUFFER_TYPE_VERTEX, 0));
+    if (!vb) throw Error("ray scene: object " + std::to_string(index) + " has no vertex buffer");
+    std::memcpy(vb, o.positions.data(), o.positions.size() * sizeof(glm::vec3));
+    // The object's BVH keeps its shape and gets new boxes (a rigid motion moves every triangle
+    // with it); the top level is rebuilt by the scene commit.
+    if (impl_->editable) rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_REFIT);
+    rtcUpdateGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0);
+    if (o.visible)
+      rtcEnableGeometry(geom);
+    else
+      rtcDisableGeometry(geom);
+    rtcCommitGeometry(geom);
+  }
+  rtcCommitScene(impl_->scene);
 }
 
 RTCScene RayScene::embree_scene() const {

@@ -67,6 +67,22 @@ std::vector<glm::mat4> Scene::world_matrices() const {
   return world;
 }
 
+std::vector<bool> Scene::visible_nodes() const {
+  std::vector<bool> visible(nodes.size(), false);
+  std::vector<bool> done(nodes.size(), false);
+  std::vector<std::pair<int, bool>> stack;
+  for (int r : roots) stack.emplace_back(r, true);
+  while (!stack.empty()) {
+    auto [n, parent] = stack.back();
+    stack.pop_back();
+    if (done[n]) continue;
+    done[n] = true;
+    visible[n] = parent && nodes[n].visible;
+    for (int c : nodes[n].children) stack.emplace_back(c, visible[n]);
+  }
+  return visible;
+}
+
 std::vector<Object> Scene::objects() const {
   std::vector<Object> out;
   // Only nodes reachable from the roots are part of the scene.

@@ -43,41 +43,29 @@ glm::vec2 WorldObject::uv(int set, std::uint32_t t, float u, float v) const {
   return (1.0f - u - v) * uvs[tri.x] + u * uvs[tri.y] + v * uvs[tri.z];
 }
 
-World World::build(const Scene& scene) {
-  World w;
-  w.scene = &scene;
-  std::vector<glm::mat4> mats = scene.world_matrices();
-  std::vector<Object> objects = scene.objects();
-  w.objects.reserve(objects.size());
-  for (std::size_t i = 0; i < objects.size(); ++i) {
-    const Object& o = objects[i];
-    const Mesh& mesh = scene.meshes[o.mesh];
-    WorldObject wo;
-    wo.object = static_cast<int>(i);
-    wo.node = o.node;
-    wo.mesh = o.mesh;
-    wo.source = &mesh;
-    const glm::mat4& m = mats[o.node];
-    glm::mat3 nm = glm::inverseTranspose(glm::mat3(m));
-    wo.positions.reserve(mesh.positions.size());
-    for (const glm::vec3& p : mesh.positions) {
-      glm::vec3 q = glm::vec3(m * glm::vec4(p, 1.0f));
-      wo.positions.push_back(q);
-      w.bounds.extend(q);
-    }
-    if (!mesh.normals.empty()) {
-      wo.normals.reserve(mesh.normals.size());
-      for (const glm::vec3& n : mesh.normals) {
-        glm::vec3 q = nm * n;
-        float len = glm::length(q);
-        wo.normals.push_back(len > 0.0f ? q / len : glm::vec3(0.0f));
-      }
-    }
-    w.objects.push_back(std::move(wo));
+namespace {
+
+void place_object(WorldObject& wo, const glm::mat4& m) {
+  const Mesh& mesh = *wo.source;
+  wo.transform = m;
+  glm::mat3 nm = glm::inverseTranspose(glm::mat3(m));
+  wo.positions.resize(mesh.positions.size());
+  for (std::size_t i = 0; i < mesh.positions.size(); ++i)
+    wo.positions[i] = glm::vec3(m * glm::vec4(mesh.positions[i], 1.0f));
+  wo.normals.resize(mesh.normals.size());
+  for (std::size_t i = 0; i < mesh.normals.size(); ++i) {
+    glm::vec3 q = nm * mesh.normals[i];
+    float len = glm::length(q);
+    wo.normals[i] = len > 0.0f ? q / len : glm::vec3(0.0f);
   }
+}
+
+void place_lights(World& w, const Scene& scene, const std::vector<glm::mat4>& mats,
+                  const std::vector<bool>& visible) {
+  w.lights.clear();
   for (int i = 0; i < static_cast<int>(scene.nodes.size()); ++i) {
     const Node& node = scene.nodes[i];
-    if (node.light < 0) continue;
+    if (node.light < 0 || !visible[i]) continue;
     const Light& l = scene.lights[node.light];
     const glm::mat4& m = mats[i];
     WorldLight wl;
@@ -92,7 +80,57 @@ World World::build(const Scene& scene) {
     wl.cos_outer = std::cos(l.outer_cone_angle);
     w.lights.push_back(wl);
   }
+}
+
+void compute_bounds(World& w) {
+  w.bounds = Bounds{};
+  for (const WorldObject& o : w.objects)
+    for (const glm::vec3& p : o.positions) w.bounds.extend(p);
+}
+
+}  // namespace
+
+World World::build(const Scene& scene) {
+  World w;
+  w.scene = &scene;
+  std::vector<glm::mat4> mats = scene.world_matrices();
+  std::vector<bool> visible = scene.visible_nodes();
+  std::vector<Object> objects = scene.objects();
+  w.objects.reserve(objects.size());
+  for (std::size_t i = 0; i < objects.size(); ++i) {
+    const Object& o = objects[i];
+    WorldObject wo;
+    wo.object = static_cast<int>(i);
+    wo.node = o.node;
+    wo.mesh = o.mesh;
+    wo.source = &scene.meshes[o.mesh];
+    wo.visible = visible[o.node];
+    place_object(wo, mats[o.node]);
+    w.objects.push_back(std::move(wo));
+  }
+  // Hidden objects count for the bounds: the probe grid and ray offsets are sized once, and an
+  // object hidden at load may be shown later.
+  compute_bounds(w);
+  place_lights(w, scene, mats, visible);
   return w;
+}
+
+std::vector<int> World::update(const Scene& s) {
+  scene = &s;
+  std::vector<glm::mat4> mats = s.world_matrices();
+  std::vector<bool> visible = s.visible_nodes();
+  std::vector<int> changed;
+  for (WorldObject& o : objects) {
+    const glm::mat4& m = mats[o.node];
+    const bool vis = visible[o.node];
+    if (m == o.transform && vis == o.visible) continue;
+    o.visible = vis;
+    if (m != o.transform) place_object(o, m);
+    changed.push_back(o.object);
+  }
+  compute_bounds(*this);
+  place_lights(*this, s, mats, visible);
+  return changed;
 }
 
 const Material& World::material(int object, std::uint32_t t) const {

@@ -81,6 +81,7 @@ Engine::Engine(const World& world, const Atlas& atlas, const std::vector<TexelGB
   const int k = params_.indirect_bounces;
   mean_.assign(k + 1, std::vector<glm::vec3>(texels_.size(), glm::vec3(0.0f)));
   probe_mean_.assign(k + 1, std::vector<glm::vec3>());
+  samples_.assign(texels_.size(), 0);
   total_mean_.assign(texels_.size(), 0.0);
   total_m2_.assign(texels_.size(), 0.0);
 }
@@ -88,12 +89,14 @@ Engine::Engine(const World& world, const Atlas& atlas, const std::vector<TexelGB
 Engine::~Engine() = default;
 
 void Engine::build_texels(const std::vector<TexelGBuffer>& gbuffers) {
+  texels_ = SurfaceTexels{};
   std::size_t total = 0;
   for (const auto& g : gbuffers) total += g.valid_count();
   texels_.position.reserve(total);
   for (std::size_t o = 0; o < gbuffers.size(); ++o) {
     const TexelGBuffer& g = gbuffers[o];
     const WorldObject& obj = world_->objects[o];
+    if (!obj.visible) continue;  // hidden by an edit: its lightmap keeps its last values
     for (std::size_t i = 0; i < g.size(); ++i) {
       if (!g.valid(i)) continue;
       glm::vec3 n = g.normal[i];
@@ -135,43 +138,60 @@ void Engine::build_probes() {
     texels_.cell.push_back(static_cast<std::uint32_t>(probes_.cell_index(texels_.position[i])));
   probe_stats_.probes = count;
   if (params_.unbiased()) return;
+  std::vector<std::size_t> all(count);
+  for (std::size_t i = 0; i < count; ++i) all[i] = i;
+  place_probes(all);
+  build_probe_weights();
+}
 
+void Engine::place_probes(const std::vector<std::size_t>& which) {
   // Probe placement: a probe inside geometry (many rays see back faces) or hugging a surface
   // sees the wrong light; move it to the free spot of its cell farthest from any surface.
-  if (params_.relocate_probes) {
-    const auto dirs = sphere_directions(64);
-    const float too_close = 0.15f * probes_.cell;
-    std::vector<std::uint8_t> moved(count, 0);
-    tbb::parallel_for(std::size_t(0), count, [&](std::size_t i) {
-      Spot here = probe_spot(*rays_, *world_, probes_.position[i], dirs);
-      if (here.backface < 0.05f && here.nearest >= too_close) return;
-      glm::vec3 centre = probes_.position[i];
-      glm::vec3 best = centre;
-      Spot best_spot = here;
-      const int steps = 4;  // candidates on a 9 x 9 x 9 lattice inside the cell
-      for (int z = -steps; z <= steps; ++z)
-        for (int y = -steps; y <= steps; ++y)
-          for (int x = -steps; x <= steps; ++x) {
-            glm::vec3 c = centre + glm::vec3(x, y, z) * (0.45f * probes_.cell / steps);
-            Spot s = probe_spot(*rays_, *world_, c, dirs);
-            bool better =
-                s.backface < best_spot.backface - 1e-6f ||
-                (s.backface <= best_spot.backface + 1e-6f && s.nearest > best_spot.nearest);
-            if (better) {
-              best = c;
-              best_spot = s;
-            }
-          }
-      probes_.position[i] = best;
-      moved[i] = best != centre;
-      if (best_spot.backface >= 0.05f) probes_.usable[i] = 0;
-    });
-    for (std::size_t i = 0; i < count; ++i) {
-      probe_stats_.relocated += moved[i];
-      probe_stats_.unusable += probes_.usable[i] == 0;
-    }
+  // Always from the cell centre, so a probe placed again after an edit lands where a fresh
+  // start on the edited scene would put it.
+  for (std::size_t i : which) {
+    const glm::ivec3 c(static_cast<int>(i % probes_.dims.x),
+                       static_cast<int>((i / probes_.dims.x) % probes_.dims.y),
+                       static_cast<int>(i / (static_cast<std::size_t>(probes_.dims.x) *
+                                             probes_.dims.y)));
+    probes_.position[i] = probes_.origin + (glm::vec3(c) + 0.5f) * probes_.cell;
+    probes_.usable[i] = 1;
   }
+  if (!params_.relocate_probes) return;
+  const auto dirs = sphere_directions(64);
+  const float too_close = 0.15f * probes_.cell;
+  std::vector<std::uint8_t> moved(which.size(), 0);
+  tbb::parallel_for(std::size_t(0), which.size(), [&](std::size_t k) {
+    const std::size_t i = which[k];
+    Spot here = probe_spot(*rays_, *world_, probes_.position[i], dirs);
+    if (here.backface < 0.05f && here.nearest >= too_close) return;
+    glm::vec3 centre = probes_.position[i];
+    glm::vec3 best = centre;
+    Spot best_spot = here;
+    const int steps = 4;  // candidates on a 9 x 9 x 9 lattice inside the cell
+    for (int z = -steps; z <= steps; ++z)
+      for (int y = -steps; y <= steps; ++y)
+        for (int x = -steps; x <= steps; ++x) {
+          glm::vec3 c = centre + glm::vec3(x, y, z) * (0.45f * probes_.cell / steps);
+          Spot s = probe_spot(*rays_, *world_, c, dirs);
+          bool better = s.backface < best_spot.backface - 1e-6f ||
+                        (s.backface <= best_spot.backface + 1e-6f && s.nearest > best_spot.nearest);
+          if (better) {
+            best = c;
+            best_spot = s;
+          }
+        }
+    probes_.position[i] = best;
+    moved[k] = best != centre;
+    if (best_spot.backface >= 0.05f) probes_.usable[i] = 0;
+  });
+  if (which.size() == probes_.count()) probe_stats_.relocated = 0;
+  probe_stats_.unusable = 0;
+  for (std::size_t i = 0; i < probes_.count(); ++i) probe_stats_.unusable += probes_.usable[i] == 0;
+  for (std::uint8_t m : moved) probe_stats_.relocated += m;
+}
 
+void Engine::build_probe_weights() {
   // Probe weights per texel: trilinear over the 8 surrounding probes, keeping only usable probes
   // the texel can see (a wall between them means the probe sees another room's light).
   probe_weights_.resize(texels_.size());
@@ -261,14 +281,54 @@ UpdateStats Engine::update() {
   auto start = std::chrono::steady_clock::now();
   UpdateStats stats;
   const int k = params_.indirect_bounces;
-  PassInput in{*world_, *atlas_,      texels_,       probe_weights_, probes_,
-               params_, unit_texels_, unit_offsets_, updates_,       0};
-  const double n = static_cast<double>(updates_) + 1.0;
+  // The texels of this update: every texel, or the next batch of those waiting since an edit
+  // (grouped into units where consecutive texels share a cell or an object).
+  const bool partial = queue_pos_ < queue_.size();
+  std::vector<std::uint32_t> batch_texels, batch_offsets;
+  const std::vector<std::uint32_t>* texels = &unit_texels_;
+  const std::vector<std::uint32_t>* offsets = &unit_offsets_;
+  if (partial) {
+    const std::size_t budget = std::max<std::size_t>(
+        1, static_cast<std::size_t>(std::ceil(params_.edit_batch * static_cast<double>(
+                                                                       texels_.size()))));
+    const std::size_t end = std::min(queue_.size(), queue_pos_ + budget);
+    batch_texels.assign(queue_.begin() + static_cast<std::ptrdiff_t>(queue_pos_),
+                        queue_.begin() + static_cast<std::ptrdiff_t>(end));
+    queue_pos_ = end;
+    const bool by_object = params_.dispatch == Dispatch::PerObject;
+    batch_offsets.push_back(0);
+    for (std::size_t i = 1; i < batch_texels.size(); ++i) {
+      const std::uint32_t a = batch_texels[i - 1], b = batch_texels[i];
+      const bool split = by_object ? texels_.object[a] != texels_.object[b]
+                                   : texels_.cell[a] != texels_.cell[b];
+      if (split) batch_offsets.push_back(static_cast<std::uint32_t>(i));
+    }
+    batch_offsets.push_back(static_cast<std::uint32_t>(batch_texels.size()));
+    texels = &batch_texels;
+    offsets = &batch_offsets;
+    ++generation_;
+  } else if (!queue_.empty()) {
+    // Caught up: back to full updates over the engine's own units.
+    queue_.clear();
+    queue_pos_ = 0;
+    ++generation_;
+  }
+  PassInput in{*world_, *atlas_,  texels_,  probe_weights_, probes_, params_,
+               *texels, *offsets, updates_, 0,              generation_};
+  // Running means with per-texel counts: a texel's first sample since a restart replaces what
+  // its means held (its values from before an edit).
   auto accumulate = [&](std::vector<glm::vec3>& mean, const std::vector<glm::vec3>& est) {
     if (mean.size() != est.size()) mean.assign(est.size(), glm::vec3(0.0f));
-    tbb::parallel_for(std::size_t(0), est.size(), [&](std::size_t i) {
-      mean[i] += (est[i] - mean[i]) * static_cast<float>(1.0 / n);
+    tbb::parallel_for(std::size_t(0), texels->size(), [&](std::size_t j) {
+      const std::uint32_t i = (*texels)[j];
+      mean[i] += (est[i] - mean[i]) * (1.0f / static_cast<float>(samples_[i] + 1));
     });
+  };
+  auto accumulate_probes = [&](std::vector<glm::vec3>& mean, const std::vector<glm::vec3>& est) {
+    if (mean.size() != est.size()) mean.assign(est.size(), glm::vec3(0.0f));
+    const float w = 1.0f / static_cast<float>(probe_samples_ + 1);
+    tbb::parallel_for(std::size_t(0), est.size(),
+                      [&](std::size_t i) { mean[i] += (est[i] - mean[i]) * w; });
   };
   std::vector<glm::vec3> est, total;
   PassResult r = backend_->direct(in, est);
@@ -284,33 +344,57 @@ UpdateStats Engine::update() {
       std::vector<glm::vec3> probe_est;
       PassResult pr = backend_->gather_probes(in, field, probe_est);
       probe_time = {pr.seconds, pr.rays};
-      accumulate(probe_mean_[b], probe_est);
+      accumulate_probes(probe_mean_[b], probe_est);
     }
     stats.probes.push_back(probe_time);
     PassResult sr = backend_->scatter(in, field, probe_mean_[b], est);
     stats.scatter.push_back({sr.seconds, sr.rays});
     accumulate(mean_[b], est);
-    for (std::size_t i = 0; i < est.size(); ++i) total[i] += est[i];
+    for (std::uint32_t i : *texels) total[i] += est[i];
     if (b < k) prev = to_lightmaps(mean_[b]);
   }
   // Welford statistics of each texel's total per-update estimate, for the convergence estimate.
-  for (std::size_t i = 0; i < total.size(); ++i) {
+  for (std::uint32_t i : *texels) {
+    const double n = static_cast<double>(samples_[i]) + 1.0;
     double x = luminance(total[i]);
+    if (samples_[i] == 0) total_mean_[i] = total_m2_[i] = 0.0;
     double d = x - total_mean_[i];
     total_mean_[i] += d / n;
     total_m2_[i] += d * (x - total_mean_[i]);
+    ++samples_[i];
   }
+  ++probe_samples_;
   ++updates_;
   stats.total_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return stats;
 }
 
-std::vector<Lightmap> Engine::lightmaps() const {
+std::uint32_t Engine::min_samples() const {
+  if (samples_.empty()) return updates_;
+  return *std::min_element(samples_.begin(), samples_.end());
+}
+
+std::vector<glm::vec3> Engine::shown() const {
   std::vector<glm::vec3> sum(texels_.size(), glm::vec3(0.0f));
   for (const auto& m : mean_)
     for (std::size_t i = 0; i < sum.size(); ++i) sum[i] += m[i];
-  return to_lightmaps(sum);
+  if (before_.size() != sum.size() || params_.edit_blend <= 0.0f) return sum;
+  // Hysteresis after an edit: weight exp(-k / tau) on the value from before the edit after k
+  // new samples, none once that is below 1 % (so a caught-up texel is never stale).
+  const float tau = params_.edit_blend;
+  const auto cutoff = static_cast<std::uint32_t>(std::ceil(std::log(100.0f) * tau));
+  for (std::size_t i = 0; i < sum.size(); ++i) {
+    const std::uint32_t n = samples_[i];
+    if (n >= cutoff) continue;
+    const float w = n == 0 ? 1.0f : std::exp(-static_cast<float>(n) / tau);
+    sum[i] = glm::mix(sum[i], before_[i], w);
+  }
+  return sum;
+}
+
+std::vector<Lightmap> Engine::lightmaps() const {
+  return to_lightmaps(shown());
 }
 
 std::vector<Lightmap> Engine::component(int bounce) const {
@@ -321,9 +405,13 @@ std::vector<Lightmap> Engine::component(int bounce) const {
 
 std::vector<Lightmap> Engine::standard_error() const {
   if (updates_ < 2) return {};
+  // Texels with fewer than 2 samples since a restart have no noise estimate: 0, so that any
+  // change of theirs counts as real.
   std::vector<glm::vec3> se(texels_.size());
-  for (std::size_t i = 0; i < se.size(); ++i)
-    se[i] = glm::vec3(static_cast<float>(std::sqrt(total_m2_[i] / (updates_ - 1) / updates_)));
+  for (std::size_t i = 0; i < se.size(); ++i) {
+    const double n = samples_[i];
+    se[i] = glm::vec3(n < 2 ? 0.0f : static_cast<float>(std::sqrt(total_m2_[i] / (n - 1) / n)));
+  }
   return to_lightmaps(se);
 }
 
@@ -332,13 +420,152 @@ double Engine::mean_relative_error() const {
   double sum = 0.0;
   std::size_t counted = 0;
   for (std::size_t i = 0; i < texels_.size(); ++i) {
+    const double n = samples_[i];
+    if (n < 2) {  // restarted by an edit and not yet estimated twice: unknown, counted as 100 %
+      sum += 1.0;
+      ++counted;
+      continue;
+    }
     double mean = total_mean_[i];
     if (!(mean > 1e-9)) continue;
-    double var = total_m2_[i] / (updates_ - 1);
-    sum += std::sqrt(var / updates_) / mean;
+    double var = total_m2_[i] / (n - 1);
+    sum += std::sqrt(var / n) / mean;
     ++counted;
   }
   return counted ? sum / static_cast<double>(counted) : 0.0;
+}
+
+namespace {
+
+// Distance from p to a box (0 inside).
+float distance_to(const Bounds& b, glm::vec3 p) {
+  const glm::vec3 d = glm::max(glm::max(b.lo - p, p - b.hi), glm::vec3(0.0f));
+  return glm::length(d);
+}
+
+// Whether the segment a -> b crosses the box (slab test).
+bool segment_hits(const Bounds& box, glm::vec3 a, glm::vec3 b) {
+  const glm::vec3 d = b - a;
+  float t0 = 0.0f, t1 = 1.0f;
+  for (int axis = 0; axis < 3; ++axis) {
+    if (std::abs(d[axis]) < 1e-20f) {
+      if (a[axis] < box.lo[axis] || a[axis] > box.hi[axis]) return false;
+      continue;
+    }
+    float ta = (box.lo[axis] - a[axis]) / d[axis], tb = (box.hi[axis] - a[axis]) / d[axis];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPose>& cameras) {
+  // What every texel shows now, and the old component means, by (object, texel) so that they
+  // survive the rebuild; texels that were not valid before read the old dilated lightmaps.
+  const std::vector<glm::vec3> shown_before = shown();
+  std::vector<std::vector<Lightmap>> old_maps;
+  old_maps.push_back(to_lightmaps(shown_before));
+  for (const auto& m : mean_) old_maps.push_back(to_lightmaps(m));
+
+  if (change.geometry || change.surfaces) {
+    build_texels(*gbuffers_);
+    for (std::size_t i = 0; i < texels_.size(); ++i)
+      texels_.cell.push_back(static_cast<std::uint32_t>(probes_.cell_index(texels_.position[i])));
+  }
+  if (change.geometry && !params_.unbiased()) {
+    // Probes in cells a moved object touches (before or after) are placed again.
+    std::vector<std::size_t> again;
+    const float reach = probes_.cell;
+    for (std::size_t p = 0; p < probes_.count(); ++p) {
+      const glm::ivec3 c(static_cast<int>(p % probes_.dims.x),
+                         static_cast<int>((p / probes_.dims.x) % probes_.dims.y),
+                         static_cast<int>(p / (static_cast<std::size_t>(probes_.dims.x) *
+                                               probes_.dims.y)));
+      const glm::vec3 centre = probes_.origin + (glm::vec3(c) + 0.5f) * probes_.cell;
+      for (const Bounds& r : change.regions)
+        if (distance_to(r, centre) <= reach) {
+          again.push_back(p);
+          break;
+        }
+    }
+    place_probes(again);
+  }
+  if ((change.geometry || change.surfaces) && !params_.unbiased()) build_probe_weights();
+  if (change.geometry || change.surfaces) build_dispatch();
+
+  // Every texel restarts; its means keep the old values until its first new sample.
+  const std::size_t n = texels_.size();
+  before_.resize(n);
+  for (auto& m : mean_) m.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint32_t o = texels_.object[i], t = texels_.texel[i];
+    before_[i] = old_maps[0][o].texels[t];
+    for (std::size_t b = 0; b < mean_.size(); ++b) mean_[b][i] = old_maps[b + 1][o].texels[t];
+  }
+  samples_.assign(n, 0);
+  total_mean_.assign(n, 0.0);
+  total_m2_.assign(n, 0.0);
+  probe_samples_ = 0;
+
+  // Priority: affected (near a region, sees a changed light, or in a shadow that moved), then
+  // the rest; within each, texels a viewer's camera sees first.
+  const float margin =
+      std::max(probes_.cell, params_.unbiased() ? probes_.cell
+                                                : params_.tracing_range * world_->bounds.max_extent());
+  std::vector<std::uint8_t> tier(n, 0);
+  tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
+    const glm::vec3 p = texels_.position[i];
+    const glm::vec3 ng = texels_.geo_normal[i];
+    auto sees = [&](glm::vec3 q) {
+      glm::vec3 to = q - p;
+      const float dist = glm::length(to);
+      if (!(dist > 0.0f) || glm::dot(to, ng) <= 0.0f) return false;
+      Ray r;
+      r.direction = to / dist;
+      r.origin = rays_->offset(p, ng, r.direction);
+      r.tmax = std::max(0.0f, glm::length(q - r.origin) - 2.0f * rays_->epsilon());
+      return !rays_->occluded(r);
+    };
+    bool affected = false;
+    for (const Bounds& r : change.regions)
+      if (distance_to(r, p) <= margin) {
+        affected = true;
+        break;
+      }
+    for (std::size_t l = 0; !affected && l < change.light_points.size(); ++l)
+      affected = sees(change.light_points[l]);
+    for (std::size_t l = 0; !affected && l < change.other_lights.size(); ++l)
+      for (const Bounds& r : change.regions)
+        if (segment_hits(r, p, change.other_lights[l])) {
+          affected = true;
+          break;
+        }
+    bool visible = false;
+    for (const CameraPose& c : cameras) {
+      const glm::vec3 d = p - c.eye;
+      const float dist = glm::length(d);
+      if (!(dist > 0.0f)) continue;
+      // Inside a cone around the view direction wide enough for a 16:9 image.
+      const float half = std::atan(std::tan(0.5f * c.yfov) * std::sqrt(1.0f + 16.0f * 16.0f / 81.0f));
+      if (glm::dot(d / dist, glm::normalize(c.forward)) < std::cos(std::min(half, 1.57f))) continue;
+      if (sees(c.eye)) {
+        visible = true;
+        break;
+      }
+    }
+    tier[i] = static_cast<std::uint8_t>((affected ? 0 : 2) + (visible ? 0 : 1));
+  });
+  queue_.clear();
+  queue_pos_ = 0;
+  for (std::uint8_t t = 0; t < 4; ++t)
+    for (std::uint32_t i : unit_texels_)
+      if (tier[i] == t) queue_.push_back(i);
+  ++generation_;
+  backend_->scene_changed();
 }
 
 }  // namespace irradcast

@@ -23,6 +23,26 @@ struct EngineHost::Impl {
 };
 
 namespace {
+std::uint64_t digest64(const std::string& key) {
+  const std::string digest = wire::sha256(key);
+  std::uint64_t v = 0;
+  for (int i = 0; i < 8; ++i)
+    v = (v << 8) | static_cast<unsigned char>(digest[static_cast<std::size_t>(i)]);
+  return v;
+}
+
+Bounds object_box(const WorldObject& o) {
+  Bounds b;
+  for (const glm::vec3& p : o.positions) b.extend(p);
+  return b;
+}
+
+bool emits(const World& w, const WorldObject& o) {
+  for (std::uint32_t t = 0; t < o.triangles().size(); ++t)
+    if (w.material(o.object, t).is_emissive()) return true;
+  return false;
+}
+
 std::uint64_t now_us() {
   return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
                                         std::chrono::system_clock::now().time_since_epoch())
@@ -38,7 +58,8 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
   options_.engine.validate();
   world_ = World::build(scene_);
   if (world_.objects.empty()) throw Error(scene_id_ + ": the scene has no triangles to light");
-  impl_->rays = std::make_unique<RayScene>(world_);
+  // Editable: the two-level BVH that an edit updates incrementally.
+  impl_->rays = std::make_unique<RayScene>(world_, /*editable=*/true);
   impl_->lights = std::make_unique<LightSampler>(world_);
   if (impl_->lights->empty())
     log::warn("engine", scene_id_ + " has no lights: every tile will be black");
@@ -52,10 +73,11 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
   std::vector<std::pair<int, int>> sizes;
   for (const ObjectLightmap& o : atlas_.objects) sizes.emplace_back(o.width, o.height);
   tiles_ = std::make_unique<TileStore>(sizes, options_.tiles);
-  package_ = wire::make_scene_package(scene_, atlas_);
+  package_ = std::make_shared<const wire::ScenePackage>(wire::make_scene_package(scene_, atlas_));
+  validation_scene_ = scene_;
   {
     const EngineParams& e = options_.engine;
-    std::string key = package_.hash;
+    std::string key = package_->hash;
     auto add = [&](double v) { key += "|" + std::to_string(v); };
     for (double v :
          {static_cast<double>(e.cell_size), static_cast<double>(e.tracing_range),
@@ -73,17 +95,189 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
       add(v);
     backend_name_ = impl_->engine->backend().describe();
     key += "|" + backend_name_;  // backends agree only within noise
-    const std::string digest = wire::sha256(key);
-    for (int i = 0; i < 8; ++i)
-      tile_epoch_ =
-          (tile_epoch_ << 8) | static_cast<unsigned char>(digest[static_cast<std::size_t>(i)]);
+    tile_epoch_ = digest64(key);
   }
   stats_.texels = impl_->engine->texel_count();
   stats_.tiles = tiles_->tile_count();
   log::info("engine", scene_id_ + ": " + std::to_string(atlas_.objects.size()) + " lightmaps, " +
                           std::to_string(impl_->engine->texel_count()) + " texels, " +
                           std::to_string(tiles_->tile_count()) + " tiles, scene package " +
-                          std::to_string(package_.bytes.size()) + " bytes");
+                          std::to_string(package_->bytes.size()) + " bytes");
+}
+
+std::shared_ptr<const wire::ScenePackage> EngineHost::package() const {
+  std::lock_guard lock(mutex_);
+  return package_;
+}
+
+std::uint64_t EngineHost::tile_epoch() const {
+  std::lock_guard lock(mutex_);
+  return tile_epoch_;
+}
+
+std::uint64_t EngineHost::revision() const {
+  std::lock_guard lock(mutex_);
+  return revision_;
+}
+
+void EngineHost::set_edit_listener(EditListener listener) {
+  std::lock_guard lock(mutex_);
+  edit_listener_ = std::move(listener);
+}
+
+void EngineHost::set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) {
+  std::lock_guard lock(mutex_);
+  if (pose)
+    cameras_[viewer] = *pose;
+  else
+    cameras_.erase(viewer);
+}
+
+std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
+  // Names and counts never change, so the copy taken at load validates every edit.
+  validate_edit(validation_scene_, edit);
+  std::lock_guard lock(mutex_);
+  const std::uint64_t revision = ++submitted_revision_;
+  pending_edits_.emplace_back(revision, edit);
+  cv_.notify_all();
+  return revision;
+}
+
+void EngineHost::apply_edits() {
+  std::deque<std::pair<std::uint64_t, SceneEdit>> edits;
+  std::vector<CameraPose> cameras;
+  {
+    std::lock_guard lock(mutex_);
+    edits.swap(pending_edits_);
+    for (const auto& [id, pose] : cameras_) cameras.push_back(pose);
+  }
+  if (edits.empty()) return;
+  const auto began = std::chrono::steady_clock::now();
+  // Boxes and emitters before, to tell the engine where things were.
+  std::vector<Bounds> boxes_before;
+  std::vector<bool> emitted_before;
+  for (const WorldObject& o : world_.objects) {
+    boxes_before.push_back(object_box(o));
+    emitted_before.push_back(o.visible && emits(world_, o));
+  }
+  std::vector<glm::vec3> lights_before;
+  for (const WorldLight& l : world_.lights) lights_before.push_back(l.position);
+
+  EditEffect effect;
+  std::vector<AppliedEdit> applied;
+  for (auto& [revision, edit] : edits) {
+    try {
+      EditEffect e = apply_edit(scene_, edit);
+      effect.nodes.insert(effect.nodes.end(), e.nodes.begin(), e.nodes.end());
+      effect.lights.insert(effect.lights.end(), e.lights.begin(), e.lights.end());
+      effect.materials.insert(effect.materials.end(), e.materials.begin(), e.materials.end());
+    } catch (const std::exception& ex) {
+      // Validated when submitted against the same names; kept safe all the same.
+      log::error("engine", std::string("edit ") + std::to_string(revision) +
+                               " could not be applied: " + ex.what());
+    }
+    AppliedEdit a;
+    a.edit = std::move(edit);
+    a.revision = revision;
+    applied.push_back(std::move(a));
+  }
+
+  // World, ray scene (refit + top level), lights, G-buffers.
+  const std::vector<int> moved = world_.update(scene_);
+  impl_->rays->update(moved);
+  *impl_->lights = LightSampler(world_);
+  const bool geometry = !moved.empty();
+  const bool surfaces = !effect.materials.empty();
+  if (geometry || surfaces) {
+    impl_->gbuffers = rasterize_gbuffer(world_, atlas_);
+    mark_hidden_texels(*impl_->rays, impl_->gbuffers);
+  }
+
+  SceneChange change;
+  change.geometry = geometry;
+  change.surfaces = surfaces;
+  std::vector<bool> is_moved(world_.objects.size(), false);
+  for (int o : moved) {
+    is_moved[static_cast<std::size_t>(o)] = true;
+    change.regions.push_back(boxes_before[static_cast<std::size_t>(o)]);
+    if (world_.objects[static_cast<std::size_t>(o)].visible)
+      change.regions.push_back(object_box(world_.objects[static_cast<std::size_t>(o)]));
+  }
+  // Emitters whose light changed: moved or shown/hidden ones, ones whose material changed.
+  std::vector<bool> material_changed(scene_.materials.size(), false);
+  for (int m : effect.materials) material_changed[static_cast<std::size_t>(m)] = true;
+  for (std::size_t o = 0; o < world_.objects.size(); ++o) {
+    const WorldObject& obj = world_.objects[o];
+    bool uses_changed = false;
+    for (std::uint32_t t = 0; t < obj.triangles().size() && !uses_changed; ++t) {
+      const std::uint32_t m =
+          t < obj.source->triangle_material.size() ? obj.source->triangle_material[t] : ~0u;
+      uses_changed = m < material_changed.size() && material_changed[m];
+    }
+    const bool emits_now = obj.visible && emits(world_, obj);
+    if (uses_changed && !is_moved[o]) change.regions.push_back(object_box(obj));
+    if ((emitted_before[o] || emits_now) && (is_moved[o] || uses_changed)) {
+      if (emitted_before[o]) change.light_points.push_back(boxes_before[o].center());
+      if (emits_now) change.light_points.push_back(object_box(obj).center());
+    } else if (emits_now) {
+      change.other_lights.push_back(object_box(obj).center());
+    }
+  }
+  // Punctual lights: every one before and after if any light or node changed (cheap: a few).
+  if (!effect.lights.empty() || !effect.nodes.empty()) {
+    for (std::size_t l = 0; l < world_.lights.size(); ++l) {
+      const bool same = l < lights_before.size() && lights_before[l] == world_.lights[l].position;
+      if (same && effect.lights.empty())
+        change.other_lights.push_back(world_.lights[l].position);
+      else
+        change.light_points.push_back(world_.lights[l].position);
+    }
+    for (const glm::vec3& p : lights_before) change.light_points.push_back(p);
+  } else {
+    for (const WorldLight& l : world_.lights) change.other_lights.push_back(l.position);
+  }
+  impl_->engine->scene_changed(change, cameras);
+
+  const std::uint64_t revision = applied.back().revision;
+  auto package =
+      std::make_shared<const wire::ScenePackage>(wire::make_scene_package(scene_, atlas_, revision));
+  std::uint64_t epoch = 0;
+  {
+    std::lock_guard lock(mutex_);
+    std::string key = std::to_string(tile_epoch_) + "|" + package->hash;
+    epoch = digest64(key);
+  }
+  const double ms =
+      1e3 * std::chrono::duration<double>(std::chrono::steady_clock::now() - began).count();
+  EditListener listener;
+  {
+    std::lock_guard lock(mutex_);
+    revision_ = revision;
+    package_ = package;
+    tile_epoch_ = epoch;
+    stats_.idle = false;
+    stats_.revision = revision;
+    stats_.last_edit_ms = ms;
+    stats_.stale_texels = impl_->engine->stale_texels();
+    stats_.texels = impl_->engine->texel_count();
+    updates_since_edit_ = 0;
+    listener = edit_listener_;
+  }
+  log::info("engine", "applied edit " + std::to_string(revision) + " (" +
+                          std::to_string(moved.size()) + " objects moved or shown/hidden, " +
+                          std::to_string(effect.lights.size()) + " lights, " +
+                          std::to_string(effect.materials.size()) + " materials) in " +
+                          std::to_string(static_cast<int>(ms)) + " ms; " +
+                          std::to_string(impl_->engine->stale_texels()) + " texels to refresh");
+  const std::uint64_t at = now_us();
+  for (AppliedEdit& a : applied) {
+    a.package = package;
+    a.tile_epoch = epoch;
+    a.applied_us = at;
+    a.apply_ms = ms;
+    if (listener) listener(a);
+  }
+  cv_.notify_all();
 }
 
 EngineHost::~EngineHost() {
@@ -119,6 +313,7 @@ void EngineHost::stop() {
 
 void EngineHost::step() {
   if (thread_.joinable()) throw Error("engine host: step() while the engine thread runs");
+  apply_edits();
   do_update();
 }
 
@@ -127,11 +322,12 @@ void EngineHost::run() {
     {
       std::unique_lock lock(mutex_);
       if (stats_.idle) {
-        cv_.wait(lock, [&] { return stopping_.load(); });
-        break;
+        cv_.wait(lock, [&] { return stopping_.load() || !pending_edits_.empty(); });
+        if (stopping_) break;
       }
     }
     try {
+      apply_edits();
       do_update();
     } catch (const std::exception& e) {
       // The engine's input was validated at construction; a failure here is a bug or a lost
@@ -152,11 +348,13 @@ void EngineHost::do_update() {
   // With the engine's own noise estimate, tiles that only changed by Monte Carlo noise wait
   // until their refresh is worth the bytes (TileStoreOptions::refresh_ratio). The last update
   // (max_updates) publishes every change beyond the threshold: final tiles are the final means.
-  const bool last = options_.max_updates > 0 && impl_->engine->updates() >= options_.max_updates;
+  // Updates count from the start, or from the last edit once every texel has a new estimate.
+  if (impl_->engine->stale_texels() == 0) ++updates_since_edit_;
+  const bool last = options_.max_updates > 0 && updates_since_edit_ >= options_.max_updates;
   std::vector<Lightmap> standard_error;
   if (!last && options_.tiles.refresh_ratio > 1.0f)
     standard_error = impl_->engine->standard_error();
-  const TileStore::Noise noise{impl_->engine->updates(), &standard_error};
+  const TileStore::Noise noise{impl_->engine->min_samples(), &standard_error};
   std::vector<std::uint32_t> changed =
       tiles_->publish(maps, now_us(), standard_error.empty() ? nullptr : &noise);
   const double bytes_per_texel = tiles_->bytes_per_texel();
@@ -178,7 +376,8 @@ void EngineHost::do_update() {
     while (!update_ends_.empty() && (ended - update_ends_.front() > kUpdateRateWindow ||
                                      update_ends_.size() > kMaxUpdateEnds))
       update_ends_.pop_front();
-    if (options_.max_updates > 0 && stats_.updates >= options_.max_updates) {
+    stats_.stale_texels = impl_->engine->stale_texels();
+    if (last) {
       stats_.idle = true;
       log::info("engine", "reached " + std::to_string(options_.max_updates) +
                               " updates; the lightmaps are final");

@@ -17,6 +17,10 @@ void EngineParams::validate() const {
     throw Error("indirect_bounces must be in 0..16");
   if (probe_resolution < 2 || probe_resolution > 64)
     throw Error("probe_resolution must be in 2..64");
+  if (!(edit_blend >= 0.0f && edit_blend <= 64.0f))
+    throw Error("edit_blend must be in [0, 64] (updates; 0 = no blending)");
+  if (!(edit_batch > 0.0f && edit_batch <= 1.0f))
+    throw Error("edit_batch must be in (0, 1] (a fraction of the texels)");
   if (std::ceil(1.0f / cell_size) > 256.0f)
     throw Error("cell_size is too small (over 256 cells per axis)");
 }

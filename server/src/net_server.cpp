@@ -264,7 +264,10 @@ class Session : public std::enable_shared_from_this<Session> {
     const TileStore& tiles = host.tiles();
     // Resume: tiles the client already holds are only sent again when their version changes.
     // Versions only mean something for the same scene package.
-    if (h.cached_scene_hash() == host.package().hash && h.known_epoch() == host.tile_epoch())
+    // The package this session serves: the one named in the Welcome (an edit after it is sent
+    // to the client as a SceneEdit, which it applies to this package's scene).
+    package_ = host.package();
+    if (h.cached_scene_hash() == package_->hash && h.known_epoch() == host.tile_epoch())
       for (const wire::TileVersion& k : h.known()) {
         std::int64_t i = tiles.index(k.lightmap(), k.tile_x(), k.tile_y());
         if (i >= 0) known_[static_cast<std::size_t>(i)] = k.version();
@@ -275,8 +278,8 @@ class Session : public std::enable_shared_from_this<Session> {
     wm->set_protocol_version(wire::kProtocolVersion);
     wm->set_session(id_);
     wm->set_scene_id(host.scene_id());
-    wm->set_scene_hash(host.package().hash);
-    wm->set_scene_bytes(host.package().bytes.size());
+    wm->set_scene_hash(package_->hash);
+    wm->set_scene_bytes(package_->bytes.size());
     wm->set_tile_size(static_cast<std::uint32_t>(tiles.options().tile_size));
     wm->add_capabilities("tiles.rgb9e5");
     wm->add_capabilities("tiles.half");
@@ -297,7 +300,7 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   void on_scene_request(const wire::SceneRequest& r) {
-    const std::string& bytes = server_->host.package().bytes;
+    const std::string& bytes = package_->bytes;
     if (r.offset() > bytes.size()) {
       error(wire::BAD_REQUEST, "scene offset " + std::to_string(r.offset()) +
                                    " is past the end of the " + std::to_string(bytes.size()) +
@@ -474,7 +477,7 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   std::string next_scene_chunk() {
-    const wire::ScenePackage& pkg = server_->host.package();
+    const wire::ScenePackage& pkg = *package_;
     const std::size_t n =
         std::min<std::size_t>(server_->options.scene_chunk_bytes, pkg.bytes.size() - scene_offset_);
     wire::Envelope e;
@@ -576,6 +579,7 @@ class Session : public std::enable_shared_from_this<Session> {
   State state_ = State::AwaitHello;
   bool closed_ = false, closing_ = false, writing_ = false;
   std::deque<std::string> control_;
+  std::shared_ptr<const wire::ScenePackage> package_;  // set by Hello
   bool scene_active_ = false;
   std::uint64_t scene_offset_ = 0;
   bool streaming_ = false;

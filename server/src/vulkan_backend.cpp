@@ -113,6 +113,7 @@ struct EngineKey {
   std::size_t probe_count = 0;
   const void* weights = nullptr;
   std::size_t weight_count = 0;
+  std::uint64_t generation = 0;
   bool operator==(const EngineKey&) const = default;
 };
 
@@ -501,7 +502,8 @@ struct VulkanBackend::Impl {
                   in.probes.position.data(),
                   in.probes.count(),
                   in.probe_weights.data(),
-                  in.probe_weights.size()};
+                  in.probe_weights.size(),
+                  in.generation};
     if (key == engine_key) return;
     if (in.atlas.objects.size() != world->objects.size())
       throw Error("Vulkan backend: the atlas has " + std::to_string(in.atlas.objects.size()) +
@@ -770,6 +772,14 @@ VulkanBackend::VulkanBackend(const World& world, const RayScene& rays, const Lig
     : impl_(std::make_unique<Impl>(world, rays, lights, options, force_staging)) {}
 
 VulkanBackend::~VulkanBackend() = default;
+
+void VulkanBackend::scene_changed() {
+  std::lock_guard lock(impl_->mutex);
+  Impl::ForgetOnThrow guard{impl_.get()};
+  impl_->engine_key = EngineKey{};
+  impl_->prev_key = Impl::PrevKey{};
+  impl_->upload_scene();
+}
 
 std::string VulkanBackend::describe() const {
   const VulkanDeviceInfo& d = device();

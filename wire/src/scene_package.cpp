@@ -165,10 +165,11 @@ int to_int(std::int32_t v) {
   return static_cast<int>(v);
 }
 
-SceneData to_proto(const Scene& s, const Atlas& atlas) {
+SceneData to_proto(const Scene& s, const Atlas& atlas, std::uint64_t revision) {
   SceneData d;
   d.set_format(kSceneFormat);
   d.set_name(s.name);
+  d.set_revision(revision);
   for (const Node& n : s.nodes) {
     SceneNode* o = d.add_nodes();
     o->set_name(n.name);
@@ -181,6 +182,7 @@ SceneData to_proto(const Scene& s, const Atlas& atlas) {
     o->set_mesh(n.mesh);
     o->set_camera(n.camera);
     o->set_light(n.light);
+    o->set_hidden(!n.visible);
   }
   for (int r : s.roots) d.add_roots(r);
   for (const Mesh& m : s.meshes) {
@@ -259,6 +261,7 @@ UnpackedScene from_proto(const SceneData& d) {
     fail("format " + std::to_string(d.format()) + " is not supported (expected " +
          std::to_string(kSceneFormat) + ")");
   UnpackedScene out;
+  out.revision = d.revision();
   Scene& s = out.scene;
   s.name = d.name();
   for (int i = 0; i < d.nodes_size(); ++i) {
@@ -275,6 +278,7 @@ UnpackedScene from_proto(const SceneData& d) {
     n.mesh = to_int(o.mesh());
     n.camera = to_int(o.camera());
     n.light = to_int(o.light());
+    n.visible = !o.hidden();
     s.nodes.push_back(std::move(n));
   }
   s.roots.assign(d.roots().begin(), d.roots().end());
@@ -387,10 +391,10 @@ UnpackedScene from_proto(const SceneData& d) {
 
 }  // namespace
 
-ScenePackage make_scene_package(const Scene& scene, const Atlas& atlas) {
+ScenePackage make_scene_package(const Scene& scene, const Atlas& atlas, std::uint64_t revision) {
   validate_scene(scene);
   validate_layout(scene, atlas);
-  const SceneData data = to_proto(scene, atlas);
+  const SceneData data = to_proto(scene, atlas, revision);
   const std::size_t size = data.ByteSizeLong();
   if (size > kMaxSceneDataBytes)
     fail("the scene is too large to send (" + std::to_string(size) + " bytes, limit " +

@@ -1,9 +1,14 @@
 // Embree acceleration structure over a World: one triangle geometry per object (geomID equals
 // the object index). Single rays for the estimators, 8-wide packets for primary rays.
+//
+// An editable scene (scene edits, docs/EDITS.md) is Embree's two-level structure: every object
+// has its own BVH and a top-level BVH sits over them. update() after an object moves refits that
+// object's BVH and rebuilds only the top level; hidden objects are disabled, not removed.
 #pragma once
 
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include <glm/glm.hpp>
 
@@ -30,7 +35,9 @@ struct Ray {
 
 class RayScene {
  public:
-  explicit RayScene(const World& world);
+  // `editable`: build the two-level structure that update() changes incrementally (traversal is
+  // somewhat slower than the single-level BVH a static scene gets).
+  explicit RayScene(const World& world, bool editable = false);
   ~RayScene();
   RayScene(const RayScene&) = delete;
   RayScene& operator=(const RayScene&) = delete;
@@ -47,6 +54,12 @@ class RayScene {
   glm::vec3 offset(glm::vec3 p, glm::vec3 ng, glm::vec3 d) const {
     return p + (glm::dot(ng, d) >= 0.0f ? epsilon_ : -epsilon_) * ng;
   }
+
+  // After World::update: the objects whose positions or visibility changed. Refits their BVHs
+  // (rigid motion keeps every triangle, so a refit is always valid) and rebuilds the top level.
+  // Not thread-safe against concurrent intersect() calls.
+  void update(const std::vector<int>& objects);
+  bool editable() const;
 
   const World& world() const { return *world_; }
   // The Embree scene behind intersect() / occluded(), for benchmarks that time raw Embree calls

@@ -86,6 +86,9 @@ struct Node {
   int mesh = -1;
   int camera = -1;
   int light = -1;
+  // Hidden nodes (and everything under them) are not part of the lit scene: their meshes cast
+  // no shadows and get no light, their lights are off. A scene edit shows or hides them.
+  bool visible = true;
 };
 
 // A mesh placed in the world by a node: the unit that gets its own lightmap.
@@ -110,8 +113,11 @@ struct Scene {
 
   // World matrix of every node (product of the locals up the hierarchy).
   std::vector<glm::mat4> world_matrices() const;
-  // Every node that carries a mesh, in node order: the scene's objects.
+  // Every node that carries a mesh, in node order: the scene's objects (hidden ones included,
+  // so that object indices and lightmaps stay fixed when an edit hides one).
   std::vector<Object> objects() const;
+  // Per node: visible itself and every ancestor visible.
+  std::vector<bool> visible_nodes() const;
   // Index of the first node with a camera, or -1.
   int first_camera_node() const;
 

@@ -35,6 +35,8 @@ struct WorldObject {
   std::vector<glm::vec3> positions;  // world space
   std::vector<glm::vec3> normals;    // world space, unit; empty if the mesh has none
   const Mesh* source = nullptr;      // uv0 / uv1 / triangles / materials live here
+  glm::mat4 transform{1.0f};         // object to world (the node's world matrix)
+  bool visible = true;               // false: hidden by an edit (no rays hit it, no texels lit)
 
   const std::vector<glm::uvec3>& triangles() const { return source->triangles; }
   // Unit geometric normal of triangle t (counter-clockwise winding) and twice its area.
@@ -71,6 +73,10 @@ struct World {
   Bounds bounds;
 
   static World build(const Scene& scene);
+  // After an edit of `scene` (the same Scene this World was built from): places every object
+  // and light again. Object and light counts never change; only what moved is recomputed.
+  // Returns the objects whose transform or visibility changed.
+  std::vector<int> update(const Scene& scene);
 
   // Albedo and emitted radiance at a surface point (textures sampled at the point's UVs).
   glm::vec3 albedo(int object, std::uint32_t t, float u, float v) const;

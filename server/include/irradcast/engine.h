@@ -4,6 +4,7 @@
 // to running per-texel means, so quality improves for as long as it runs.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -37,6 +38,21 @@ struct ProbeStats {
   std::size_t unusable = 0;   // inside geometry with no free spot in their cell
 };
 
+// What a scene edit changed, for Engine::scene_changed.
+struct SceneChange {
+  bool geometry = false;  // objects moved, shown or hidden: texels, probes and visibility change
+  bool surfaces = false;  // albedo changed somewhere: texel albedo is read from the G-buffers
+  // World-space boxes where it happened: moved objects before and after, changed lights and
+  // emitters. Texels near one (within the tracing range or a cell) are affected.
+  std::vector<Bounds> regions;
+  // Light positions whose direct light changed (a light moved, recoloured or dimmed, an emitter
+  // changed): texels that see one are affected.
+  std::vector<glm::vec3> light_points;
+  // Emitters that did not change (centres): texels whose path to one crosses a region are in a
+  // shadow that moved, so they are affected too.
+  std::vector<glm::vec3> other_lights;
+};
+
 class Engine {
  public:
   // The world, atlas, G-buffers and ray scene must outlive the engine. `rays` serves the
@@ -46,7 +62,21 @@ class Engine {
   ~Engine();
 
   // One progressive update: direct pass, then per bounce probe gather (biased mode) + scatter.
+  // While texels wait for their first estimate since an edit, an update covers the next batch
+  // of them (EngineParams::edit_batch, in priority order) instead of every texel.
   UpdateStats update();
+
+  // After a scene edit: the host changed the world, ray scene, lights and G-buffers in place
+  // (the same objects and lightmaps) and told the backend. Rebuilds the texels (validity and
+  // positions may change), re-places the probes in affected cells and the probe weights, and
+  // restarts every texel's estimate: affected texels first, then the rest; within each, texels
+  // a camera sees first (seed 001 section 4.7.1 and 4.7.3). What a texel shows blends from its
+  // value before the edit to the new estimate (EngineParams::edit_blend).
+  void scene_changed(const SceneChange& change, const std::vector<CameraPose>& cameras);
+  // Texels that have no estimate since the last edit (0: caught up).
+  std::size_t stale_texels() const { return queue_.size() - queue_pos_; }
+  // The smallest number of samples of any texel since its last restart.
+  std::uint32_t min_samples() const;
 
   std::uint32_t updates() const { return updates_; }
   const EngineParams& params() const { return params_; }
@@ -71,6 +101,10 @@ class Engine {
   void build_probes();
   void build_dispatch();
   std::vector<Lightmap> to_lightmaps(const std::vector<glm::vec3>& values) const;
+  void place_probes(const std::vector<std::size_t>& probes);
+  void build_probe_weights();
+  // Per texel: the total it shows (the blend of the new estimate and its value before an edit).
+  std::vector<glm::vec3> shown() const;
 
   const World* world_;
   const Atlas* atlas_;
@@ -84,9 +118,17 @@ class Engine {
   std::vector<ProbeWeights> probe_weights_;
   std::vector<std::uint32_t> unit_texels_, unit_offsets_;
   std::uint32_t updates_ = 0;
-  // Running means: [0] direct, [k] bounce k; probe radiance per bounce.
+  std::uint64_t generation_ = 0;  // PassInput::generation
+  // Running means: [0] direct, [k] bounce k; probe radiance per bounce. A texel's means count
+  // samples_[i] samples; before its first sample since an edit they hold its old values.
   std::vector<std::vector<glm::vec3>> mean_;
   std::vector<std::vector<glm::vec3>> probe_mean_;
+  std::vector<std::uint32_t> samples_;
+  std::uint32_t probe_samples_ = 0;  // every probe is gathered every update
+  std::vector<glm::vec3> before_;    // per texel: what it showed when the last edit came
+  // Texels waiting for their first sample since the last edit, in priority order.
+  std::vector<std::uint32_t> queue_;
+  std::size_t queue_pos_ = 0;
   // Welford statistics of each texel's total per-update estimate (luminance).
   std::vector<double> total_mean_, total_m2_;
 };

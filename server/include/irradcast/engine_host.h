@@ -11,7 +11,9 @@
 #include <deque>
 #include <functional>
 #include <memory>
+#include <map>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -20,6 +22,7 @@
 #include "irradcast/backend_select.h"
 #include "irradcast/engine_params.h"
 #include "irradcast/scene.h"
+#include "irradcast/scene_edit.h"
 #include "irradcast/scene_package.h"
 #include "irradcast/tile_store.h"
 #include "irradcast/world.h"
@@ -27,6 +30,16 @@
 namespace irradcast {
 
 struct UpdateStats;
+
+// An edit the engine thread has applied (EngineHost::set_edit_listener).
+struct AppliedEdit {
+  SceneEdit edit;
+  std::uint64_t revision = 0;  // the scene's revision after it (the first edit makes 1)
+  std::shared_ptr<const wire::ScenePackage> package;  // the scene package at that revision
+  std::uint64_t tile_epoch = 0;                       // EngineHost::tile_epoch() after it
+  std::uint64_t applied_us = 0;  // system clock when the engine had applied it
+  double apply_ms = 0.0;         // time to apply (scene, ray scene, G-buffers, engine)
+};
 
 struct EngineHostOptions {
   EngineParams engine;
@@ -69,6 +82,10 @@ struct EngineHostStats {
   double bytes_per_texel = 0.0;  // TileStore::bytes_per_texel() after the last publish
   std::uint64_t texels = 0;      // texels the engine computes
   std::uint64_t tiles = 0;       // tiles in the tile store
+  std::uint64_t revision = 0;    // scene revision (edits applied so far)
+  double last_edit_ms = 0.0;     // time the last edit took to apply
+  // Texels still waiting for their first estimate since the last edit (0: caught up).
+  std::uint64_t stale_texels = 0;
 };
 
 class EngineHost {
@@ -84,6 +101,23 @@ class EngineHost {
   using PublishListener = std::function<void(const std::vector<std::uint32_t>&)>;
   void set_listener(PublishListener listener);
 
+  // Scene edits (docs/EDITS.md). Validates `edit` against the scene and queues it; the engine
+  // thread applies queued edits before its next update (waking up if it was idle) and then
+  // refines the affected texels first. Returns the revision the scene will have once it is
+  // applied. Throws irradcast::Error with a clear message on an invalid edit (nothing queued).
+  // Any thread.
+  std::uint64_t submit_edit(const SceneEdit& edit);
+  // Called on the engine thread once per applied edit, before the tiles that show it are
+  // published: the server sends the edit to every viewer from here.
+  using EditListener = std::function<void(const AppliedEdit&)>;
+  void set_edit_listener(EditListener listener);
+  // The revision of the scene as applied (0: as loaded).
+  std::uint64_t revision() const;
+
+  // The cameras of connected viewers (from their CameraUpdates): the engine refines what they
+  // see first after an edit. `pose` empty removes the viewer. Any thread.
+  void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose);
+
   void start();  // starts the engine thread
   void stop();   // stops it after the update in flight; idempotent
   // Runs one update and publishes it on the calling thread (tests; not while started).
@@ -94,14 +128,19 @@ class EngineHost {
   const std::string& backend() const { return backend_; }
   // The backend and its device ("embree", "vulkan on NVIDIA ... (discrete GPU, ...)").
   const std::string& backend_name() const { return backend_name_; }
+  // The scene, world and atlas: the engine thread changes the scene and world when it applies
+  // an edit, so other threads must not read them while the engine runs (tests read them
+  // between step() calls).
   const Scene& scene() const { return scene_; }
   const World& world() const { return world_; }
   const Atlas& atlas() const { return atlas_; }
-  const wire::ScenePackage& package() const { return package_; }
+  // The scene package at the current revision (a new one after every edit). Any thread.
+  std::shared_ptr<const wire::ScenePackage> package() const;
   // Identifies the lineage of tile versions (Welcome.tile_epoch): a hash of everything that
-  // determines them (scene package, engine, atlas and tile options). The engine is
-  // deterministic, so a host built from the same inputs publishes the same versions.
-  std::uint64_t tile_epoch() const { return tile_epoch_; }
+  // determines them (scene package, engine, atlas and tile options, and every edit since). The
+  // engine is deterministic, so a host built from the same inputs publishes the same versions.
+  // Any thread.
+  std::uint64_t tile_epoch() const;
   TileStore& tiles() { return *tiles_; }
   const TileStore& tiles() const { return *tiles_; }
   // A copy of the stats; update_rate is computed at the time of the call.
@@ -114,6 +153,7 @@ class EngineHost {
   struct Impl;
   void run();
   void do_update();
+  void apply_edits();  // engine thread: applies the queued edits
   void record_passes(const UpdateStats& u);  // with mutex_ held
   static constexpr std::size_t kMaxUpdateEnds = 1u << 16;
 
@@ -124,8 +164,15 @@ class EngineHost {
   EngineHostOptions options_;
   World world_;
   Atlas atlas_;
-  wire::ScenePackage package_;
-  std::uint64_t tile_epoch_ = 0;
+  std::shared_ptr<const wire::ScenePackage> package_;  // guarded by mutex_
+  std::uint64_t tile_epoch_ = 0;                       // guarded by mutex_
+  Scene validation_scene_;  // names and counts for submit_edit (never edited)
+  std::deque<std::pair<std::uint64_t, SceneEdit>> pending_edits_;  // guarded by mutex_
+  std::uint64_t revision_ = 0;            // applied; guarded by mutex_
+  std::uint64_t submitted_revision_ = 0;  // guarded by mutex_
+  std::uint32_t updates_since_edit_ = 0;  // engine thread
+  EditListener edit_listener_;            // guarded by mutex_
+  std::map<std::uint64_t, CameraPose> cameras_;  // guarded by mutex_
   std::unique_ptr<Impl> impl_;
   std::unique_ptr<TileStore> tiles_;
   PublishListener listener_;

@@ -23,6 +23,13 @@ struct EngineParams {
   bool relocate_probes = true;   // move probes out of geometry (seed 001 section 4.3.2 leaks)
   bool probe_visibility = true;  // texels only use probes they can see
   std::uint64_t seed = 1;
+  // Scene edits (docs/EDITS.md). After an edit every texel starts a new estimate, the affected
+  // and visible ones first, `edit_batch` of the texels per update until all have one; what a
+  // texel shows blends from its value before the edit to the new estimate with weight
+  // exp(-k / edit_blend) on the old value after k new samples (0 = no blending), and drops the
+  // old value entirely once that weight is below 1 %.
+  float edit_blend = 1.0f;
+  float edit_batch = 0.25f;
 
   bool unbiased() const { return !(tracing_range < std::numeric_limits<float>::infinity()); }
   // Throws irradcast::Error naming the bad parameter.

@@ -71,6 +71,9 @@ struct PassInput {
   const std::vector<std::uint32_t>& unit_offsets;  // size units + 1
   std::uint32_t update = 0;
   std::uint32_t bounce = 0;  // 0 for the direct pass, k for the k-th indirect bounce
+  // Changes whenever the texels, units, probes or probe weights change (a scene edit, a batch
+  // of texels): backends that keep copies compare it.
+  std::uint64_t generation = 0;
 };
 
 struct PassResult {
@@ -84,6 +87,9 @@ class TraceBackend {
   virtual std::string name() const = 0;
   // The name and the device it runs on ("vulkan on NVIDIA H100 ..."), for logs and reports.
   virtual std::string describe() const { return name(); }
+  // The world, the lights or the materials changed (a scene edit; the objects are the same):
+  // a backend that copied scene data (geometry, materials, lights) copies it again.
+  virtual void scene_changed() {}
 
   // Direct irradiance per texel (one update's estimate).
   virtual PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) = 0;

@@ -30,6 +30,9 @@ class VulkanBackend final : public TraceBackend {
 
   std::string name() const override { return "vulkan"; }
   std::string describe() const override;
+  // Uploads the scene again: BVH (rebuilt with Embree's builder over the new world), materials,
+  // lights, and the engine data on the next pass.
+  void scene_changed() override;
   const VulkanDeviceInfo& device() const;
   // Validation layer messages so far (0 unless options.validation).
   std::uint64_t validation_messages() const;

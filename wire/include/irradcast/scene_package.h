@@ -28,12 +28,15 @@ struct ScenePackage {
 };
 
 // Throws irradcast::Error if the atlas does not match the scene's objects or the scene holds
-// invalid data (indices out of range, non-finite positions).
-ScenePackage make_scene_package(const Scene& scene, const Atlas& atlas);
+// invalid data (indices out of range, non-finite positions). `revision` counts the scene edits
+// applied since the scene was loaded (docs/EDITS.md).
+ScenePackage make_scene_package(const Scene& scene, const Atlas& atlas,
+                                std::uint64_t revision = 0);
 
 struct UnpackedScene {
   Scene scene;
   Atlas atlas;
+  std::uint64_t revision = 0;  // edits the package's scene includes
 };
 // Parses and validates. Throws irradcast::Error with a clear message on a hash mismatch, corrupt
 // data, indices out of range, or a layout that does not match the scene's objects. An empty

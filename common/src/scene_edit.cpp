@@ -1,0 +1,400 @@
+#include "irradcast/scene_edit.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+
+#include <glm/gtc/matrix_transform.hpp>
+#include <nlohmann/json.hpp>
+
+#include "irradcast/error.h"
+
+namespace irradcast {
+namespace {
+
+using Kind = EditOp::Kind;
+
+struct KindName {
+  Kind kind;
+  const char* name;
+};
+constexpr KindName kKinds[] = {
+    {Kind::Move, "move"},
+    {Kind::Rotate, "rotate"},
+    {Kind::Scale, "scale"},
+    {Kind::SetTransform, "transform"},
+    {Kind::Show, "show"},
+    {Kind::Hide, "hide"},
+    {Kind::LightColor, "light_color"},
+    {Kind::LightIntensity, "light_intensity"},
+    {Kind::MaterialAlbedo, "albedo"},
+    {Kind::MaterialEmission, "emission"},
+};
+
+enum class Target { Node, Light, Material };
+
+Target target_of(Kind k) {
+  switch (k) {
+    case Kind::LightColor:
+    case Kind::LightIntensity:
+      return Target::Light;
+    case Kind::MaterialAlbedo:
+    case Kind::MaterialEmission:
+      return Target::Material;
+    default:
+      return Target::Node;
+  }
+}
+
+const char* target_name(Target t) {
+  return t == Target::Node ? "node" : t == Target::Light ? "light" : "material";
+}
+
+// Index of the named item, or of "#N"; -1 if none.
+template <typename T>
+int find(const std::vector<T>& items, const std::string& target) {
+  if (target.size() > 1 && target[0] == '#') {
+    const std::string digits = target.substr(1);
+    if (!std::all_of(digits.begin(), digits.end(), [](char c) { return c >= '0' && c <= '9'; }) ||
+        digits.size() > 9)
+      return -1;
+    const long i = std::strtol(digits.c_str(), nullptr, 10);
+    return i < static_cast<long>(items.size()) ? static_cast<int>(i) : -1;
+  }
+  for (std::size_t i = 0; i < items.size(); ++i)
+    if (items[i].name == target) return static_cast<int>(i);
+  return -1;
+}
+
+bool finite(glm::vec3 v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+
+int resolve(const Scene& scene, const EditOp& op, const std::string& where) {
+  const Target t = target_of(op.kind);
+  if (op.target.empty()) throw Error(where + ": no " + target_name(t) + " named");
+  const int i = t == Target::Node    ? find(scene.nodes, op.target)
+                : t == Target::Light ? find(scene.lights, op.target)
+                                     : find(scene.materials, op.target);
+  if (i < 0) {
+    const std::size_t count = t == Target::Node    ? scene.nodes.size()
+                              : t == Target::Light ? scene.lights.size()
+                                                   : scene.materials.size();
+    throw Error(where + ": the scene has no " + target_name(t) + " '" + op.target + "' (it has " +
+                std::to_string(count) + " " + target_name(t) + "s; name one or give #index)");
+  }
+  return i;
+}
+
+void check_op(const Scene& scene, const EditOp& op, const std::string& where) {
+  resolve(scene, op, where);
+  if (!finite(op.vector) || !std::isfinite(op.value))
+    throw Error(where + ": a number is not finite (NaN or infinity)");
+  switch (op.kind) {
+    case Kind::Rotate:
+      if (!(glm::length(op.vector) > 0.0f))
+        throw Error(where + ": the rotation axis is zero (give a direction and degrees)");
+      break;
+    case Kind::Scale:
+      if (op.vector.x == 0.0f || op.vector.y == 0.0f || op.vector.z == 0.0f)
+        throw Error(where + ": a scale factor of 0 flattens the object; use hide instead");
+      break;
+    case Kind::SetTransform: {
+      for (int c = 0; c < 4; ++c)
+        for (int r = 0; r < 4; ++r)
+          if (!std::isfinite(op.matrix[c][r]))
+            throw Error(where + ": the matrix has a non-finite entry (NaN or infinity)");
+      if (op.matrix[0][3] != 0.0f || op.matrix[1][3] != 0.0f || op.matrix[2][3] != 0.0f ||
+          op.matrix[3][3] != 1.0f)
+        throw Error(where + ": the matrix is not affine (its last row must be 0 0 0 1)");
+      if (!(std::abs(glm::determinant(glm::mat3(op.matrix))) > 1e-12f))
+        throw Error(where + ": the matrix is not invertible");
+      break;
+    }
+    case Kind::LightColor:
+    case Kind::MaterialAlbedo:
+      if (glm::any(glm::lessThan(op.vector, glm::vec3(0.0f))))
+        throw Error(where + ": a colour component is negative");
+      break;
+    case Kind::LightIntensity:
+      if (op.value < 0.0f) throw Error(where + ": the intensity is negative");
+      break;
+    case Kind::MaterialEmission:
+      if (glm::any(glm::lessThan(op.vector, glm::vec3(0.0f))) || op.value < 0.0f)
+        throw Error(where + ": the emission colour or strength is negative");
+      break;
+    default:
+      break;
+  }
+}
+
+void add_unique(std::vector<int>& v, int i) {
+  if (std::find(v.begin(), v.end(), i) == v.end()) v.push_back(i);
+}
+
+}  // namespace
+
+const char* edit_kind_name(EditOp::Kind kind) {
+  for (const KindName& k : kKinds)
+    if (k.kind == kind) return k.name;
+  return "?";
+}
+
+EditOp::Kind parse_edit_kind(std::string_view name) {
+  for (const KindName& k : kKinds)
+    if (name == k.name) return k.kind;
+  std::string all;
+  for (const KindName& k : kKinds) all += std::string(all.empty() ? "" : ", ") + k.name;
+  throw Error("unknown edit operation '" + std::string(name) + "' (expected one of " + all + ")");
+}
+
+void validate_edit(const Scene& scene, const SceneEdit& edit) {
+  if (edit.ops.empty()) throw Error("scene edit: no operations");
+  for (std::size_t i = 0; i < edit.ops.size(); ++i)
+    check_op(scene, edit.ops[i],
+             "edit op " + std::to_string(i + 1) + " (" + edit_kind_name(edit.ops[i].kind) + ")");
+}
+
+EditEffect apply_edit(Scene& scene, const SceneEdit& edit) {
+  validate_edit(scene, edit);
+  EditEffect effect;
+  for (const EditOp& op : edit.ops) {
+    const int i = resolve(scene, op, "");
+    switch (op.kind) {
+      case Kind::Move: {
+        Node& n = scene.nodes[i];
+        n.local = glm::translate(glm::mat4(1.0f), op.vector) * n.local;
+        add_unique(effect.nodes, i);
+        break;
+      }
+      case Kind::Rotate: {
+        Node& n = scene.nodes[i];
+        const glm::vec3 origin(n.local[3]);
+        const glm::mat4 r =
+            glm::rotate(glm::mat4(1.0f), glm::radians(op.value), glm::normalize(op.vector));
+        n.local = glm::translate(glm::mat4(1.0f), origin) * r *
+                  glm::translate(glm::mat4(1.0f), -origin) * n.local;
+        add_unique(effect.nodes, i);
+        break;
+      }
+      case Kind::Scale: {
+        Node& n = scene.nodes[i];
+        n.local = n.local * glm::scale(glm::mat4(1.0f), op.vector);
+        add_unique(effect.nodes, i);
+        break;
+      }
+      case Kind::SetTransform:
+        scene.nodes[i].local = op.matrix;
+        add_unique(effect.nodes, i);
+        break;
+      case Kind::Show:
+      case Kind::Hide:
+        scene.nodes[i].visible = op.kind == Kind::Show;
+        add_unique(effect.nodes, i);
+        break;
+      case Kind::LightColor:
+        scene.lights[i].color = op.vector;
+        add_unique(effect.lights, i);
+        break;
+      case Kind::LightIntensity:
+        scene.lights[i].intensity = op.value;
+        add_unique(effect.lights, i);
+        break;
+      case Kind::MaterialAlbedo:
+        scene.materials[i].base_color = op.vector;
+        add_unique(effect.materials, i);
+        break;
+      case Kind::MaterialEmission:
+        scene.materials[i].emissive = op.vector;
+        scene.materials[i].emissive_strength = op.value;
+        add_unique(effect.materials, i);
+        break;
+    }
+  }
+  return effect;
+}
+
+// ---------------------------------------------------------------------------------------------
+// JSON
+
+namespace {
+
+using Json = nlohmann::json;
+
+glm::vec3 vec3_of(const Json& j, const std::string& where, const char* key) {
+  if (!j.is_array() || j.size() != 3)
+    throw Error(where + ": \"" + key + "\" must be an array of 3 numbers");
+  glm::vec3 v;
+  for (int i = 0; i < 3; ++i) {
+    if (!j[static_cast<std::size_t>(i)].is_number())
+      throw Error(where + ": \"" + key + "\" must be an array of 3 numbers");
+    v[i] = j[static_cast<std::size_t>(i)].get<float>();
+  }
+  return v;
+}
+
+float number_of(const Json& j, const std::string& where, const char* key) {
+  if (!j.is_number()) throw Error(where + ": \"" + key + "\" must be a number");
+  return j.get<float>();
+}
+
+const Json& need(const Json& op, const std::string& where, const char* key) {
+  auto it = op.find(key);
+  if (it == op.end()) throw Error(where + ": missing \"" + key + "\"");
+  return *it;
+}
+
+EditOp op_from_json(const Json& j, const std::string& where) {
+  if (!j.is_object()) throw Error(where + ": an operation must be a JSON object");
+  if (!j.contains("op") || !j["op"].is_string())
+    throw Error(where + ": missing \"op\" (move, rotate, scale, transform, show, hide, "
+                        "light_color, light_intensity, albedo, emission)");
+  EditOp op;
+  op.kind = parse_edit_kind(j["op"].get<std::string>());
+  const char* key = target_name(target_of(op.kind));
+  const Json& t = need(j, where, key);
+  if (t.is_string())
+    op.target = t.get<std::string>();
+  else if (t.is_number_unsigned())
+    op.target = "#" + std::to_string(t.get<unsigned>());
+  else
+    throw Error(where + ": \"" + key + "\" must be a name or an index");
+  switch (op.kind) {
+    case Kind::Move:
+      op.vector = vec3_of(need(j, where, "by"), where, "by");
+      break;
+    case Kind::Rotate:
+      op.vector = vec3_of(need(j, where, "axis"), where, "axis");
+      op.value = number_of(need(j, where, "degrees"), where, "degrees");
+      break;
+    case Kind::Scale: {
+      const Json& by = need(j, where, "by");
+      op.vector = by.is_number() ? glm::vec3(number_of(by, where, "by")) : vec3_of(by, where, "by");
+      break;
+    }
+    case Kind::SetTransform: {
+      const Json& m = need(j, where, "matrix");
+      if (!m.is_array() || m.size() != 16)
+        throw Error(where + ": \"matrix\" must be 16 numbers, column-major");
+      for (int i = 0; i < 16; ++i) {
+        if (!m[static_cast<std::size_t>(i)].is_number())
+          throw Error(where + ": \"matrix\" must be 16 numbers, column-major");
+        op.matrix[i / 4][i % 4] = m[static_cast<std::size_t>(i)].get<float>();
+      }
+      break;
+    }
+    case Kind::Show:
+    case Kind::Hide:
+      break;
+    case Kind::LightColor:
+    case Kind::MaterialAlbedo:
+      op.vector = vec3_of(need(j, where, "color"), where, "color");
+      break;
+    case Kind::LightIntensity:
+      op.value = number_of(need(j, where, "intensity"), where, "intensity");
+      break;
+    case Kind::MaterialEmission:
+      op.vector = vec3_of(need(j, where, "color"), where, "color");
+      op.value = j.contains("strength") ? number_of(j["strength"], where, "strength") : 1.0f;
+      break;
+  }
+  return op;
+}
+
+Json op_to_json(const EditOp& op) {
+  Json j;
+  j["op"] = edit_kind_name(op.kind);
+  j[target_name(target_of(op.kind))] = op.target;
+  auto vec = [](glm::vec3 v) { return Json::array({v.x, v.y, v.z}); };
+  switch (op.kind) {
+    case Kind::Move:
+    case Kind::Scale:
+      j["by"] = vec(op.vector);
+      break;
+    case Kind::Rotate:
+      j["axis"] = vec(op.vector);
+      j["degrees"] = op.value;
+      break;
+    case Kind::SetTransform: {
+      Json m = Json::array();
+      for (int i = 0; i < 16; ++i) m.push_back(op.matrix[i / 4][i % 4]);
+      j["matrix"] = m;
+      break;
+    }
+    case Kind::Show:
+    case Kind::Hide:
+      break;
+    case Kind::LightColor:
+    case Kind::MaterialAlbedo:
+      j["color"] = vec(op.vector);
+      break;
+    case Kind::LightIntensity:
+      j["intensity"] = op.value;
+      break;
+    case Kind::MaterialEmission:
+      j["color"] = vec(op.vector);
+      j["strength"] = op.value;
+      break;
+  }
+  return j;
+}
+
+SceneEdit edit_from_json(const Json& j, const std::string& where) {
+  SceneEdit edit;
+  if (j.is_object() && j.contains("ops")) {
+    const Json& ops = j["ops"];
+    if (!ops.is_array()) throw Error(where + ": \"ops\" must be an array");
+    for (std::size_t i = 0; i < ops.size(); ++i)
+      edit.ops.push_back(op_from_json(ops[i], where + " op " + std::to_string(i + 1)));
+  } else {
+    edit.ops.push_back(op_from_json(j, where));
+  }
+  if (edit.ops.empty()) throw Error(where + ": no operations");
+  return edit;
+}
+
+Json parse_json(std::string_view text) {
+  try {
+    return Json::parse(text);
+  } catch (const Json::parse_error& e) {
+    throw Error(std::string("edit JSON: ") + e.what());
+  }
+}
+
+}  // namespace
+
+SceneEdit parse_edit_json(std::string_view text) {
+  return edit_from_json(parse_json(text), "edit");
+}
+
+std::string edit_to_json(const SceneEdit& edit) {
+  Json ops = Json::array();
+  for (const EditOp& op : edit.ops) ops.push_back(op_to_json(op));
+  Json j;
+  j["ops"] = ops;
+  return j.dump();
+}
+
+std::vector<EditStep> parse_edit_script(std::string_view text) {
+  const Json j = parse_json(text);
+  std::vector<EditStep> steps;
+  auto step = [&](const Json& s, const std::string& where) {
+    EditStep e;
+    if (s.is_object() && s.contains("after_ms")) {
+      e.after_ms = number_of(s["after_ms"], where, "after_ms");
+      if (!(e.after_ms >= 0.0) || !std::isfinite(e.after_ms))
+        throw Error(where + ": \"after_ms\" must be a finite number >= 0");
+    }
+    e.edit = edit_from_json(s, where);
+    steps.push_back(std::move(e));
+  };
+  if (j.is_array()) {
+    for (std::size_t i = 0; i < j.size(); ++i) step(j[i], "script step " + std::to_string(i + 1));
+  } else {
+    step(j, "script");
+  }
+  if (steps.empty()) throw Error("edit script: no steps");
+  return steps;
+}
+
+}  // namespace irradcast
