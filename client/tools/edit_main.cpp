@@ -143,8 +143,8 @@ std::vector<irradcast::EditStep> steps_of(const Options& o) {
 }
 
 std::string token_of(const Options& o) {
-  if (o.token.empty() == o.token_file.empty())
-    throw irradcast::Error("give --token or --token-file (one of them)");
+  if (!o.token.empty() && !o.token_file.empty())
+    throw irradcast::Error("give --token or --token-file, not both");
   if (!o.token_file.empty()) {
     std::ifstream f(o.token_file);
     if (!f) throw irradcast::Error("--token-file: cannot read '" + o.token_file + "'");
@@ -156,7 +156,7 @@ std::string token_of(const Options& o) {
       throw irradcast::Error("--token-file: the first line of '" + o.token_file + "' is empty");
     return line.substr(first, line.find_last_not_of(space) + 1 - first);
   }
-  return o.token;
+  return o.token;  // empty: the server will refuse the edit
 }
 
 // A blocking connection with read deadlines.
