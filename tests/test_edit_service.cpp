@@ -6,6 +6,7 @@
 #include <asio.hpp>
 
 #include <cmath>
+#include <fstream>
 #include <limits>
 #include <optional>
 #include <string>
@@ -368,6 +369,20 @@ TEST(EditService, IrradcastEditReportsRefusalsAndAppliedEdits) {
                         "'{\"op\": \"albedo\", \"material\": \"red\", \"color\": [0.5, 0, 0]}'");
   EXPECT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("revision 2 queued"), std::string::npos) << r.output;
+
+  // A script with a delay, the token from a file.
+  const std::string dir = ::testing::TempDir();
+  {
+    std::ofstream(dir + "/edit_token") << "  secret \n";
+    std::ofstream(dir + "/edit_script.json") << R"([{"op": "hide", "node": "short_block"},
+               {"after_ms": 50, "op": "show", "node": "short_block"}])";
+  }
+  r = test::run_cli(
+      exe, connect + " --token-file " + dir + "/edit_token --script " + dir + "/edit_script.json");
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("revision 3 applied in"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("revision 4 applied in"), std::string::npos) << r.output;
+  EXPECT_EQ(host.revision(), 4u);
 
   // Usage errors: no edit, two edits.
   r = test::run_cli(exe, connect + " --token secret");
