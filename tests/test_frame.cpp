@@ -155,6 +155,9 @@ std::vector<Envelope> all_messages() {
     m->set_tiles(480);
     m->set_texels(118000);
     m->set_backend("vulkan on llvmpipe (CPU, Vulkan 1.3.230)");
+    m->set_scene_revision(3);
+    m->set_last_edit_ms(12.75);
+    m->set_stale_texels(4096);
     out.push_back(e);
   }
   {
@@ -167,6 +170,23 @@ std::vector<Envelope> all_messages() {
     Envelope e;
     e.mutable_pong()->set_nonce(42);
     e.mutable_pong()->set_time_us(1234567);
+    out.push_back(e);
+  }
+  {
+    Envelope e;
+    SceneEdit* m = e.mutable_scene_edit();
+    m->set_token("secret");
+    EditOp* op = m->add_ops();
+    op->set_kind(EditOp::SET_TRANSFORM);
+    op->set_target("tall_block");
+    op->mutable_vector()->set_x(0.05f);
+    op->set_value(30.0f);
+    for (int i = 0; i < 16; ++i) op->add_matrix(i % 5 == 0 ? 1.0f : 0.0f);
+    m->set_request_id(7);
+    m->set_revision(2);
+    m->set_scene_hash(std::string(32, '\x5a'));
+    m->set_applied(true);
+    m->set_applied_us(1700000000000001ULL);
     out.push_back(e);
   }
   out.push_back(make_error(UNSUPPORTED_VERSION, "protocol version 9 is not supported"));

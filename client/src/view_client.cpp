@@ -11,10 +11,12 @@
 
 #include "irradcast/camera_message.h"
 #include "irradcast/compositor.h"
+#include "irradcast/edit_message.h"
 #include "irradcast/error.h"
 #include "irradcast/frame.h"
 #include "irradcast/log.h"
 #include "irradcast/ray_scene.h"
+#include "irradcast/scene_edit.h"
 #include "irradcast/scene_package.h"
 #include "irradcast/tile_codec.h"
 
@@ -206,6 +208,12 @@ void ViewClient::load_scene(const wire::Welcome& w) {
       bytes.clear();
     }
   }
+  // Edits that arrive meanwhile wait for the scene (on_scene_edit).
+  loading_ = true;
+  struct Done {
+    bool& flag;
+    ~Done() { flag = false; }
+  } done{loading_};
   if (!from_cache) {
     wire::Envelope req;
     req.mutable_scene_request()->set_offset(0);
@@ -241,11 +249,17 @@ void ViewClient::load_scene(const wire::Welcome& w) {
   loaded->rays = std::make_unique<RayScene>(loaded->world);
   tiles_.configure(w, loaded->unpacked.atlas);
   scene_hash_ = w.scene_hash();
+  revision_ = loaded->unpacked.revision;
   loaded_ = std::move(loaded);
-  log::info("view", "scene '" + w.scene_id() + "' " +
+  loading_ = false;
+  log::info("view", "scene '" + w.scene_id() + "' revision " + std::to_string(revision_) + " " +
                         (from_cache ? "from the cache" : "downloaded") + ": " +
                         std::to_string(tiles_.lightmaps().size()) + " lightmaps, " +
                         std::to_string(tiles_.tile_count()) + " tiles");
+  // Edits that arrived during the download, in order (those the package has are skipped).
+  std::vector<wire::SceneEdit> pending;
+  pending.swap(pending_edits_);
+  for (const wire::SceneEdit& m : pending) on_scene_edit(m);
 }
 
 void ViewClient::subscribe() {
@@ -264,6 +278,9 @@ void ViewClient::apply(const wire::Envelope& e) {
     case wire::Envelope::kStats:
       last_stats_ = e.stats();
       break;
+    case wire::Envelope::kSceneEdit:
+      on_scene_edit(e.scene_edit());
+      break;
     case wire::Envelope::kError:
       ++counters_.errors_received;
       log::warn("view", "server error: " + e.error().message());
@@ -273,6 +290,44 @@ void ViewClient::apply(const wire::Envelope& e) {
       break;
     default:
       break;  // Pong and anything newer: nothing to do
+  }
+}
+
+void ViewClient::on_scene_edit(const wire::SceneEdit& m) {
+  if (!m.applied()) return;  // an acknowledgement: for the client that sent the edit
+  if (loading_ || !loaded_) {
+    pending_edits_.push_back(m);
+    return;
+  }
+  if (m.revision() <= revision_) return;  // the scene has it already
+  if (m.revision() > revision_ + 1) {
+    // Missed one: the simplest correct thing is the current scene package, which a new
+    // connection's Welcome names.
+    log::warn("view", "scene edit " + std::to_string(m.revision()) + " after revision " +
+                          std::to_string(revision_) + ": edits missed; loading the scene again");
+    reload_ = true;
+    return;
+  }
+  apply_scene_edit(m);
+}
+
+void ViewClient::apply_scene_edit(const wire::SceneEdit& m) {
+  Loaded& l = *loaded_;
+  try {
+    const SceneEdit edit = wire::from_proto(m);
+    apply_edit(l.unpacked.scene, edit);  // validates first: unchanged on a bad edit
+    const std::vector<int> changed = l.world.update(l.unpacked.scene);
+    l.rays->update(changed);
+    revision_ = m.revision();
+    ++counters_.edits_applied;
+    log::info("view", "applied scene edit " + std::to_string(revision_) + ": " +
+                          edit_to_json(edit) + " (" + std::to_string(changed.size()) +
+                          " objects changed)");
+  } catch (const Error& e) {
+    log::warn("view", "scene edit " + std::to_string(m.revision()) +
+                          " does not apply to this scene (" + e.what() +
+                          "); loading the scene again");
+    reload_ = true;
   }
 }
 
@@ -296,6 +351,10 @@ std::size_t ViewClient::poll(std::chrono::milliseconds budget) {
       wire::Envelope e;
       const auto until = std::min(deadline, last_ping_ + ping_interval_);
       if (read_frame(e, until)) apply(e);
+      if (reload_) {
+        reload_ = false;
+        reconnect();
+      }
     } catch (const ConnectionLost& lost) {
       if (!options_.reconnect) throw Error(std::string("connection lost: ") + lost.what());
       log::info("view", std::string("connection lost (") + lost.what() + "); reconnecting");
@@ -306,6 +365,7 @@ std::size_t ViewClient::poll(std::chrono::milliseconds budget) {
 }
 
 void ViewClient::reconnect() {
+  pending_edits_.clear();
   net_.reset();
   open_connection();
   handshake();

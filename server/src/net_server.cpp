@@ -13,6 +13,7 @@
 #include <thread>
 #include <vector>
 
+#include "irradcast/edit_message.h"
 #include "irradcast/error.h"
 #include "irradcast/frame.h"
 #include "irradcast/log.h"
@@ -58,6 +59,7 @@ struct Server::Impl {
 
   void accept();
   void on_publish(const std::vector<std::uint32_t>& tiles);
+  void on_edit(const AppliedEdit& applied);
   void remove(const std::shared_ptr<Session>& s) {
     std::lock_guard lock(sessions_mutex);
     sessions.erase(s);
@@ -128,6 +130,17 @@ class Session : public std::enable_shared_from_this<Session> {
       for (std::uint32_t t : *tiles)
         if (self->subscribed_[store.tile(t).lightmap]) self->queue_.push(t);
       self->queue_changed();
+      self->pump();
+    });
+  }
+
+  // Engine thread: an edit the engine applied, as an encoded SceneEdit frame. Posted like the
+  // tile notifications, so it reaches the client before the tiles that show it (control frames
+  // go first in pump()).
+  void edit_applied(std::shared_ptr<const std::string> frame) {
+    asio::post(strand_, [self = shared_from_this(), frame] {
+      if (self->closed_ || self->closing_ || self->state_ != State::Ready) return;
+      self->send_frame(*frame);
       self->pump();
     });
   }
@@ -220,7 +233,11 @@ class Session : public std::enable_shared_from_this<Session> {
         on_subscribe(env.subscribe());
         break;
       case E::kCameraUpdate:
-        break;  // accepted; priorities by camera are not used yet
+        on_camera(env.camera_update());
+        break;
+      case E::kSceneEdit:
+        on_scene_edit(env.scene_edit());
+        break;
       case E::kStatsRequest:
         send_stats();
         break;
@@ -346,6 +363,69 @@ class Session : public std::enable_shared_from_this<Session> {
     queue_changed();
   }
 
+  // The viewer's camera: the engine refines what the viewers see first after an edit.
+  void on_camera(const wire::CameraUpdate& c) {
+    auto vec = [](const wire::Vec3& v) { return glm::vec3(v.x(), v.y(), v.z()); };
+    CameraPose pose;
+    pose.eye = vec(c.eye());
+    pose.forward = vec(c.forward());
+    pose.up = vec(c.up());
+    pose.yfov = c.yfov();
+    const auto finite = [](glm::vec3 v) {
+      return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+    };
+    if (!finite(pose.eye) || !finite(pose.forward) || !finite(pose.up) ||
+        !std::isfinite(pose.yfov)) {
+      error(wire::BAD_REQUEST, "camera update: a number is not finite (NaN or infinity)");
+      return;
+    }
+    if (!(glm::length(pose.forward) > 0.0f)) {
+      error(wire::BAD_REQUEST, "camera update: the forward direction is zero");
+      return;
+    }
+    server_->host.set_camera(id_, pose);
+  }
+
+  // A scene edit: needs the control token; validated by the host (the scene does not change
+  // on a bad edit); acknowledged to the sender with the revision it will make.
+  void on_scene_edit(const wire::SceneEdit& m) {
+    const std::string& token = server_->options.control_token;
+    if (token.empty()) {
+      error(wire::PERMISSION_DENIED,
+            "this server takes no edits (start it with --control-token or "
+            "--control-token-file)");
+      return;
+    }
+    if (!same_secret(m.token(), token)) {
+      error(wire::PERMISSION_DENIED, "scene edits need the control token");
+      return;
+    }
+    std::uint64_t revision = 0;
+    try {
+      revision = server_->host.submit_edit(wire::from_proto(m));
+    } catch (const Error& e) {
+      error(wire::BAD_REQUEST, e.what());
+      return;
+    }
+    log::info("server", "session " + std::to_string(id_) + " ('" + client_name_ +
+                            "') submitted edit " + std::to_string(revision) + " (" +
+                            std::to_string(m.ops_size()) + " operations)");
+    wire::Envelope ack;
+    wire::SceneEdit* a = ack.mutable_scene_edit();
+    a->set_request_id(m.request_id());
+    a->set_revision(revision);
+    a->set_applied(false);
+    send(ack);
+  }
+
+  // Compares a client's token with the server's in time independent of where they differ.
+  static bool same_secret(const std::string& given, const std::string& secret) {
+    unsigned char diff = given.size() == secret.size() ? 0 : 1;
+    for (std::size_t i = 0; i < secret.size(); ++i)
+      diff |= static_cast<unsigned char>((i < given.size() ? given[i] : '\0') ^ secret[i]);
+    return diff == 0;
+  }
+
   void send_stats() {
     const EngineHostStats es = server_->host.stats();
     const ServerStats ss = server_->stats();
@@ -395,6 +475,9 @@ class Session : public std::enable_shared_from_this<Session> {
     s->set_tiles(es.tiles);
     s->set_texels(es.texels);
     s->set_backend(server_->host.backend_name());
+    s->set_scene_revision(es.revision);
+    s->set_last_edit_ms(es.last_edit_ms);
+    s->set_stale_texels(es.stale_texels);
     send(e);
   }
 
@@ -424,7 +507,9 @@ class Session : public std::enable_shared_from_this<Session> {
     pump();
   }
 
-  void send(const wire::Envelope& e) {
+  void send(const wire::Envelope& e) { send_frame(wire::encode_frame(e)); }
+
+  void send_frame(std::string frame) {
     if (closed_ || closing_) return;
     if (control_.size() >= server_->options.max_control_frames) {
       fail(wire::BAD_REQUEST,
@@ -432,7 +517,7 @@ class Session : public std::enable_shared_from_this<Session> {
            CloseReason::SlowClient);
       return;
     }
-    control_.push_back(wire::encode_frame(e));
+    control_.push_back(std::move(frame));
   }
 
   // Starts the next write if none is in flight: control frames first, then the scene package,
@@ -560,6 +645,7 @@ class Session : public std::enable_shared_from_this<Session> {
     close_timer_.cancel();
     socket_.shutdown(tcp::socket::shutdown_both, ec);
     socket_.close(ec);
+    server_->host.set_camera(id_, std::nullopt);
     queue_changed();
     ++server_->sessions_closed[static_cast<std::size_t>(*close_reason_)];
     queue_depth_ = 0;
@@ -637,6 +723,22 @@ void Server::Impl::on_publish(const std::vector<std::uint32_t>& tiles) {
   for (const auto& s : sessions) s->tiles_changed(shared);
 }
 
+void Server::Impl::on_edit(const AppliedEdit& applied) {
+  wire::Envelope e;
+  wire::SceneEdit* m = e.mutable_scene_edit();
+  wire::to_proto(applied.edit, m);
+  m->set_revision(applied.revision);
+  // Edits applied together share one package, made after the last of them: only that one
+  // names it (the listener runs before the engine can apply anything else).
+  if (applied.package && applied.revision == host.revision())
+    m->set_scene_hash(applied.package->hash);
+  m->set_applied(true);
+  m->set_applied_us(applied.applied_us);
+  auto frame = std::make_shared<const std::string>(wire::encode_frame(e));
+  std::lock_guard lock(sessions_mutex);
+  for (const auto& s : sessions) s->edit_applied(frame);
+}
+
 Server::Server(EngineHost& host, ServerOptions options)
     : impl_(std::make_shared<Impl>(host, std::move(options))) {
   if (impl_->options.io_threads < 1) throw Error("the server needs at least one I/O thread");
@@ -663,6 +765,9 @@ void Server::start() {
   im.host.set_listener([weak](const std::vector<std::uint32_t>& tiles) {
     if (auto s = weak.lock()) s->on_publish(tiles);
   });
+  im.host.set_edit_listener([weak](const AppliedEdit& applied) {
+    if (auto s = weak.lock()) s->on_edit(applied);
+  });
   im.work.emplace(asio::make_work_guard(im.io));
   im.accept();
   for (int i = 0; i < im.options.io_threads; ++i)
@@ -685,6 +790,7 @@ void Server::stop() {
   Impl& im = *impl_;
   if (im.stopping.exchange(true)) return;
   im.host.set_listener(nullptr);
+  im.host.set_edit_listener(nullptr);
   if (im.threads.empty()) return;
   asio::post(im.io, [&im] {
     std::error_code ec;

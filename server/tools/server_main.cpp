@@ -5,9 +5,11 @@
 
 #include <csignal>
 #include <cstdio>
+#include <fstream>
 #include <memory>
 #include <string>
 #include <thread>
+#include <utility>
 
 #include <pthread.h>
 
@@ -41,13 +43,41 @@ struct Options {
   int metrics_port = -1;     // -1: no metrics endpoint
   std::string metrics_bind;  // empty: --bind
   std::string log_level = "info";
+  std::string control_token;
+  std::string control_token_file;
   irradcast::tools::EngineOptions engine;
 };
+
+// The control token for scene edits (docs/EDITS.md) and where it came from, for the log (the
+// token itself is never logged). Empty: the server takes no edits.
+std::pair<std::string, std::string> control_token(const Options& o) {
+  using irradcast::Error;
+  if (!o.control_token.empty() && !o.control_token_file.empty())
+    throw Error("give --control-token or --control-token-file, not both");
+  if (!o.control_token_file.empty()) {
+    std::ifstream f(o.control_token_file);
+    if (!f) throw Error("--control-token-file: cannot read '" + o.control_token_file + "'");
+    std::string line;
+    std::getline(f, line);
+    const char* space = " \t\r\n";
+    const std::size_t first = line.find_first_not_of(space);
+    line = first == std::string::npos
+               ? ""
+               : line.substr(first, line.find_last_not_of(space) + 1 - first);
+    if (line.empty())
+      throw Error("--control-token-file: the first line of '" + o.control_token_file +
+                  "' is empty (it must hold the token)");
+    return {line, "file " + o.control_token_file};
+  }
+  if (!o.control_token.empty()) return {o.control_token, "--control-token"};
+  return {"", ""};
+}
 
 int run(const Options& o, sigset_t signals) {
   using namespace irradcast;
   log::set_level(log::parse_level(o.log_level));
   Progress::set_enabled(false);
+  const auto [token, token_source] = control_token(o);
   std::unique_ptr<tbb::global_control> threads;
   if (o.threads > 0)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -69,6 +99,10 @@ int run(const Options& o, sigset_t signals) {
   so.port = static_cast<std::uint16_t>(o.port);
   so.io_threads = o.io_threads;
   so.idle_timeout = std::chrono::seconds(o.idle_timeout_s);
+  so.control_token = token;
+  log::info("server", token.empty()
+                          ? std::string("scene edits: disabled")
+                          : "scene edits: enabled (control token from " + token_source + ")");
   Server server(host, so);
   server.start();
   std::unique_ptr<MetricsEndpoint> metrics;
@@ -151,7 +185,8 @@ int main(int argc, char** argv) {
   Options o;
   CLI::App app{
       "irradcast-server: computes a scene's diffuse irradiance continuously (the GI engine) and "
-      "streams it as lightmap tiles to irradcast-view and irradcast-load clients.",
+      "streams it as lightmap tiles to irradcast-view and irradcast-load clients. With a control "
+      "token it also takes live scene edits (irradcast-edit, docs/EDITS.md).",
       "irradcast-server"};
   app.option_defaults()->always_capture_default();
   app.add_option("--scene", o.scene, "cornell | rooms:N | FILE.gltf | FILE.glb");
@@ -187,6 +222,14 @@ int main(int argc, char** argv) {
       ->default_str("off");
   app.add_option("--metrics-bind", o.metrics_bind,
                  "address for the metrics endpoint (default: the --bind address)");
+  app.add_option("--control-token", o.control_token,
+                 "accept live scene edits (irradcast-edit) from clients that give this token "
+                 "(visible in the process list: prefer --control-token-file); without a token "
+                 "the server takes no edits")
+      ->default_str("none");
+  app.add_option("--control-token-file", o.control_token_file,
+                 "read the control token for scene edits from the first line of this file")
+      ->default_str("none");
   app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
   bool list_devices = false;
   app.add_flag("--list-devices", list_devices,

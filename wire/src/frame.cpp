@@ -125,6 +125,8 @@ const char* message_name(const Envelope& e) {
       return "error";
     case Envelope::kBye:
       return "bye";
+    case Envelope::kSceneEdit:
+      return "scene_edit";
     case Envelope::MSG_NOT_SET:
       break;
   }

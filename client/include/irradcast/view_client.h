@@ -43,6 +43,7 @@ struct ViewClientCounters {
   std::uint32_t connections = 0;  // 1 + reconnects
   bool scene_from_cache = false;
   std::uint64_t errors_received = 0;
+  std::uint64_t edits_applied = 0;  // scene edits applied to the viewer's copy of the scene
 };
 
 class ViewClient {
@@ -76,7 +77,12 @@ class ViewClient {
   bool all_tiles_received() const { return tiles_.all_received(); }
   std::size_t tile_count() const { return tiles_.tile_count(); }
   const ViewClientCounters& counters() const { return counters_; }
+  // The hash of the scene package downloaded (or taken from the cache) at the last connection;
+  // edits applied since then do not change it.
   const std::string& scene_hash() const { return scene_hash_; }
+  // The revision of the viewer's scene: the package's, plus the edits applied since (every
+  // applied SceneEdit the server broadcasts, in order; docs/EDITS.md).
+  std::uint64_t scene_revision() const { return revision_; }
   std::uint64_t session() const { return session_; }
 
  private:
@@ -91,6 +97,9 @@ class ViewClient {
   bool read_frame(wire::Envelope& out, std::chrono::steady_clock::time_point deadline);
   void apply(const wire::Envelope& e);
   void apply_tile(const wire::TileUpdate& t);
+  // A SceneEdit from the server: buffered while the scene loads, applied in revision order.
+  void on_scene_edit(const wire::SceneEdit& m);
+  void apply_scene_edit(const wire::SceneEdit& m);
   void reconnect();
 
   ViewClientOptions options_;
@@ -101,6 +110,10 @@ class ViewClient {
   std::uint64_t tile_epoch_ = 0;
   TileCache tiles_;
   std::optional<wire::Stats> last_stats_;
+  std::uint64_t revision_ = 0;
+  bool loading_ = false;                        // a scene download is in progress
+  std::vector<wire::SceneEdit> pending_edits_;  // arrived while loading_
+  bool reload_ = false;  // missed an edit: reconnect to get the current scene
   ViewClientCounters counters_;
   std::chrono::steady_clock::time_point last_ping_{};
   std::chrono::milliseconds ping_interval_{5000};

@@ -26,6 +26,9 @@ struct ServerOptions {
   std::size_t scene_chunk_bytes = 256u << 10;     // SceneChunk payload size
   std::size_t max_control_frames = 256;           // queued replies before a client is dropped
   std::uint32_t max_clients = 4096;
+  // The secret a client must put in SceneEdit.token to edit the scene (docs/EDITS.md). Empty:
+  // this server takes no edits (every SceneEdit gets Error PERMISSION_DENIED).
+  std::string control_token;
 };
 
 // Why a session ended (ServerStats::sessions_closed).

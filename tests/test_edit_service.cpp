@@ -1,0 +1,396 @@
+// Live scene edits end to end over loopback TCP: the control token, refused edits, the
+// acknowledgement and the broadcast, a viewer applying the edit to its own scene, a client that
+// connects after the edit, and the irradcast-edit tool.
+#include <gtest/gtest.h>
+
+#include <asio.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <optional>
+#include <string>
+
+#include "cli.h"
+#include "irradcast/builtin.h"
+#include "irradcast/camera_message.h"
+#include "irradcast/edit_message.h"
+#include "irradcast/engine_host.h"
+#include "irradcast/frame.h"
+#include "irradcast/log.h"
+#include "irradcast/net_server.h"
+#include "irradcast/progress.h"
+#include "irradcast/scene_package.h"
+#include "irradcast/view_client.h"
+
+using namespace irradcast;
+using asio::ip::tcp;
+using namespace std::chrono_literals;
+
+namespace {
+
+EngineHostOptions quick_host() {
+  Progress::set_enabled(false);
+  log::set_level(log::Level::Warn);
+  EngineHostOptions o;
+  o.atlas.texels_per_scene = 32.0f;
+  o.tiles.tile_size = 16;
+  o.max_updates = 1;
+  return o;
+}
+
+ServerOptions edit_server(const std::string& token) {
+  ServerOptions o;
+  o.bind = "127.0.0.1";
+  o.port = 0;
+  o.idle_timeout = 10000ms;
+  o.control_token = token;
+  return o;
+}
+
+// A raw protocol client: Hello, then whatever the test sends.
+struct Raw {
+  explicit Raw(std::uint16_t port) : socket(io) {
+    socket.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+    wire::Envelope h;
+    h.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+    h.mutable_hello()->set_client_name("raw-editor");
+    send(h);
+    auto w = read();
+    EXPECT_TRUE(w && w->has_welcome());
+    if (w && w->has_welcome()) welcome = w->welcome();
+  }
+  void send(const wire::Envelope& e) { asio::write(socket, asio::buffer(wire::encode_frame(e))); }
+  std::optional<wire::Envelope> read(std::chrono::milliseconds limit = 5000ms) {
+    wire::Envelope e;
+    const auto deadline = std::chrono::steady_clock::now() + limit;
+    for (;;) {
+      if (decoder.next(e) == wire::DecodeStatus::Frame) return e;
+      if (std::chrono::steady_clock::now() > deadline || eof) return std::nullopt;
+      std::error_code result = asio::error::would_block;
+      std::size_t n = 0;
+      socket.async_read_some(asio::buffer(buf), [&](std::error_code ec, std::size_t got) {
+        result = ec;
+        n = got;
+      });
+      io.restart();
+      io.run_for(deadline - std::chrono::steady_clock::now());
+      if (result == asio::error::would_block) {
+        socket.cancel();
+        io.restart();
+        io.run();
+      }
+      if (result && result != asio::error::would_block && result != asio::error::operation_aborted)
+        eof = true;
+      decoder.feed(buf.data(), n);
+    }
+  }
+  // The next SceneEdit or Error frame (others, e.g. Pong, are skipped).
+  std::optional<wire::Envelope> reply(std::chrono::milliseconds limit = 5000ms) {
+    while (auto e = read(limit))
+      if (e->has_scene_edit() || e->has_error()) return e;
+    return std::nullopt;
+  }
+  void edit(const std::string& json, const std::string& token, std::uint64_t request_id = 1) {
+    wire::Envelope e;
+    wire::to_proto(parse_edit_json(json), e.mutable_scene_edit());
+    e.mutable_scene_edit()->set_token(token);
+    e.mutable_scene_edit()->set_request_id(request_id);
+    send(e);
+  }
+  // Sends a Ping and expects its Pong (skipping anything else): the session is alive.
+  bool alive() {
+    wire::Envelope p;
+    p.mutable_ping()->set_nonce(4242);
+    send(p);
+    while (auto e = read())
+      if (e->has_pong()) return e->pong().nonce() == 4242;
+    return false;
+  }
+  asio::io_context io;
+  tcp::socket socket;
+  wire::FrameDecoder decoder;
+  std::array<char, 4096> buf{};
+  bool eof = false;
+  wire::Welcome welcome;
+};
+
+// The Error a raw client gets for `json` with `token` (code and message), after which the
+// session must still answer a Ping.
+std::pair<wire::ErrorCode, std::string> refused(Raw& r, const std::string& json,
+                                                const std::string& token) {
+  r.edit(json, token);
+  auto e = r.reply();
+  EXPECT_TRUE(e && e->has_error()) << json;
+  EXPECT_TRUE(r.alive()) << "the session should go on after a refused edit";
+  if (!e || !e->has_error()) return {wire::ERROR_UNSPECIFIED, ""};
+  return {e->error().code(), e->error().message()};
+}
+
+const char* kMove = R"({"op": "move", "node": "tall_block", "by": [0.05, 0, 0]})";
+
+int node_index(const Scene& s, const std::string& name) {
+  for (std::size_t i = 0; i < s.nodes.size(); ++i)
+    if (s.nodes[i].name == name) return static_cast<int>(i);
+  return -1;
+}
+
+}  // namespace
+
+TEST(EditService, EditsNeedTheControlToken) {
+  EngineHost host(make_cornell_box(), "cornell", quick_host());
+  {
+    Server server(host, edit_server("secret"));
+    server.start();
+    Raw r(server.port());
+    auto [code, message] = refused(r, kMove, "");
+    EXPECT_EQ(code, wire::PERMISSION_DENIED);
+    EXPECT_EQ(message, "scene edits need the control token");
+    std::tie(code, message) = refused(r, kMove, "Secret");
+    EXPECT_EQ(code, wire::PERMISSION_DENIED);
+    std::tie(code, message) = refused(r, kMove, "secret-and-more");
+    EXPECT_EQ(code, wire::PERMISSION_DENIED);
+    EXPECT_EQ(host.revision(), 0u);
+    server.stop();
+  }
+  {  // A server without a token takes no edits, whatever the client sends.
+    Server server(host, edit_server(""));
+    server.start();
+    Raw r(server.port());
+    auto [code, message] = refused(r, kMove, "secret");
+    EXPECT_EQ(code, wire::PERMISSION_DENIED);
+    EXPECT_NE(message.find("this server takes no edits"), std::string::npos) << message;
+    std::tie(code, message) = refused(r, kMove, "");
+    EXPECT_EQ(code, wire::PERMISSION_DENIED);
+    server.stop();
+  }
+  host.step();  // nothing was queued: the scene is as loaded
+  EXPECT_EQ(host.revision(), 0u);
+  EXPECT_EQ(host.stats().revision, 0u);
+}
+
+TEST(EditService, BadEditsAndCamerasGetBadRequestAndChangeNothing) {
+  EngineHost host(make_cornell_box(), "cornell", quick_host());
+  const std::string hash = host.package()->hash;
+  Server server(host, edit_server("secret"));
+  server.start();
+  Raw r(server.port());
+  auto [code, message] =
+      refused(r, R"({"op": "move", "node": "no_such_node", "by": [1, 0, 0]})", "secret");
+  EXPECT_EQ(code, wire::BAD_REQUEST);
+  EXPECT_NE(message.find("no node 'no_such_node'"), std::string::npos) << message;
+
+  {  // NaN cannot be written in JSON: straight into the message.
+    wire::Envelope e;
+    wire::SceneEdit* m = e.mutable_scene_edit();
+    m->set_token("secret");
+    wire::EditOp* op = m->add_ops();
+    op->set_kind(wire::EditOp::MOVE);
+    op->set_target("tall_block");
+    op->mutable_vector()->set_y(std::numeric_limits<float>::quiet_NaN());
+    r.send(e);
+    auto err = r.reply();
+    ASSERT_TRUE(err && err->has_error());
+    EXPECT_EQ(err->error().code(), wire::BAD_REQUEST);
+    EXPECT_NE(err->error().message().find("not finite"), std::string::npos)
+        << err->error().message();
+    // A matrix of the wrong size is refused by the wire conversion.
+    op->set_kind(wire::EditOp::SET_TRANSFORM);
+    op->mutable_vector()->set_y(0.0f);
+    op->add_matrix(1.0f);
+    r.send(e);
+    err = r.reply();
+    ASSERT_TRUE(err && err->has_error());
+    EXPECT_EQ(err->error().code(), wire::BAD_REQUEST);
+    EXPECT_NE(err->error().message().find("the matrix has 1 values"), std::string::npos)
+        << err->error().message();
+  }
+  std::tie(code, message) = refused(
+      r, R"({"op": "rotate", "node": "tall_block", "axis": [0, 0, 0], "degrees": 30})", "secret");
+  EXPECT_EQ(code, wire::BAD_REQUEST);
+  EXPECT_NE(message.find("rotation axis is zero"), std::string::npos) << message;
+  {  // An empty edit.
+    wire::Envelope e;
+    e.mutable_scene_edit()->set_token("secret");
+    r.send(e);
+    auto err = r.reply();
+    ASSERT_TRUE(err && err->has_error());
+    EXPECT_EQ(err->error().code(), wire::BAD_REQUEST);
+    EXPECT_NE(err->error().message().find("no operations"), std::string::npos);
+  }
+  {  // Cameras: non-finite numbers and a zero forward direction.
+    CameraPose pose;
+    pose.eye = glm::vec3(0.2f, 0.2f, -0.5f);
+    pose.forward = glm::vec3(0.0f);
+    r.send(camera_update(pose));
+    auto err = r.read();
+    ASSERT_TRUE(err && err->has_error());
+    EXPECT_EQ(err->error().code(), wire::BAD_REQUEST);
+    EXPECT_NE(err->error().message().find("forward direction is zero"), std::string::npos);
+    pose.forward = glm::vec3(0.0f, 0.0f, 1.0f);
+    pose.yfov = std::numeric_limits<float>::infinity();
+    r.send(camera_update(pose));
+    err = r.read();
+    ASSERT_TRUE(err && err->has_error());
+    EXPECT_EQ(err->error().code(), wire::BAD_REQUEST);
+    EXPECT_NE(err->error().message().find("not finite"), std::string::npos);
+    pose.yfov = 0.7f;
+    r.send(camera_update(pose));  // a good one: no answer, the session goes on
+    EXPECT_TRUE(r.alive());
+  }
+  host.step();
+  EXPECT_EQ(host.revision(), 0u);
+  EXPECT_EQ(host.package()->hash, hash);
+  server.stop();
+}
+
+TEST(EditService, AnEditIsAcknowledgedBroadcastAndAppliedByViewers) {
+  EngineHost host(make_cornell_box(), "cornell", quick_host());
+  const int tall = node_index(host.scene(), "tall_block");
+  ASSERT_GE(tall, 0);
+  const glm::mat4 before = host.scene().nodes[static_cast<std::size_t>(tall)].local;
+  const std::string hash_before = host.package()->hash;
+  Server server(host, edit_server("secret"));
+  server.start();
+  host.start();
+
+  ViewClientOptions vo;
+  vo.port = server.port();
+  vo.name = "viewer";
+  ViewClient viewer(vo);
+  viewer.connect();
+  EXPECT_EQ(viewer.scene_revision(), 0u);
+  EXPECT_EQ(viewer.scene_hash(), hash_before);
+  const std::size_t object = [&] {
+    const std::vector<Object> objects = viewer.scene().objects();
+    for (std::size_t i = 0; i < objects.size(); ++i)
+      if (objects[i].node == tall) return i;
+    return objects.size();
+  }();
+  ASSERT_LT(object, viewer.world().objects.size());
+  const glm::vec3 p0 = viewer.world().objects[object].positions.at(0);
+
+  // The editor gets the acknowledgement, then (like every client) the applied edit.
+  Raw editor(server.port());
+  editor.edit(kMove, "secret", 77);
+  auto ack = editor.reply();
+  ASSERT_TRUE(ack && ack->has_scene_edit())
+      << (ack && ack->has_error() ? ack->error().message() : std::string("none"));
+  EXPECT_FALSE(ack->scene_edit().applied());
+  EXPECT_EQ(ack->scene_edit().request_id(), 77u);
+  EXPECT_EQ(ack->scene_edit().revision(), 1u);
+  EXPECT_TRUE(ack->scene_edit().token().empty());
+  auto applied = editor.reply(10000ms);
+  ASSERT_TRUE(applied && applied->has_scene_edit());
+  const wire::SceneEdit& b = applied->scene_edit();
+  EXPECT_TRUE(b.applied());
+  EXPECT_EQ(b.revision(), 1u);
+  EXPECT_EQ(b.request_id(), 0u);
+  EXPECT_TRUE(b.token().empty());
+  EXPECT_GT(b.applied_us(), 0u);
+  EXPECT_EQ(b.scene_hash(), host.package()->hash);
+  EXPECT_NE(b.scene_hash(), hash_before);
+  ASSERT_EQ(b.ops_size(), 1);
+  EXPECT_EQ(b.ops(0).kind(), wire::EditOp::MOVE);
+  EXPECT_EQ(b.ops(0).target(), "tall_block");
+
+  // The viewer applies it to its own scene: the node and its triangles moved by 5 cm.
+  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  while (viewer.scene_revision() < 1 && std::chrono::steady_clock::now() < deadline)
+    viewer.poll(20ms);
+  ASSERT_EQ(viewer.scene_revision(), 1u);
+  EXPECT_EQ(viewer.counters().edits_applied, 1u);
+  glm::mat4 expected = before;
+  expected[3].x += 0.05f;
+  EXPECT_EQ(viewer.scene().nodes[static_cast<std::size_t>(tall)].local, expected);
+  const glm::vec3 p1 = viewer.world().objects[object].positions.at(0);
+  EXPECT_NEAR(p1.x - p0.x, 0.05f, 1e-6f);
+  EXPECT_EQ(p1.y, p0.y);
+  EXPECT_EQ(p1.z, p0.z);
+  // The stats say so too.
+  auto stats = viewer.request_stats(5s);
+  ASSERT_TRUE(stats);
+  EXPECT_EQ(stats->scene_revision(), 1u);
+  EXPECT_GT(stats->last_edit_ms(), 0.0);
+
+  // A client that connects now gets the edited scene in its Welcome.
+  ViewClient late(vo);
+  late.connect();
+  EXPECT_NE(late.scene_hash(), hash_before);
+  EXPECT_EQ(late.scene_hash(), host.package()->hash);
+  EXPECT_EQ(late.scene_revision(), 1u);
+  EXPECT_EQ(late.counters().edits_applied, 0u);  // from the package, not from an edit
+  EXPECT_EQ(late.scene().nodes[static_cast<std::size_t>(tall)].local, expected);
+  {  // The raw package as well.
+    Raw r(server.port());
+    EXPECT_NE(r.welcome.scene_hash(), hash_before);
+    const auto pkg = host.package();
+    EXPECT_EQ(r.welcome.scene_hash(), pkg->hash);
+    const wire::UnpackedScene u = wire::open_scene_package(pkg->bytes, r.welcome.scene_hash());
+    EXPECT_EQ(u.revision, 1u);
+    EXPECT_EQ(u.scene.nodes[static_cast<std::size_t>(tall)].local, expected);
+  }
+  late.close();
+  viewer.close();
+  server.stop();
+  host.stop();
+}
+
+TEST(EditService, IrradcastEditReportsRefusalsAndAppliedEdits) {
+  EngineHost host(make_cornell_box(), "cornell", quick_host());
+  Server server(host, edit_server("secret"));
+  server.start();
+  host.start();
+  const std::string exe = IRRADCAST_EDIT_EXE;
+  const std::string connect = "--connect 127.0.0.1:" + std::to_string(server.port());
+
+  test::CliResult r = test::run_cli(exe, connect + " --move tall_block 0.05,0,0");
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("irradcast-edit: scene edits need the control token"), std::string::npos)
+      << r.output;
+  r = test::run_cli(exe, connect + " --token wrong --hide short_block");
+  EXPECT_EQ(r.status, 2) << r.output;
+
+  r = test::run_cli(exe, connect + " --token secret --move no_such_node 0.05,0,0");
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_NE(r.output.find("irradcast-edit: edit op 1 (move): the scene has no node 'no_such_node'"),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(host.revision(), 0u);
+
+  r = test::run_cli(exe, connect + " --token secret --move tall_block 0.05,0,0");
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("revision 1 applied in"), std::string::npos) << r.output;
+  EXPECT_EQ(host.revision(), 1u);
+
+  r = test::run_cli(exe,
+                    connect +
+                        " --token secret --no-wait --json "
+                        "'{\"op\": \"albedo\", \"material\": \"red\", \"color\": [0.5, 0, 0]}'");
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("revision 2 queued"), std::string::npos) << r.output;
+
+  // A script with a delay, the token from a file.
+  const std::string dir = ::testing::TempDir();
+  {
+    std::ofstream(dir + "/edit_token") << "  secret \n";
+    std::ofstream(dir + "/edit_script.json") << R"([{"op": "hide", "node": "short_block"},
+               {"after_ms": 50, "op": "show", "node": "short_block"}])";
+  }
+  r = test::run_cli(
+      exe, connect + " --token-file " + dir + "/edit_token --script " + dir + "/edit_script.json");
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("revision 3 applied in"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("revision 4 applied in"), std::string::npos) << r.output;
+  EXPECT_EQ(host.revision(), 4u);
+
+  // Usage errors: no edit, two edits.
+  r = test::run_cli(exe, connect + " --token secret");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("give exactly one edit"), std::string::npos) << r.output;
+  r = test::run_cli(exe, connect + " --token secret --show a --hide b");
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("give exactly one edit"), std::string::npos) << r.output;
+  server.stop();
+  host.stop();
+}
