@@ -98,13 +98,21 @@ struct EditCase {
   std::string scene, kind, json;
 };
 
-// The first furniture piece of the first room: an object to move in rooms:N.
-std::string rooms_object(const Scene& s) {
+// The first lit room's light and its first furniture piece: what to move in rooms:N.
+std::pair<std::string, std::string> rooms_targets(const Scene& s) {
+  std::string light;
   for (const Node& n : s.nodes)
-    if (n.mesh >= 0 && n.name.rfind("room_0_0_", 0) == 0 && n.name != "room_0_0_walls" &&
-        n.name != "room_0_0_floor" && n.name != "room_0_0_ceiling")
-      return n.name;
-  throw Error("rooms scene without furniture in room 0_0");
+    if (n.mesh >= 0 && n.name.rfind("light_", 0) == 0) {
+      light = n.name;
+      break;
+    }
+  if (light.empty()) throw Error("rooms scene without a light");
+  const std::string room = "room_" + light.substr(6) + "_";
+  for (const Node& n : s.nodes)
+    if (n.mesh >= 0 && n.name.rfind(room, 0) == 0 && n.name != room + "walls" &&
+        n.name != room + "floor" && n.name != room + "ceiling")
+      return {light, n.name};
+  throw Error("rooms scene without furniture in " + room);
 }
 
 std::vector<EditCase> default_cases(const std::vector<std::string>& scenes) {
@@ -116,12 +124,11 @@ std::vector<EditCase> default_cases(const std::vector<std::string>& scenes) {
       out.push_back(
           {s, "object move", R"({"op": "move", "node": "tall_block", "by": [-0.1, 0, -0.12]})"});
     } else {
-      const Scene scene = load_scene(s, 1.0f);
-      out.push_back(
-          {s, "light move", R"({"op": "move", "node": "light_0_0", "by": [0.8, -0.3, 0.6]})"});
-      out.push_back(
-          {s, "object move",
-           R"({"op": "move", "node": ")" + rooms_object(scene) + R"(", "by": [0.6, 0, -0.5]})"});
+      const auto [light, object] = rooms_targets(load_scene(s, 1.0f));
+      out.push_back({s, "light move",
+                     R"({"op": "move", "node": ")" + light + R"(", "by": [0.8, -0.3, 0.6]})"});
+      out.push_back({s, "object move",
+                     R"({"op": "move", "node": ")" + object + R"(", "by": [0.6, 0, -0.5]})"});
     }
   }
   return out;

@@ -201,4 +201,54 @@ TEST(EngineEdit, AffectedTilesAreRefreshedFirstAndEveryTexelCatchesUp) {
   EXPECT_FALSE(host.stats().idle);
 }
 
+// Tiles of the floor and the back wall refreshed by the first batch after dimming the light
+// (which changes every texel; both see the light), with or without a viewer looking at the
+// back wall from 11 cm in front of it.
+std::pair<int, int> first_batch(bool viewer) {
+  EngineHostOptions o = options(1);
+  o.engine.edit_batch = 0.02f;  // a small first batch: only the most urgent texels
+  EngineHost host(make_cornell_box(), "cornell", o);
+  run_to_idle(host);
+  if (viewer) {
+    CameraPose camera;
+    camera.eye = glm::vec3(0.12f, 0.27f, 0.45f);
+    camera.forward = glm::vec3(0.0f, 0.0f, 1.0f);
+    camera.up = glm::vec3(0.0f, 1.0f, 0.0f);
+    camera.yfov = 0.5f;
+    host.set_camera(7, camera);
+  }
+  std::vector<std::uint64_t> versions;
+  for (std::uint32_t t = 0; t < host.tiles().tile_count(); ++t)
+    versions.push_back(host.tiles().version(t));
+  host.submit_edit(
+      edit_of(R"({"op": "emission", "material": "light", "color": [17, 12, 4], "strength": 0.3})"));
+  host.step();
+  EXPECT_GT(host.stats().stale_texels, 0u);
+  auto refreshed = [&](const std::string& name) {
+    int object = -1;
+    for (const WorldObject& w : host.world().objects)
+      if (host.scene().nodes[static_cast<std::size_t>(w.node)].name == name) object = w.object;
+    EXPECT_GE(object, 0) << name;
+    const auto [first, last] = host.tiles().tiles_of(static_cast<std::uint32_t>(object));
+    int n = 0;
+    for (std::uint32_t t = first; t < last; ++t) n += host.tiles().version(t) > versions[t];
+    return n;
+  };
+  return {refreshed("floor"), refreshed("back_wall")};
+}
+
+TEST(EngineEdit, TilesAViewerSeesAreRefreshedFirst) {
+  const auto [floor_alone, back_alone] = first_batch(false);
+  const auto [floor_seen, back_seen] = first_batch(true);
+  std::printf("first batch: without a viewer %d floor / %d back wall tiles, with a viewer on the "
+              "back wall %d / %d\n",
+              floor_alone, back_alone, floor_seen, back_seen);
+  // Without a viewer the refresh goes cell by cell from the front of the box: floor first,
+  // back wall last. The viewer's tiles jump the queue.
+  EXPECT_GT(floor_alone, 0);
+  EXPECT_EQ(back_alone, 0);
+  EXPECT_GT(back_seen, 0);
+  EXPECT_LT(floor_seen, floor_alone + 1);
+}
+
 }  // namespace

@@ -94,6 +94,12 @@ void Engine::build_texels(const std::vector<TexelGBuffer>& gbuffers) {
   std::size_t total = 0;
   for (const auto& g : gbuffers) total += g.valid_count();
   texels_.position.reserve(total);
+  texels_.normal.reserve(total);
+  texels_.geo_normal.reserve(total);
+  texels_.albedo.reserve(total);
+  texels_.object.reserve(total);
+  texels_.texel.reserve(total);
+  texels_.cell.reserve(total);
   for (std::size_t o = 0; o < gbuffers.size(); ++o) {
     const TexelGBuffer& g = gbuffers[o];
     const WorldObject& obj = world_->objects[o];
@@ -488,9 +494,12 @@ void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPo
   };
   // What every texel shows now and its old component means, found again by (object, texel)
   // after the rebuild; texels that were not valid before read the old dilated lightmaps.
+  const bool rebuild = change.geometry || change.surfaces;
   const std::vector<glm::vec3> shown_before = shown();
-  const std::vector<std::vector<glm::vec3>> mean_before = mean_;
-  const SurfaceTexels texels_before = texels_;
+  const std::vector<std::vector<glm::vec3>> mean_before = std::move(mean_);
+  mean_.assign(mean_before.size(), {});
+  // The texel list is rebuilt (moved from) only when geometry or surfaces changed.
+  const SurfaceTexels texels_before = rebuild ? std::move(texels_) : texels_;
   const std::vector<std::uint32_t> samples_before = samples_, bounce_before = bounce_samples_;
   const std::vector<double> total_mean_before = total_mean_, total_m2_before = total_m2_;
   const std::vector<std::uint8_t> restarted_before = restarted_;

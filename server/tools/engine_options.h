@@ -29,6 +29,9 @@ struct EngineOptions {
   std::string backend = "auto";
   int vulkan_device = -1;
   bool vulkan_validation = false;
+  float edit_blend = 1.0f;
+  float edit_batch = 0.25f;
+  int edit_keep = 8;
 
   void add_to(CLI::App& app) {
     app.add_option("--cell-size", cell_size, "engine: radiance cell size (fraction of the scene)");
@@ -63,6 +66,18 @@ struct EngineOptions {
         ->check(CLI::Range(0, 1024));
     app.add_flag("--vulkan-validation", vulkan_validation,
                  "engine: run Vulkan with the Khronos validation layer (slow; for debugging)");
+    app.add_option("--edit-blend", edit_blend,
+                   "edits: time constant, in updates, of the blend from a texel's old value to "
+                   "its new estimate (0 = none; docs/EDITS.md)")
+        ->capture_default_str();
+    app.add_option("--edit-batch", edit_batch,
+                   "edits: fraction of the texels refreshed per update until all have a new "
+                   "estimate")
+        ->capture_default_str();
+    app.add_option("--edit-keep", edit_keep,
+                   "edits: samples' worth of its old estimate a texel the edit does not affect "
+                   "keeps (0 = every texel restarts)")
+        ->capture_default_str();
   }
 
   // Throws irradcast::Error naming a bad value.
@@ -79,6 +94,9 @@ struct EngineOptions {
     p.relocate_probes = !no_probe_relocation;
     p.probe_visibility = !no_probe_visibility;
     p.seed = seed;
+    p.edit_blend = edit_blend;
+    p.edit_batch = edit_batch;
+    p.edit_keep = edit_keep;
     p.validate();
     return p;
   }
