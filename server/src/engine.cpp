@@ -315,17 +315,9 @@ UpdateStats Engine::update() {
     offsets = &batch_offsets;
     ++generation_;
   } else if (!queue_.empty()) {
-    // Caught up: back to full updates over the engine's own units. The indirect estimates made
-    // while catching up read texels that still held their values from before the edit, so
-    // they are biased: the bounces and probes restart (keeping their values as the starting
-    // point until the next estimate replaces them, as after the edit). Direct estimates do not
-    // read other texels and are kept.
+    // Caught up: back to full updates over the engine's own units.
     queue_.clear();
     queue_pos_ = 0;
-    const auto keep = static_cast<std::uint32_t>(params_.edit_keep);
-    for (std::size_t i = 0; i < bounce_samples_.size(); ++i)
-      bounce_samples_[i] = restarted_[i] ? 0u : std::min(bounce_samples_[i], keep);
-    probe_samples_ = 0;
     ++generation_;
   }
   PassInput in{*world_,  *atlas_,  texels_, probe_weights_, probes_, params_, *texels,
@@ -350,6 +342,17 @@ UpdateStats Engine::update() {
   PassResult r = backend_->direct(in, est);
   stats.direct = {r.seconds, r.rays};
   accumulate(mean_[0], est, samples_);
+  if (partial) {
+    // While catching up after an edit: the direct light only. The bounces would read texels
+    // that still hold their values from before the edit and so be biased; a restarted texel
+    // keeps its old indirect light (and its blend with the old value, see shown()) until the
+    // first full update, whose bounces all read new direct light.
+    for (std::uint32_t i : *texels) ++samples_[i];
+    ++updates_;
+    stats.total_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return stats;
+  }
   total = est;
   std::vector<Lightmap> prev = to_lightmaps(mean_[0]);
   for (int b = 1; b <= k; ++b) {
@@ -369,11 +372,12 @@ UpdateStats Engine::update() {
     for (std::uint32_t i : *texels) total[i] += est[i];
     if (b < k) prev = to_lightmaps(mean_[b]);
   }
-  // Welford statistics of each texel's total per-update estimate, for the convergence estimate.
+  // Welford statistics of each texel's total per-update estimate (full updates only), for the
+  // convergence estimate.
   for (std::uint32_t i : *texels) {
-    const double n = static_cast<double>(samples_[i]) + 1.0;
+    const double n = static_cast<double>(bounce_samples_[i]) + 1.0;
     double x = luminance(total[i]);
-    if (samples_[i] == 0) total_mean_[i] = total_m2_[i] = 0.0;
+    if (bounce_samples_[i] == 0) total_mean_[i] = total_m2_[i] = 0.0;
     double d = x - total_mean_[i];
     total_mean_[i] += d / n;
     total_m2_[i] += d * (x - total_mean_[i]);
@@ -388,8 +392,8 @@ UpdateStats Engine::update() {
 }
 
 std::uint32_t Engine::min_samples() const {
-  if (samples_.empty()) return updates_;
-  return *std::min_element(samples_.begin(), samples_.end());
+  if (bounce_samples_.empty()) return updates_;
+  return *std::min_element(bounce_samples_.begin(), bounce_samples_.end());
 }
 
 std::vector<glm::vec3> Engine::shown() const {
@@ -427,7 +431,7 @@ std::vector<Lightmap> Engine::standard_error() const {
   // change of theirs counts as real.
   std::vector<glm::vec3> se(texels_.size());
   for (std::size_t i = 0; i < se.size(); ++i) {
-    const double n = samples_[i];
+    const double n = bounce_samples_[i];
     se[i] = glm::vec3(n < 2 ? 0.0f : static_cast<float>(std::sqrt(total_m2_[i] / (n - 1) / n)));
   }
   return to_lightmaps(se);
@@ -438,7 +442,7 @@ double Engine::mean_relative_error() const {
   double sum = 0.0;
   std::size_t counted = 0;
   for (std::size_t i = 0; i < texels_.size(); ++i) {
-    const double n = samples_[i];
+    const double n = bounce_samples_[i];
     if (n < 2) {  // restarted by an edit and not yet estimated twice: unknown, counted as 100 %
       sum += 1.0;
       ++counted;
@@ -653,9 +657,13 @@ void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPo
     samples_[i] = std::min(had, keep);
     bounce_samples_[i] = std::min(bounce_before[k], keep);
     total_mean_[i] = total_mean_before[k];
-    total_m2_[i] = had > 1 ? total_m2_before[k] * (samples_[i] - 1.0) / (had - 1.0) : 0.0;
+    const std::uint32_t full = bounce_before[k];
+    total_m2_[i] =
+        full > 1 ? total_m2_before[k] * (bounce_samples_[i] - 1.0) / (full - 1.0) : 0.0;
   }
-  probe_samples_ = std::min(probe_samples_, keep);
+  // Probes see the whole scene: after a light change they restart, else they keep their
+  // estimate like the texels the edit does not affect.
+  probe_samples_ = change.light_points.empty() ? std::min(probe_samples_, keep) : 0u;
   queue_.clear();
   queue_pos_ = 0;
   for (std::uint8_t t = 0; t < 4; ++t)

@@ -31,7 +31,7 @@ struct EngineOptions {
   bool vulkan_validation = false;
   float edit_blend = 1.0f;
   float edit_batch = 0.25f;
-  int edit_keep = 8;
+  int edit_keep = 2;
 
   void add_to(CLI::App& app) {
     app.add_option("--cell-size", cell_size, "engine: radiance cell size (fraction of the scene)");

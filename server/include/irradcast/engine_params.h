@@ -32,7 +32,7 @@ struct EngineParams {
   float edit_batch = 0.25f;
   // Texels an edit does not affect keep their estimate, weighted as at most this many samples
   // (0: every texel restarts).
-  int edit_keep = 8;
+  int edit_keep = 2;
 
   bool unbiased() const { return !(tracing_range < std::numeric_limits<float>::infinity()); }
   // Throws irradcast::Error naming the bad parameter.
