@@ -3,16 +3,20 @@
 // tile, the edit is submitted, and the viewer's lightmaps are recorded as tiles arrive until the
 // server is idle again. Reports the time from the edit to (a) the first updated tile at the
 // viewer, (b) 90 % and (c) 99 % of the final change reached (progress = 1 - RMS(now - final) /
-// RMS(before - final), in luminance over every texel, from the first moment it stays above the
-// level), and the same for recomputing from scratch (a new engine host on the edited scene:
-// set-up plus updates, measured at its tile store, so without the network and the scene
-// download a restarted server would also need). Writes JSON and a PNG plot
-// (docs/BENCHMARKS.md, "Scene edits").
+// RMS(before - final), over the mean luminance of the tiles the edit changes, from the first
+// moment it stays above the level), and the same for recomputing from scratch (a new engine
+// host on the edited scene: set-up plus updates, measured at its tile store, so without the
+// network and the scene download a restarted server would also need). Writes JSON and a PNG
+// plot (docs/BENCHMARKS.md, "Scene edits").
 #include <tbb/global_control.h>
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -29,6 +33,7 @@
 #include "irradcast/log.h"
 #include "irradcast/net_server.h"
 #include "irradcast/progress.h"
+#include "irradcast/ray_scene.h"
 #include "irradcast/sampling.h"
 #include "irradcast/scene_edit.h"
 #include "irradcast/view_client.h"
@@ -47,10 +52,23 @@ double seconds_since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
+// Mean luminance of every 32 x 32 tile of every lightmap (the unit the server streams): per
+// texel, Monte Carlo noise would swamp a local change.
 std::vector<float> luminances(const std::vector<Lightmap>& maps) {
+  constexpr int kTile = 32;
   std::vector<float> out;
   for (const Lightmap& m : maps)
-    for (const glm::vec3& t : m.texels) out.push_back(static_cast<float>(luminance(t)));
+    for (int ty = 0; ty < m.height; ty += kTile)
+      for (int tx = 0; tx < m.width; tx += kTile) {
+        double sum = 0.0;
+        int n = 0;
+        for (int y = ty; y < std::min(ty + kTile, m.height); ++y)
+          for (int x = tx; x < std::min(tx + kTile, m.width); ++x) {
+            sum += luminance(m.texels[static_cast<std::size_t>(y) * m.width + x]);
+            ++n;
+          }
+        out.push_back(static_cast<float>(sum / std::max(n, 1)));
+      }
   return out;
 }
 
@@ -67,9 +85,9 @@ double rms_difference(const std::vector<float>& a, const std::vector<float>& b,
   return std::sqrt(d2 / static_cast<double>(std::max<std::size_t>(n, 1)));
 }
 
-// The texels the edit changes: by more than 10 % between `before` and a converged bake of the
-// edited scene (and more than 1 % of the mean level). Unchanged texels only carry noise, which
-// would swamp a local change in an RMS over the whole scene.
+// The tiles the edit changes: their mean by more than 5 % between `before` and a converged
+// bake of the edited scene (and by more than 0.5 % of the scene's mean level). Unchanged tiles
+// only carry noise, which would swamp a local change in an RMS over the whole scene.
 std::vector<std::uint8_t> changed_texels(const std::vector<float>& before,
                                          const std::vector<float>& after) {
   double mean = 0.0;
@@ -78,7 +96,7 @@ std::vector<std::uint8_t> changed_texels(const std::vector<float>& before,
   std::vector<std::uint8_t> mask(before.size(), 0);
   for (std::size_t i = 0; i < before.size(); ++i)
     mask[i] = std::abs(double(after[i]) - before[i]) >
-              0.1 * std::max(static_cast<double>(before[i]), 0.1 * mean);
+              0.05 * std::max(static_cast<double>(before[i]), 0.1 * mean);
   return mask;
 }
 
@@ -151,94 +169,203 @@ std::vector<EditCase> default_cases(const std::vector<std::string>& scenes) {
       out.push_back({s, "light move",
                      R"({"op": "move", "node": ")" + light + R"(", "by": [0.8, -0.3, 0.6]})"});
       out.push_back({s, "object move",
-                     R"({"op": "move", "node": ")" + object + R"(", "by": [0.6, 0, -0.5]})"});
+                     R"({"op": "move", "node": ")" + object + R"(", "by": [-0.3, 0, 0.3]})"});
     }
   }
   return out;
 }
 
+// The price of editability: closest-hit rays (cosine-distributed from random surface points) on
+// the static single-level BVH and on the server's editable two-level one, over the same world,
+// interleaved in rounds. Returns seconds per million rays, {static, editable}.
+std::pair<double, double> trace_cost(const Scene& scene) {
+  const World world = World::build(scene);
+  const RayScene fixed(world, false), editable(world, true);
+  Rng rng(7);
+  std::vector<Ray> rays;
+  for (int i = 0; i < 200000; ++i) {
+    const WorldObject& o =
+        world.objects[static_cast<std::size_t>(rng.next_u32() % world.objects.size())];
+    const auto t = static_cast<std::uint32_t>(rng.next_u32() % o.triangles().size());
+    float u = rng.next_float(), v = rng.next_float();
+    if (u + v > 1.0f) {
+      u = 1.0f - u;
+      v = 1.0f - v;
+    }
+    const glm::vec3 n = o.geometric_normal(t);
+    Ray r;
+    r.direction =
+        Frame(n).to_world(cosine_hemisphere(glm::vec2(rng.next_float(), rng.next_float())));
+    r.origin = fixed.offset(o.position(t, u, v), n, r.direction);
+    rays.push_back(r);
+  }
+  double seconds[2] = {0.0, 0.0};
+  std::uint64_t sink = 0;
+  for (int round = 0; round < 6; ++round)
+    for (int k = 0; k < 2; ++k) {
+      const RayScene& rs = k == 0 ? fixed : editable;
+      const Clock::time_point t0 = Clock::now();
+      std::atomic<std::uint64_t> hits{0};
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), 1024),
+                        [&](const tbb::blocked_range<std::size_t>& b) {
+                          std::uint64_t h = 0;
+                          for (std::size_t i = b.begin(); i < b.end(); ++i)
+                            h += rs.intersect(rays[i]).valid();
+                          hits += h;
+                        });
+      if (round > 0) seconds[k] += seconds_since(t0);  // round 0 warms up
+      sink += hits;
+    }
+  if (sink == 0) std::fprintf(stderr, "no ray hit anything\n");
+  const double per_million = 5.0 * static_cast<double>(rays.size()) / 1e6;
+  return {seconds[0] / per_million, seconds[1] / per_million};
+}
+
 struct Result {
   EditCase c;
-  Curve edit, scratch;
+  Curve edit, edit_no_blend, scratch;
   double apply_ms = 0.0;
   std::size_t texels = 0;
-  double changed = 0.0;  // fraction of the lightmap texels the edit changes (see changed_texels)
+  double changed = 0.0;  // fraction of the tiles the edit changes (see changed_texels)
 };
+
+// The edit path: a server on the scene with the given options, a viewer holding every tile;
+// returns the viewer's tile means before the edit and as tiles arrive after it.
+struct EditRun {
+  std::vector<float> before;
+  std::vector<Sample> samples;
+  double apply_ms = 0.0;
+  std::size_t texels = 0;
+};
+
+EditRun run_edit(const Scene& scene, const EditCase& ec, const SceneEdit& edit,
+                 const EngineHostOptions& options) {
+  EditRun run;
+  EngineHost host(scene, ec.scene, options);
+  run.texels = host.stats().texels;
+  ServerOptions so;
+  so.bind = "127.0.0.1";
+  so.port = 0;
+  Server server(host, so);
+  server.start();
+  host.start();
+  ViewClientOptions vo;
+  vo.port = server.port();
+  vo.name = "bench-edit";
+  ViewClient client(vo);
+  client.connect();
+  // The viewer looks through the scene's camera: its tiles come first after the edit.
+  client.send_camera(camera_pose(scene, scene.first_camera_node()));
+  std::fprintf(stderr, "  %s / %s (edit blend %.1f): converging before the edit ...\n",
+               ec.scene.c_str(), ec.kind.c_str(), options.engine.edit_blend);
+  for (;;) {
+    client.poll(50ms);
+    if (!host.stats().idle || !client.all_tiles_received()) continue;
+    auto s = client.request_stats(5s);
+    if (s && s->engine_idle() && s->queue_depth() == 0) break;
+  }
+  client.poll(100ms);
+  run.before = luminances(client.lightmaps());
+  const Clock::time_point t0 = Clock::now();
+  host.submit_edit(edit);
+  auto last_check = Clock::now();
+  for (;;) {
+    if (client.poll(20ms) > 0)
+      run.samples.push_back({seconds_since(t0), luminances(client.lightmaps())});
+    if (Clock::now() - last_check < 200ms) continue;
+    last_check = Clock::now();
+    if (host.revision() < 1 || !host.stats().idle) continue;
+    auto s = client.request_stats(5s);
+    if (s && s->engine_idle() && s->queue_depth() == 0) {
+      if (client.poll(50ms) > 0)
+        run.samples.push_back({seconds_since(t0), luminances(client.lightmaps())});
+      break;
+    }
+  }
+  run.apply_ms = host.stats().last_edit_ms;
+  client.close();
+  host.stop();
+  server.stop();
+  if (run.samples.empty()) throw Error(ec.scene + ": no tiles after the edit");
+  return run;
+}
 
 Result run_case(const EditCase& ec, const EngineHostOptions& options) {
   Result r;
   r.c = ec;
   const SceneEdit edit = parse_edit_json(ec.json);
   const Scene scene = load_scene(ec.scene, 1.0f);
-
-  // The edit path: a server on the scene, a viewer holding every tile.
+  Scene edited = scene;
+  apply_edit(edited, edit);
   {
-    EngineHost host(scene, ec.scene, options);
-    r.texels = host.stats().texels;
-    ServerOptions so;
-    so.bind = "127.0.0.1";
-    so.port = 0;
-    Server server(host, so);
-    server.start();
-    host.start();
-    ViewClientOptions vo;
-    vo.port = server.port();
-    vo.name = "bench-edit";
-    ViewClient client(vo);
-    client.connect();
-    // The viewer looks through the scene's camera: its tiles come first after the edit.
-    client.send_camera(camera_pose(scene, scene.first_camera_node()));
-    std::fprintf(stderr, "  %s / %s: converging before the edit ...\n", ec.scene.c_str(),
-                 ec.kind.c_str());
-    for (;;) {
-      client.poll(50ms);
-      if (!host.stats().idle || !client.all_tiles_received()) continue;
-      auto s = client.request_stats(5s);
-      if (s && s->engine_idle() && s->queue_depth() == 0) break;
-    }
-    client.poll(100ms);
-    const std::vector<float> before = luminances(client.lightmaps());
-    std::vector<Sample> samples;
-    const Clock::time_point t0 = Clock::now();
-    host.submit_edit(edit);
-    auto last_check = Clock::now();
-    for (;;) {
-      if (client.poll(20ms) > 0)
-        samples.push_back({seconds_since(t0), luminances(client.lightmaps())});
-      if (Clock::now() - last_check < 200ms) continue;
-      last_check = Clock::now();
-      if (host.revision() < 1 || !host.stats().idle) continue;
-      auto s = client.request_stats(5s);
-      if (s && s->engine_idle() && s->queue_depth() == 0) {
-        if (client.poll(50ms) > 0)
-          samples.push_back({seconds_since(t0), luminances(client.lightmaps())});
-        break;
-      }
-    }
-    r.apply_ms = host.stats().last_edit_ms;
-    client.close();
-    host.stop();
-    server.stop();
-    // From scratch, on the same machine after the edit path is done: the before state is the
-    // same converged view.
-    std::fprintf(stderr, "  %s / %s: from scratch ...\n", ec.scene.c_str(), ec.kind.c_str());
-    Scene edited = scene;
-    apply_edit(edited, edit);
-    std::vector<Sample> scratch;
-    const Clock::time_point t1 = Clock::now();
-    EngineHost fresh(edited, ec.scene, options);
-    while (!fresh.stats().idle) {
-      fresh.step();
-      scratch.push_back({seconds_since(t1), luminances(fresh.tiles().published())});
-    }
-    if (scratch.empty() || samples.empty()) throw Error(ec.scene + ": no tiles after the edit");
-    const std::vector<std::uint8_t> mask = changed_texels(before, scratch.back().lum);
-    r.changed = static_cast<double>(std::count(mask.begin(), mask.end(), 1)) /
-                static_cast<double>(std::max<std::size_t>(mask.size(), 1));
-    r.edit = progress_curve(before, samples, mask);
-    r.scratch = progress_curve(before, scratch, mask);
+    // Texel by texel comparisons need the same atlas and probe grid: the bounds must not move.
+    const Bounds a = World::build(scene).bounds, b = World::build(edited).bounds;
+    if (a.lo != b.lo || a.hi != b.hi)
+      throw Error(ec.scene + " / " + ec.kind +
+                  ": the edit changes the scene's bounds; pick one "
+                  "that stays inside");
   }
+  const EditRun blended = run_edit(scene, ec, edit, options);
+  EngineHostOptions no_blend = options;
+  no_blend.engine.edit_blend = 0.0f;
+  const EditRun direct = run_edit(scene, ec, edit, no_blend);
+  r.apply_ms = blended.apply_ms;
+  r.texels = blended.texels;
+
+  // From scratch: a new host on the edited scene (set-up plus updates).
+  std::fprintf(stderr, "  %s / %s: from scratch ...\n", ec.scene.c_str(), ec.kind.c_str());
+  std::vector<Sample> scratch;
+  const Clock::time_point t1 = Clock::now();
+  EngineHost fresh(edited, ec.scene, options);
+  while (!fresh.stats().idle) {
+    fresh.step();
+    scratch.push_back({seconds_since(t1), luminances(fresh.tiles().published())});
+  }
+  const std::vector<std::uint8_t> mask = changed_texels(blended.before, scratch.back().lum);
+  r.changed = static_cast<double>(std::count(mask.begin(), mask.end(), 1)) /
+              static_cast<double>(std::max<std::size_t>(mask.size(), 1));
+  r.edit = progress_curve(blended.before, blended.samples, mask);
+  r.edit_no_blend = progress_curve(direct.before, direct.samples, mask);
+  r.scratch = progress_curve(blended.before, scratch, mask);
   return r;
+}
+
+// Progress curves from the JSON this tool writes (also --replot).
+void write_plot(const std::string& path, const json& edits) {
+  plot::XYPlot p;
+  p.title = "Scene edits: progress after an edit";
+  p.x_label = "seconds since the edit";
+  p.y_label = "progress (1 = final)";
+  p.note = "thick: incremental, at a viewer; thin: from scratch, at the tile store";
+  p.legend = plot::XYPlot::Legend::BottomRight;
+  const plot::Color colors[] = {plot::kBlue, plot::kOrange, plot::kGreen, plot::kRed,
+                                plot::kDarkGrey};
+  auto clamped = [](const json& v) {
+    std::vector<double> out = v.get<std::vector<double>>();
+    for (double& x : out) x = std::clamp(x, -0.2, 1.0);
+    return out;
+  };
+  for (std::size_t i = 0; i < edits.size(); ++i) {
+    const json& e = edits[i];
+    plot::Series a;
+    a.label = e["scene"].get<std::string>() + " " + e["edit"].get<std::string>();
+    a.x = e["incremental"]["t"].get<std::vector<double>>();
+    a.y = clamped(e["incremental"]["progress"]);
+    a.color = colors[i % 5];
+    a.points = false;
+    a.lines = true;
+    a.line_width = 2.5;
+    p.series.push_back(a);
+    plot::Series b = a;
+    b.label.clear();
+    b.x = e["scratch"]["t"].get<std::vector<double>>();
+    b.y = clamped(e["scratch"]["progress"]);
+    b.line_width = 1.0;
+    p.series.push_back(b);
+  }
+  p.y_from_zero = false;
+  p.x_log = true;
+  write_xy_plot(path, p);
 }
 
 }  // namespace
@@ -253,17 +380,27 @@ int main(int argc, char** argv) {
   float density = 0.0f;
   int threads = 0;
   bool verbose = false;
+  std::string replot;
   app.add_option("--scenes", scenes_arg, "comma-separated built-in scenes")->capture_default_str();
   app.add_option("--updates", updates, "engine updates to converge (max_updates)")
       ->capture_default_str();
   app.add_option("--density", density, "atlas texels per scene unit (0 = default)");
   app.add_option("--threads", threads, "worker threads (0 = all cores)");
   app.add_flag("--verbose", verbose, "log the server's info lines (edit timings)");
+  app.add_option("--replot", replot, "only redraw the plot from an edit.json this tool wrote");
   app.add_option("--out", out_dir, "output directory (JSON, PNG)")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   try {
     Progress::set_enabled(false);
     log::set_level(verbose ? log::Level::Info : log::Level::Warn);
+    if (!replot.empty()) {
+      std::ifstream in(replot);
+      if (!in) throw Error("cannot read " + replot);
+      fs::create_directories(out_dir);
+      write_plot(out_dir + "/edit_progress.png", json::parse(in)["edits"]);
+      std::printf("wrote %s/edit_progress.png\n", out_dir.c_str());
+      return 0;
+    }
     std::unique_ptr<tbb::global_control> limit;
     if (threads > 0)
       limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -282,20 +419,20 @@ int main(int argc, char** argv) {
     std::vector<Result> results;
     for (const EditCase& c : default_cases(scenes)) results.push_back(run_case(c, options));
 
-    std::printf("\n%-10s %-12s %8s %8s %9s %10s %8s %8s | %11s %8s %8s | %6s %6s %6s\n", "scene",
-                "edit", "texels", "changed", "apply ms", "1st tile s", "90% s", "99% s",
-                "scratch 1st", "90% s", "99% s", "x 1st", "x 90%", "x 99%");
+    std::printf("\n%-8s %-11s %7s %7s %8s | %8s %6s %6s | %6s %6s | %8s %6s %6s | %5s %5s %5s\n",
+                "scene", "edit", "texels", "changed", "apply ms", "1st tile", "90%", "99%",
+                "90% nb", "99% nb", "scratch", "90%", "99%", "x 1st", "x 90", "x 99");
     json j = json::array();
     for (const Result& r : results) {
       const double x90 = r.scratch.t90 / std::max(r.edit.t90, 1e-9);
       const double x99 = r.scratch.t99 / std::max(r.edit.t99, 1e-9);
       const double x1 = r.scratch.first_tile / std::max(r.edit.first_tile, 1e-9);
       std::printf(
-          "%-10s %-12s %8zu %7.1f%% %9.1f %10.3f %8.3f %8.3f | %11.3f %8.3f %8.3f | %6.2f %6.2f "
-          "%6.2f\n",
+          "%-8s %-11s %7zu %6.1f%% %8.0f | %8.3f %6.2f %6.2f | %6.2f %6.2f | %8.3f %6.2f %6.2f | "
+          "%5.2f %5.2f %5.2f\n",
           r.c.scene.c_str(), r.c.kind.c_str(), r.texels, 100.0 * r.changed, r.apply_ms,
-          r.edit.first_tile, r.edit.t90, r.edit.t99, r.scratch.first_tile, r.scratch.t90,
-          r.scratch.t99, x1, x90, x99);
+          r.edit.first_tile, r.edit.t90, r.edit.t99, r.edit_no_blend.t90, r.edit_no_blend.t99,
+          r.scratch.first_tile, r.scratch.t90, r.scratch.t99, x1, x90, x99);
       json e;
       e["scene"] = r.c.scene;
       e["edit"] = r.c.kind;
@@ -304,6 +441,7 @@ int main(int argc, char** argv) {
       e["apply_ms"] = r.apply_ms;
       for (const auto& [name, curve] :
            {std::pair<const char*, const Curve*>{"incremental", &r.edit},
+            {"incremental_no_blend", &r.edit_no_blend},
             {"scratch", &r.scratch}}) {
         e[name]["first_tile_s"] = curve->first_tile;
         e[name]["t90_s"] = curve->t90;
@@ -318,41 +456,21 @@ int main(int argc, char** argv) {
       e["speedup_99"] = x99;
       j.push_back(e);
     }
-    std::ofstream(out_dir + "/edit.json") << j.dump(1) << "\n";
-
-    plot::XYPlot p;
-    p.title = "Scene edits: progress towards the final lightmaps after an edit";
-    p.x_label = "seconds since the edit";
-    p.y_label = "progress (1 = final)";
-    p.note = "solid: incremental (at a viewer); thin: recompute from scratch (at the tile store)";
-    p.legend = plot::XYPlot::Legend::BottomRight;
-    const plot::Color colors[] = {plot::kBlue, plot::kOrange, plot::kGreen, plot::kRed,
-                                  plot::kDarkGrey};
-    for (std::size_t i = 0; i < results.size(); ++i) {
-      const Result& r = results[i];
-      auto clamp01 = [](std::vector<double> v) {
-        for (double& x : v) x = std::clamp(x, -0.2, 1.0);
-        return v;
-      };
-      plot::Series a;
-      a.label = r.c.scene + " " + r.c.kind;
-      a.x = r.edit.t;
-      a.y = clamp01(r.edit.progress);
-      a.color = colors[i % 5];
-      a.points = false;
-      a.lines = true;
-      a.line_width = 2.5;
-      p.series.push_back(a);
-      plot::Series b = a;
-      b.label.clear();
-      b.x = r.scratch.t;
-      b.y = clamp01(r.scratch.progress);
-      b.line_width = 1.0;
-      p.series.push_back(b);
+    std::printf("\nTrace cost of the editable (two-level) BVH, closest-hit rays, interleaved:\n");
+    json trace = json::array();
+    for (const std::string& name : scenes) {
+      const auto [fixed, editable] = trace_cost(load_scene(name, 1.0f));
+      std::printf("%-10s static %.3f s / M rays, editable %.3f s / M rays: %.2fx\n", name.c_str(),
+                  fixed, editable, editable / fixed);
+      trace.push_back({{"scene", name},
+                       {"static_s_per_mray", fixed},
+                       {"editable_s_per_mray", editable},
+                       {"ratio", editable / fixed}});
     }
-    p.y_from_zero = false;
-    p.x_log = true;
-    write_xy_plot(out_dir + "/edit_progress.png", p);
+    std::ofstream(out_dir + "/edit.json")
+        << json{{"edits", j}, {"trace_cost", trace}}.dump(1) << "\n";
+
+    write_plot(out_dir + "/edit_progress.png", j);
     std::printf("\nwrote %s/edit.json and %s/edit_progress.png\n", out_dir.c_str(),
                 out_dir.c_str());
     return 0;

@@ -112,9 +112,10 @@ void check_converges(const char* name, const std::string& json, BackendKind back
   const double change = relative_rms(before, truth);
   const double bias = mean_luminance(after) / mean_luminance(truth) - 1.0;
   const double control_bias = mean_luminance(other) / mean_luminance(truth) - 1.0;
-  std::printf("%s (%s): edited vs fresh %.4f, control vs fresh %.4f, before edit vs fresh %.4f, "
-              "mean %+.4f (control %+.4f)\n",
-              name, edited.backend_name().c_str(), error, noise, change, bias, control_bias);
+  std::printf(
+      "%s (%s): edited vs fresh %.4f, control vs fresh %.4f, before edit vs fresh %.4f, "
+      "mean %+.4f (control %+.4f)\n",
+      name, edited.backend_name().c_str(), error, noise, change, bias, control_bias);
   // The edit mattered (the test can tell a missed edit from noise) ...
   EXPECT_GT(change, 3.0 * noise);
   // ... and the edited host ends where a fresh bake of the edited scene is, within the noise
@@ -253,9 +254,10 @@ std::pair<int, int> first_batch(bool viewer) {
 TEST(EngineEdit, TilesAViewerSeesAreRefreshedFirst) {
   const auto [floor_alone, back_alone] = first_batch(false);
   const auto [floor_seen, back_seen] = first_batch(true);
-  std::printf("first batch: without a viewer %d floor / %d back wall tiles, with a viewer on the "
-              "back wall %d / %d\n",
-              floor_alone, back_alone, floor_seen, back_seen);
+  std::printf(
+      "first batch: without a viewer %d floor / %d back wall tiles, with a viewer on the "
+      "back wall %d / %d\n",
+      floor_alone, back_alone, floor_seen, back_seen);
   // Without a viewer the refresh goes cell by cell from the front of the box: floor first,
   // back wall last. The viewer's tiles jump the queue.
   EXPECT_GT(floor_alone, 0);

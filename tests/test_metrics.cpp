@@ -373,6 +373,9 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   e.update_rate = 7.25;
   e.bytes_per_texel = 2.33;
   e.texels = 118000;
+  e.revision = 3;
+  e.last_edit_ms = 250.0;
+  e.stale_texels = 4321;
   e.tiles = 480;
   e.passes = {{"direct", 0, 0.001, 1000, 0.009, 9000},
               {"probes", 1, 0.002, 2000, 0.018, 18000},
@@ -432,6 +435,9 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   d("irradcast_engine_convergence", 0.0123456789);
   u("irradcast_engine_idle", 1);
   u("irradcast_engine_texels", 118000);
+  u("irradcast_scene_revision", 3);
+  d("irradcast_edit_apply_seconds", 0.25);
+  u("irradcast_engine_stale_texels", 4321);
   for (const EnginePassStats& p : e.passes) {
     const LabelMap l = {{"pass", p.pass}, {"bounce", std::to_string(p.bounce)}};
     d("irradcast_engine_pass_seconds", p.seconds, l);
@@ -442,7 +448,7 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   EXPECT_EQ(x.family("irradcast_engine_pass_seconds").size(), e.passes.size());
   // Nothing else: every sample above was checked.
   EXPECT_EQ(checked.size(), x.samples.size()) << text;
-  EXPECT_EQ(x.samples.size(), 27 + kCloseReasons + 4 * e.passes.size());
+  EXPECT_EQ(x.samples.size(), 30 + kCloseReasons + 4 * e.passes.size());
 }
 
 TEST(Metrics, FormatterHandlesAnEmptySnapshotAndSpecialValues) {

@@ -658,12 +658,12 @@ void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPo
     bounce_samples_[i] = std::min(bounce_before[k], keep);
     total_mean_[i] = total_mean_before[k];
     const std::uint32_t full = bounce_before[k];
-    total_m2_[i] =
-        full > 1 ? total_m2_before[k] * (bounce_samples_[i] - 1.0) / (full - 1.0) : 0.0;
+    total_m2_[i] = full > 1 ? total_m2_before[k] * (bounce_samples_[i] - 1.0) / (full - 1.0) : 0.0;
   }
-  // Probes see the whole scene: after a light change they restart, else they keep their
-  // estimate like the texels the edit does not affect.
-  probe_samples_ = change.light_points.empty() ? std::min(probe_samples_, keep) : 0u;
+  // Probes restart after every edit: each sees much of the scene, they are few, and every
+  // full update gathers all of them (a kept estimate would hold the old light for many
+  // updates, measured on rooms:2).
+  probe_samples_ = 0;
   queue_.clear();
   queue_pos_ = 0;
   for (std::uint8_t t = 0; t < 4; ++t)

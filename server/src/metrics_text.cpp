@@ -192,6 +192,13 @@ std::string format_metrics(const MetricsSnapshot& m) {
           "1 when the engine stopped refining (--max-updates reached): the tiles are final.",
           std::uint64_t{e.idle ? 1u : 0u});
   w.gauge("irradcast_engine_texels", "Texels the engine computes.", e.texels);
+  w.gauge("irradcast_scene_revision", "Scene edits applied since the scene was loaded.",
+          e.revision);
+  w.gauge("irradcast_edit_apply_seconds", "Wall time the last scene edit took to apply.",
+          e.last_edit_ms / 1e3);
+  w.gauge("irradcast_engine_stale_texels",
+          "Texels still waiting for new direct light since the last edit (0: caught up).",
+          e.stale_texels);
   w.family("irradcast_engine_pass_seconds", "gauge",
            "Wall time of each engine pass in the last update (bounce 0: direct).");
   for (const EnginePassStats& p : e.passes) w.sample(pass_labels(p), p.seconds);

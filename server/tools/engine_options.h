@@ -29,7 +29,7 @@ struct EngineOptions {
   std::string backend = "auto";
   int vulkan_device = -1;
   bool vulkan_validation = false;
-  float edit_blend = 1.0f;
+  float edit_blend = 0.5f;
   float edit_batch = 0.25f;
   int edit_keep = 2;
 

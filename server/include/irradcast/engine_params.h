@@ -28,7 +28,7 @@ struct EngineParams {
   // texel shows blends from its value before the edit to the new estimate with weight
   // exp(-k / edit_blend) on the old value after k new samples (0 = no blending), and drops the
   // old value entirely once that weight is below 1 %.
-  float edit_blend = 1.0f;
+  float edit_blend = 0.5f;
   float edit_batch = 0.25f;
   // Texels an edit does not affect keep their estimate, weighted as at most this many samples
   // (0: every texel restarts).
