@@ -266,4 +266,26 @@ TEST(EngineEdit, TilesAViewerSeesAreRefreshedFirst) {
   EXPECT_LT(floor_seen, floor_alone + 1);
 }
 
+TEST(EngineEdit, MaxUpdatesCountsFullUpdatesAfterTheCatchUp) {
+  EngineHostOptions o = options(1);
+  o.max_updates = 1;
+  o.engine.edit_batch = 0.25f;
+  EngineHost host(make_cornell_box(), "cornell", o);
+  // An edit before the first update: the very first update is a catch-up batch.
+  host.submit_edit(edit_of(R"({"op": "move", "node": "tall_block", "by": [0.02, 0, 0]})"));
+  int steps = 0;
+  do {
+    host.step();
+    ++steps;
+  } while (!host.stats().idle && steps < 20);
+  // Four direct-only batches, then the one full update max_updates asks for.
+  EXPECT_EQ(steps, 5);
+  EXPECT_EQ(host.stats().stale_texels, 0u);
+  // The pass list names every pass although the first update had only the direct one.
+  std::vector<std::string> passes;
+  for (const EnginePassStats& p : host.stats().passes) passes.push_back(p.pass);
+  EXPECT_EQ(passes, (std::vector<std::string>{"direct", "probes", "scatter", "probes", "scatter"}));
+  EXPECT_GT(host.stats().passes.back().rays, 0u);
+}
+
 }  // namespace

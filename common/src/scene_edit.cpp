@@ -90,6 +90,24 @@ void check_op(const Scene& scene, const EditOp& op, const std::string& where) {
   resolve(scene, op, where);
   if (!finite(op.vector) || !std::isfinite(op.value))
     throw Error(where + ": a number is not finite (NaN or infinity)");
+  // Bounds that keep every coordinate finite however many edits follow one another.
+  constexpr float kLimit = 1e6f;
+  if (glm::any(glm::greaterThan(glm::abs(op.vector), glm::vec3(kLimit))) ||
+      std::abs(op.value) > kLimit)
+    throw Error(where + ": a number is beyond +-1e6");
+  if (op.kind == Kind::Scale && glm::any(glm::lessThan(glm::abs(op.vector), glm::vec3(1e-3f))))
+    throw Error(where + ": a scale factor below 1e-3 in magnitude; use hide instead");
+  if (op.kind == Kind::Move || op.kind == Kind::Scale) {
+    // The node's transform after this op must stay well inside float range.
+    const glm::mat4& local = scene.nodes[static_cast<std::size_t>(resolve(scene, op, where))].local;
+    const glm::mat4 next = op.kind == Kind::Move
+                               ? glm::translate(glm::mat4(1.0f), op.vector) * local
+                               : local * glm::scale(glm::mat4(1.0f), op.vector);
+    for (int c = 0; c < 4; ++c)
+      for (int r = 0; r < 4; ++r)
+        if (!(std::abs(next[c][r]) < 1e9f))
+          throw Error(where + ": the node's transform would leave +-1e9");
+  }
   switch (op.kind) {
     case Kind::Rotate:
       if (!(glm::length(op.vector) > 0.0f))

@@ -69,6 +69,7 @@ void place_lights(World& w, const Scene& scene, const std::vector<glm::mat4>& ma
     const Light& l = scene.lights[node.light];
     const glm::mat4& m = mats[i];
     WorldLight wl;
+    wl.node = i;
     wl.type = l.type;
     wl.position = glm::vec3(m[3]);
     glm::vec3 d = -glm::vec3(m[2]);  // lights shine down their local -Z
@@ -128,7 +129,6 @@ std::vector<int> World::update(const Scene& s) {
     if (m != o.transform) place_object(o, m);
     changed.push_back(o.object);
   }
-  compute_bounds(*this);
   place_lights(*this, s, mats, visible);
   return changed;
 }

@@ -139,6 +139,7 @@ std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
   std::lock_guard lock(mutex_);
   const std::uint64_t revision = ++submitted_revision_;
   pending_edits_.emplace_back(revision, edit);
+  stats_.idle = false;  // refining again from now on: nobody waits for an idle that is stale
   cv_.notify_all();
   return revision;
 }
@@ -160,8 +161,7 @@ void EngineHost::apply_edits() {
     boxes_before.push_back(object_box(o));
     emitted_before.push_back(o.visible && emits(world_, o));
   }
-  std::vector<glm::vec3> lights_before;
-  for (const WorldLight& l : world_.lights) lights_before.push_back(l.position);
+  const std::vector<WorldLight> lights_before = world_.lights;
 
   EditEffect effect;
   std::vector<AppliedEdit> applied;
@@ -172,15 +172,18 @@ void EngineHost::apply_edits() {
       effect.lights.insert(effect.lights.end(), e.lights.begin(), e.lights.end());
       effect.materials.insert(effect.materials.end(), e.materials.begin(), e.materials.end());
     } catch (const std::exception& ex) {
-      // Validated when submitted against the same names; kept safe all the same.
+      // Validated when submitted against the scene as loaded; against the edited scene it can
+      // still fail (a transform pushed out of range by many edits). Not applied, not sent.
       log::error("engine", std::string("edit ") + std::to_string(revision) +
                                " could not be applied: " + ex.what());
+      continue;
     }
     AppliedEdit a;
     a.edit = std::move(edit);
     a.revision = revision;
     applied.push_back(std::move(a));
   }
+  if (applied.empty()) return;
 
   // World, ray scene (refit + top level), lights, G-buffers.
   std::string timings;
@@ -262,18 +265,31 @@ void EngineHost::apply_edits() {
       change.other_lights.push_back(object_box(obj).center());
     }
   }
-  // Punctual lights: every one before and after if any light or node changed (cheap: a few).
-  if (!effect.lights.empty() || !effect.nodes.empty()) {
-    for (std::size_t l = 0; l < world_.lights.size(); ++l) {
-      const bool same = l < lights_before.size() && lights_before[l] == world_.lights[l].position;
-      if (same && effect.lights.empty())
-        change.other_lights.push_back(world_.lights[l].position);
-      else
-        change.light_points.push_back(world_.lights[l].position);
+  // Punctual lights, matched by their node: the old and new positions of those that moved,
+  // changed or were shown or hidden; the others are unchanged emitters.
+  std::vector<bool> light_changed(scene_.lights.size(), false);
+  for (int l : effect.lights) light_changed[static_cast<std::size_t>(l)] = true;
+  auto before_of = [&](int node) -> const WorldLight* {
+    for (const WorldLight& l : lights_before)
+      if (l.node == node) return &l;
+    return nullptr;
+  };
+  for (const WorldLight& l : world_.lights) {
+    const WorldLight* old = before_of(l.node);
+    const bool changed = !old || old->position != l.position || old->direction != l.direction ||
+                         light_changed[static_cast<std::size_t>(
+                             scene_.nodes[static_cast<std::size_t>(l.node)].light)];
+    if (changed) {
+      change.light_points.push_back(l.position);
+      if (old) change.light_points.push_back(old->position);
+    } else {
+      change.other_lights.push_back(l.position);
     }
-    for (const glm::vec3& p : lights_before) change.light_points.push_back(p);
-  } else {
-    for (const WorldLight& l : world_.lights) change.other_lights.push_back(l.position);
+  }
+  for (const WorldLight& old : lights_before) {  // lights hidden by the edit
+    bool still = false;
+    for (const WorldLight& l : world_.lights) still = still || l.node == old.node;
+    if (!still) change.light_points.push_back(old.position);
   }
   lap("regions");
   impl_->engine->scene_changed(change, cameras);
@@ -349,7 +365,10 @@ void EngineHost::start() {
 }
 
 void EngineHost::stop() {
-  stopping_ = true;
+  {
+    std::lock_guard lock(mutex_);  // the engine thread checks it under the lock before waiting
+    stopping_ = true;
+  }
   cv_.notify_all();
   if (thread_.joinable()) thread_.join();
 }
@@ -386,13 +405,15 @@ void EngineHost::run() {
 
 void EngineHost::do_update() {
   const auto began = std::chrono::steady_clock::now();
+  // A full update (not a catch-up batch after an edit) counts towards max_updates.
+  const bool full = impl_->engine->stale_texels() == 0;
   UpdateStats u = impl_->engine->update();
   std::vector<Lightmap> maps = impl_->engine->lightmaps();
   // With the engine's own noise estimate, tiles that only changed by Monte Carlo noise wait
   // until their refresh is worth the bytes (TileStoreOptions::refresh_ratio). The last update
   // (max_updates) publishes every change beyond the threshold: final tiles are the final means.
   // Updates count from the start, or from the last edit once every texel has a new estimate.
-  if (impl_->engine->stale_texels() == 0) ++updates_since_edit_;
+  if (full) ++updates_since_edit_;
   const bool last = options_.max_updates > 0 && updates_since_edit_ >= options_.max_updates;
   std::vector<Lightmap> standard_error;
   if (!last && options_.tiles.refresh_ratio > 1.0f)
@@ -441,7 +462,8 @@ void EngineHost::record_passes(const UpdateStats& u) {
   const bool probes = !options_.engine.unbiased();
   if (stats_.passes.empty()) {
     stats_.passes.push_back({"direct", 0});
-    for (std::size_t b = 1; b <= u.scatter.size(); ++b) {
+    const auto bounces = static_cast<std::size_t>(options_.engine.indirect_bounces);
+    for (std::size_t b = 1; b <= bounces; ++b) {
       if (probes) stats_.passes.push_back({"probes", static_cast<std::uint32_t>(b)});
       stats_.passes.push_back({"scatter", static_cast<std::uint32_t>(b)});
     }

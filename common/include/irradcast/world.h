@@ -50,6 +50,7 @@ struct WorldObject {
 };
 
 struct WorldLight {
+  int node = -1;  // the node that places it
   Light::Type type = Light::Type::Point;
   glm::vec3 position{0.0f};
   glm::vec3 direction{0.0f, 0.0f, -1.0f};  // direction the light travels (spot/directional)
@@ -75,7 +76,9 @@ struct World {
   static World build(const Scene& scene);
   // After an edit of `scene` (the same Scene this World was built from): places every object
   // and light again. Object and light counts never change; only what moved is recomputed.
-  // Returns the objects whose transform or visibility changed.
+  // The bounds stay as built (the probe grid, ray offsets, tracing range and distant points
+  // of an engine are sized from them). Returns the objects whose transform or visibility
+  // changed.
   std::vector<int> update(const Scene& scene);
 
   // Albedo and emitted radiance at a surface point (textures sampled at the point's UVs).
