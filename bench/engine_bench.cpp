@@ -113,12 +113,6 @@ Rng texel_rng(const EngineParams& p, std::uint64_t index, std::uint32_t update, 
              (static_cast<std::uint64_t>(update) << 16) ^ (stream << 8) ^ bounce);
 }
 
-glm::vec3 radiance_at(const RadianceField& f, const Hit& h) {
-  glm::vec2 uv = f.atlas->objects[h.object].uv(h.triangle, h.u, h.v);
-  glm::vec3 e = (*f.irradiance)[h.object].bilinear(uv);
-  return f.world->albedo(h.object, h.triangle, h.u, h.v) * kInvPi * e;
-}
-
 glm::vec3 sample_probe(const std::vector<glm::vec3>& radiance, std::size_t probe, int res,
                        glm::vec3 dir) {
   glm::vec2 uv = octahedral_encode(dir) * static_cast<float>(res) - 0.5f;

@@ -32,7 +32,7 @@ struct EngineSetup {
   std::unique_ptr<Engine> engine(EngineParams p,
                                  std::unique_ptr<TraceBackend> backend = nullptr) const {
     if (!backend) backend = std::make_unique<EmbreeBackend>(rays, lights);
-    return std::make_unique<Engine>(world, atlas, gbuffers, rays, std::move(backend), p);
+    return std::make_unique<Engine>(world, atlas, gbuffers, rays, std::move(backend), p, &lights);
   }
   Scene scene;
   World world;

@@ -20,7 +20,8 @@ namespace {
 
 constexpr std::uint32_t kUpdates = 16;
 
-EngineHostOptions options(std::uint64_t seed, BackendKind backend = BackendKind::Embree) {
+EngineHostOptions options(std::uint64_t seed, BackendKind backend = BackendKind::Embree,
+                          Method method = Method::Cells) {
   Progress::set_enabled(false);
   log::set_level(log::Level::Warn);
   EngineHostOptions o;
@@ -30,6 +31,7 @@ EngineHostOptions options(std::uint64_t seed, BackendKind backend = BackendKind:
   o.tiles.change_threshold = 0.0f;
   o.tiles.refresh_ratio = 1.0f;
   o.engine.seed = seed;
+  o.engine.method = method;
   o.backend.kind = backend;
   o.max_updates = kUpdates;
   o.engine_nice = 0;
@@ -87,9 +89,10 @@ class EditConverges : public ::testing::TestWithParam<EditCase> {};
 
 // Edits a converged host, runs it to convergence again and compares it with a fresh bake of the
 // edited scene, against the control of a second fresh bake with another seed.
-void check_converges(const char* name, const std::string& json, BackendKind backend) {
+void check_converges(const char* name, const std::string& json, BackendKind backend,
+                     Method method = Method::Cells) {
   const SceneEdit edit = edit_of(json);
-  EngineHost edited(make_cornell_box(), "cornell", options(1, backend));
+  EngineHost edited(make_cornell_box(), "cornell", options(1, backend, method));
   run_to_idle(edited);
   const std::vector<Lightmap> before = edited.tiles().published();
   edited.submit_edit(edit);
@@ -100,9 +103,9 @@ void check_converges(const char* name, const std::string& json, BackendKind back
 
   Scene scene = make_cornell_box();
   apply_edit(scene, edit);
-  EngineHost fresh(scene, "cornell", options(1, backend));
+  EngineHost fresh(scene, "cornell", options(1, backend, method));
   run_to_idle(fresh);
-  EngineHost control(scene, "cornell", options(2, backend));
+  EngineHost control(scene, "cornell", options(2, backend, method));
   run_to_idle(control);
   const std::vector<Lightmap> truth = fresh.tiles().published();
   const std::vector<Lightmap> other = control.tiles().published();
@@ -113,9 +116,10 @@ void check_converges(const char* name, const std::string& json, BackendKind back
   const double bias = mean_luminance(after) / mean_luminance(truth) - 1.0;
   const double control_bias = mean_luminance(other) / mean_luminance(truth) - 1.0;
   std::printf(
-      "%s (%s): edited vs fresh %.4f, control vs fresh %.4f, before edit vs fresh %.4f, "
+      "%s (%s, %s): edited vs fresh %.4f, control vs fresh %.4f, before edit vs fresh %.4f, "
       "mean %+.4f (control %+.4f)\n",
-      name, edited.backend_name().c_str(), error, noise, change, bias, control_bias);
+      name, edited.backend_name().c_str(), method_name(method).c_str(), error, noise, change, bias,
+      control_bias);
   // The edit mattered (the test can tell a missed edit from noise) ...
   EXPECT_GT(change, 3.0 * noise);
   // ... and the edited host ends where a fresh bake of the edited scene is, within the noise
@@ -135,6 +139,20 @@ TEST(EngineEdit, VulkanBackendFollowsAnEdit) {
                               {"op": "emission", "material": "light", "color": [17, 12, 4],
                                "strength": 0.6}]})",
                   BackendKind::Vulkan);
+}
+
+// The other methods (docs/METHODS.md) follow an edit too: VPLs the moved block now occludes
+// are shot again (seed 000), records near it are placed again (seed 004).
+TEST(EngineEdit, VplMethodFollowsAnEdit) {
+  check_converges("tall_block_move",
+                  R"({"op": "move", "node": "tall_block", "by": [-0.1, 0, -0.12]})",
+                  BackendKind::Embree, Method::Vpl);
+}
+
+TEST(EngineEdit, IrradianceCacheFollowsAnEdit) {
+  check_converges("tall_block_move",
+                  R"({"op": "move", "node": "tall_block", "by": [-0.1, 0, -0.12]})",
+                  BackendKind::Embree, Method::IrradianceCache);
 }
 
 INSTANTIATE_TEST_SUITE_P(

@@ -45,12 +45,6 @@ std::uint64_t for_each_texel(const PassInput& in, Body&& body) {
   return rays.load();
 }
 
-glm::vec3 radiance_at(const RadianceField& f, const Hit& h) {
-  glm::vec2 uv = f.atlas->objects[h.object].uv(h.triangle, h.u, h.v);
-  glm::vec3 e = (*f.irradiance)[h.object].bilinear(uv);
-  return f.world->albedo(h.object, h.triangle, h.u, h.v) * kInvPi * e;
-}
-
 glm::vec3 sample_probe(const std::vector<glm::vec3>& radiance, std::size_t probe, int res,
                        glm::vec3 dir) {
   glm::vec2 uv = octahedral_encode(dir) * static_cast<float>(res) - 0.5f;
@@ -88,6 +82,12 @@ int pick_probe(const ProbeWeights& w, float u) {
 }
 
 }  // namespace
+
+glm::vec3 radiance_at(const RadianceField& f, const Hit& h) {
+  glm::vec2 uv = f.atlas->objects[h.object].uv(h.triangle, h.u, h.v);
+  glm::vec3 e = (*f.irradiance)[h.object].bilinear(uv);
+  return f.world->albedo(h.object, h.triangle, h.u, h.v) * kInvPi * e;
+}
 
 PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& out) {
   auto start = Clock::now();

@@ -51,14 +51,15 @@ Spot probe_spot(const RayScene& rays, const World& world, glm::vec3 p,
 }  // namespace
 
 std::uint64_t UpdateStats::total_rays() const {
-  std::uint64_t n = direct.rays;
+  std::uint64_t n = direct.rays + prepare.rays;
   for (const auto& p : probes) n += p.rays;
   for (const auto& s : scatter) n += s.rays;
   return n;
 }
 
 Engine::Engine(const World& world, const Atlas& atlas, const std::vector<TexelGBuffer>& gbuffers,
-               const RayScene& rays, std::unique_ptr<TraceBackend> backend, EngineParams params)
+               const RayScene& rays, std::unique_ptr<TraceBackend> backend, EngineParams params,
+               const LightSampler* lights)
     : world_(&world),
       atlas_(&atlas),
       gbuffers_(&gbuffers),
@@ -66,9 +67,13 @@ Engine::Engine(const World& world, const Atlas& atlas, const std::vector<TexelGB
       backend_(std::move(backend)),
       params_(params) {
   params_.validate();
+  if (params_.method != Method::Cells) {
+    if (!lights) throw Error("engine: method " + method_name(params_.method) + " needs the lights");
+    method_ = make_indirect_method(params_, world, rays, *lights);
+  }
   // Seed 001 section 4.3.2 and our rooms test: probes stand in for everything beyond the range,
   // so a range much shorter than a cell makes the probes' parallax dominate the error.
-  if (!params_.unbiased() && params_.tracing_range < 0.4f * params_.cell_size)
+  if (params_.uses_probes() && params_.tracing_range < 0.4f * params_.cell_size)
     log::warn("engine", "tracing range " + std::to_string(params_.tracing_range) +
                             " is short for cells of " + std::to_string(params_.cell_size) +
                             ": expect probe error; use a cell size of at most " +
@@ -144,7 +149,7 @@ void Engine::build_probes() {
   for (std::size_t i = 0; i < texels_.size(); ++i)
     texels_.cell.push_back(static_cast<std::uint32_t>(probes_.cell_index(texels_.position[i])));
   probe_stats_.probes = count;
-  if (params_.unbiased()) return;
+  if (!params_.uses_probes()) return;
   std::vector<std::size_t> all(count);
   for (std::size_t i = 0; i < count; ++i) all[i] = i;
   place_probes(all);
@@ -354,12 +359,25 @@ UpdateStats Engine::update() {
     return stats;
   }
   total = est;
+  if (method_) {
+    PassResult pr = method_->prepare(in);
+    stats.prepare = {pr.seconds, pr.rays};
+  }
   std::vector<Lightmap> prev = to_lightmaps(mean_[0]);
   for (int b = 1; b <= k; ++b) {
     in.bounce = static_cast<std::uint32_t>(b);
     RadianceField field{world_, atlas_, &prev};
+    if (method_) {
+      stats.probes.push_back({});
+      PassResult mr = method_->bounce(in, field, est);
+      stats.scatter.push_back({mr.seconds, mr.rays});
+      accumulate(mean_[b], est, bounce_samples_);
+      for (std::uint32_t i : *texels) total[i] += est[i];
+      if (b < k) prev = to_lightmaps(mean_[b]);
+      continue;
+    }
     PassTiming probe_time;
-    if (!params_.unbiased()) {
+    if (params_.uses_probes()) {
       std::vector<glm::vec3> probe_est;
       PassResult pr = backend_->gather_probes(in, field, probe_est);
       probe_time = {pr.seconds, pr.rays};
@@ -513,7 +531,7 @@ void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPo
       texels_.cell.push_back(static_cast<std::uint32_t>(probes_.cell_index(texels_.position[i])));
   }
   lap("texels");
-  if (change.geometry && !params_.unbiased()) {
+  if (change.geometry && params_.uses_probes()) {
     // Probes in cells a moved object touches (before or after) are placed again.
     std::vector<std::size_t> again;
     const float reach = probes_.cell;
@@ -532,7 +550,7 @@ void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPo
     place_probes(again);
     lap(("probes (" + std::to_string(again.size()) + ")").c_str());
   }
-  if ((change.geometry || change.surfaces) && !params_.unbiased()) build_probe_weights();
+  if ((change.geometry || change.surfaces) && params_.uses_probes()) build_probe_weights();
   if (change.geometry || change.surfaces) build_dispatch();
   lap("probe weights");
 
@@ -590,7 +608,7 @@ void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPo
   // the rest; within each, texels a viewer's camera sees first.
   const float margin = std::max(
       probes_.cell,
-      params_.unbiased() ? probes_.cell : params_.tracing_range * world_->bounds.max_extent());
+      !params_.uses_probes() ? probes_.cell : params_.tracing_range * world_->bounds.max_extent());
   std::vector<std::uint8_t> tier(n, 0);
   tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
     const glm::vec3 p = texels_.position[i];
@@ -672,6 +690,10 @@ void Engine::scene_changed(const SceneChange& change, const std::vector<CameraPo
   ++generation_;
   backend_->scene_changed();
   lap("backend");
+  if (method_) {
+    method_->scene_changed(change);
+    lap(method_->name().c_str());
+  }
 }
 
 }  // namespace irradcast

@@ -68,8 +68,9 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
   mark_hidden_texels(*impl_->rays, impl_->gbuffers);
   BackendChoice backend = make_backend(options_.backend, world_, *impl_->rays, *impl_->lights);
   backend_ = backend.reason;
-  impl_->engine = std::make_unique<Engine>(world_, atlas_, impl_->gbuffers, *impl_->rays,
-                                           std::move(backend.backend), options_.engine);
+  impl_->engine =
+      std::make_unique<Engine>(world_, atlas_, impl_->gbuffers, *impl_->rays,
+                               std::move(backend.backend), options_.engine, impl_->lights.get());
   std::vector<std::pair<int, int>> sizes;
   for (const ObjectLightmap& o : atlas_.objects) sizes.emplace_back(o.width, o.height);
   tiles_ = std::make_unique<TileStore>(sizes, options_.tiles);
@@ -79,19 +80,34 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
     const EngineParams& e = options_.engine;
     std::string key = package_->hash;
     auto add = [&](double v) { key += "|" + std::to_string(v); };
-    for (double v :
-         {static_cast<double>(e.cell_size), static_cast<double>(e.tracing_range),
-          static_cast<double>(e.direct_samples), static_cast<double>(e.indirect_samples),
-          static_cast<double>(e.indirect_bounces), static_cast<double>(e.probe_resolution),
-          static_cast<double>(e.dispatch), static_cast<double>(e.distant_point),
-          static_cast<double>(e.relocate_probes), static_cast<double>(e.probe_visibility),
-          static_cast<double>(e.seed), static_cast<double>(options_.atlas.texels_per_scene),
-          static_cast<double>(options_.atlas.max_lightmap_size),
-          static_cast<double>(options_.tiles.tile_size),
-          static_cast<double>(options_.tiles.change_threshold),
-          static_cast<double>(options_.tiles.floor_fraction),
-          static_cast<double>(options_.tiles.refresh_ratio),
-          static_cast<double>(options_.tiles.significance)})
+    for (double v : {static_cast<double>(e.cell_size),
+                     static_cast<double>(e.tracing_range),
+                     static_cast<double>(e.direct_samples),
+                     static_cast<double>(e.indirect_samples),
+                     static_cast<double>(e.indirect_bounces),
+                     static_cast<double>(e.probe_resolution),
+                     static_cast<double>(e.dispatch),
+                     static_cast<double>(e.distant_point),
+                     static_cast<double>(e.relocate_probes),
+                     static_cast<double>(e.probe_visibility),
+                     static_cast<double>(e.seed),
+                     static_cast<double>(e.method),
+                     static_cast<double>(e.vpl_paths),
+                     static_cast<double>(e.vpl_sets),
+                     static_cast<double>(e.vpl_interleave),
+                     static_cast<double>(e.vpl_clamp),
+                     static_cast<double>(e.vpl_replace),
+                     static_cast<double>(e.ic_accuracy),
+                     static_cast<double>(e.ic_rays),
+                     static_cast<double>(e.ic_min_radius),
+                     static_cast<double>(e.ic_max_radius),
+                     static_cast<double>(options_.atlas.texels_per_scene),
+                     static_cast<double>(options_.atlas.max_lightmap_size),
+                     static_cast<double>(options_.tiles.tile_size),
+                     static_cast<double>(options_.tiles.change_threshold),
+                     static_cast<double>(options_.tiles.floor_fraction),
+                     static_cast<double>(options_.tiles.refresh_ratio),
+                     static_cast<double>(options_.tiles.significance)})
       add(v);
     backend_name_ = impl_->engine->backend().describe();
     key += "|" + backend_name_;  // backends agree only within noise
@@ -99,7 +115,8 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
   }
   stats_.texels = impl_->engine->texel_count();
   stats_.tiles = tiles_->tile_count();
-  log::info("engine", scene_id_ + ": " + std::to_string(atlas_.objects.size()) + " lightmaps, " +
+  log::info("engine", scene_id_ + ": method " + method_name(options_.engine.method) + ", " +
+                          std::to_string(atlas_.objects.size()) + " lightmaps, " +
                           std::to_string(impl_->engine->texel_count()) + " texels, " +
                           std::to_string(tiles_->tile_count()) + " tiles, scene package " +
                           std::to_string(package_->bytes.size()) + " bytes");
@@ -451,21 +468,30 @@ void EngineHost::do_update() {
     // empty queue then really has every final tile.
     std::lock_guard lock(mutex_);
     stats_.idle = true;
+    const std::string method = impl_->engine->method_summary();
     log::info("engine", "reached " + std::to_string(options_.max_updates) +
-                            " updates; the lightmaps are final");
+                            " updates; the lightmaps are final" +
+                            (method.empty() ? "" : " (" + method + ")"));
   }
   cv_.notify_all();
 }
 
 void EngineHost::record_passes(const UpdateStats& u) {
   // The list of passes is fixed by the parameters; it is built on the first update.
-  const bool probes = !options_.engine.unbiased();
+  const EngineParams& e = options_.engine;
+  const bool probes = e.uses_probes();
+  const bool cells = e.method == Method::Cells;
+  const char* bounce_pass = e.method == Method::Vpl ? "vpl-gather"
+                            : cells                 ? "scatter"
+                                                    : "cache-records";
   if (stats_.passes.empty()) {
     stats_.passes.push_back({"direct", 0});
-    const auto bounces = static_cast<std::size_t>(options_.engine.indirect_bounces);
+    if (!cells)
+      stats_.passes.push_back({e.method == Method::Vpl ? "vpl-shoot" : "cache-placement", 0});
+    const auto bounces = static_cast<std::size_t>(e.indirect_bounces);
     for (std::size_t b = 1; b <= bounces; ++b) {
       if (probes) stats_.passes.push_back({"probes", static_cast<std::uint32_t>(b)});
-      stats_.passes.push_back({"scatter", static_cast<std::uint32_t>(b)});
+      stats_.passes.push_back({bounce_pass, static_cast<std::uint32_t>(b)});
     }
   }
   auto add = [](EnginePassStats& p, const PassTiming& t) {
@@ -476,6 +502,7 @@ void EngineHost::record_passes(const UpdateStats& u) {
   };
   std::size_t i = 0;
   add(stats_.passes[i++], u.direct);
+  if (!cells && i < stats_.passes.size()) add(stats_.passes[i++], u.prepare);
   for (std::size_t b = 0; b < u.scatter.size() && i < stats_.passes.size(); ++b) {
     if (probes && b < u.probes.size()) add(stats_.passes[i++], u.probes[b]);
     if (i < stats_.passes.size()) add(stats_.passes[i++], u.scatter[b]);

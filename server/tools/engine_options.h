@@ -32,8 +32,46 @@ struct EngineOptions {
   float edit_blend = 0.5f;
   float edit_batch = 0.25f;
   int edit_keep = 2;
+  std::string method = "cells";
+  int vpl_paths = 1024;
+  int vpl_sets = 4;
+  int vpl_interleave = 4;
+  float vpl_clamp = 0.05f;
+  int vpl_replace = 0;
+  float ic_accuracy = 0.25f;
+  int ic_rays = 4;
+  float ic_min_radius = 0.01f;
+  float ic_max_radius = 0.25f;
 
   void add_to(CLI::App& app) {
+    app.add_option("--method", method,
+                   "engine: indirect light by cells (radiance cells, seed 001) | vpl (instant "
+                   "radiosity, seeds 003/000) | irradiance-cache (seed 004); docs/METHODS.md")
+        ->capture_default_str();
+    app.add_option("--vpl-paths", vpl_paths, "vpl: light paths in the pool")->capture_default_str();
+    app.add_option("--vpl-sets", vpl_sets, "vpl: temporal sets, one gathered per update")
+        ->capture_default_str();
+    app.add_option("--vpl-interleave", vpl_interleave,
+                   "vpl: interleaved sampling pattern side n (n x n subsets)")
+        ->capture_default_str();
+    app.add_option("--vpl-clamp", vpl_clamp,
+                   "vpl: clamp 1/d^2 below this distance (fraction of the scene; 0 = none)")
+        ->capture_default_str();
+    app.add_option("--vpl-replace", vpl_replace,
+                   "vpl: VPLs shot again per update after an edit (0 = all at once)")
+        ->capture_default_str();
+    app.add_option("--ic-accuracy", ic_accuracy,
+                   "irradiance-cache: a; records where no record has weight above 1/a")
+        ->capture_default_str();
+    app.add_option("--ic-rays", ic_rays,
+                   "irradiance-cache: theta strata per record per update (x 4 in phi)")
+        ->capture_default_str();
+    app.add_option("--ic-min-radius", ic_min_radius,
+                   "irradiance-cache: smallest record radius (fraction of the scene)")
+        ->capture_default_str();
+    app.add_option("--ic-max-radius", ic_max_radius,
+                   "irradiance-cache: largest record radius (fraction of the scene)")
+        ->capture_default_str();
     app.add_option("--cell-size", cell_size, "engine: radiance cell size (fraction of the scene)");
     app.add_option("--tracing-range", tracing_range,
                    "engine: hemisphere ray length (fraction of the scene), or inf (unbiased)");
@@ -97,6 +135,16 @@ struct EngineOptions {
     p.edit_blend = edit_blend;
     p.edit_batch = edit_batch;
     p.edit_keep = edit_keep;
+    p.method = parse_method(method);
+    p.vpl_paths = vpl_paths;
+    p.vpl_sets = vpl_sets;
+    p.vpl_interleave = vpl_interleave;
+    p.vpl_clamp = vpl_clamp;
+    p.vpl_replace = vpl_replace;
+    p.ic_accuracy = ic_accuracy;
+    p.ic_rays = ic_rays;
+    p.ic_min_radius = ic_min_radius;
+    p.ic_max_radius = ic_max_radius;
     p.validate();
     return p;
   }

@@ -13,6 +13,7 @@
 #include "irradcast/atlas.h"
 #include "irradcast/engine_params.h"
 #include "irradcast/gbuffer.h"
+#include "irradcast/indirect_method.h"
 #include "irradcast/lightmap.h"
 #include "irradcast/ray_scene.h"
 #include "irradcast/trace_backend.h"
@@ -27,6 +28,7 @@ struct PassTiming {
 
 struct UpdateStats {
   PassTiming direct;
+  PassTiming prepare;               // VPL / irradiance cache: shooting VPLs, placing records
   std::vector<PassTiming> probes;   // per bounce (empty entries in unbiased mode)
   std::vector<PassTiming> scatter;  // per bounce
   double total_seconds = 0.0;
@@ -58,8 +60,11 @@ class Engine {
  public:
   // The world, atlas, G-buffers and ray scene must outlive the engine. `rays` serves the
   // host-side set-up (probe placement and probe visibility); the passes run on `backend`.
+  // Methods other than radiance cells (EngineParams::method) run their bounces on the CPU with
+  // `rays` and need the scene's `lights` (which must outlive the engine too).
   Engine(const World& world, const Atlas& atlas, const std::vector<TexelGBuffer>& gbuffers,
-         const RayScene& rays, std::unique_ptr<TraceBackend> backend, EngineParams params);
+         const RayScene& rays, std::unique_ptr<TraceBackend> backend, EngineParams params,
+         const LightSampler* lights = nullptr);
   ~Engine();
 
   // One progressive update: direct pass, then per bounce probe gather (biased mode) + scatter.
@@ -87,6 +92,9 @@ class Engine {
   const ProbeStats& probe_stats() const { return probe_stats_; }
   std::size_t texel_count() const { return texels_.size(); }
   const TraceBackend& backend() const { return *backend_; }
+  // The indirect method's state in one line ("" for radiance cells).
+  std::string method_summary() const { return method_ ? method_->summary() : std::string(); }
+  const IndirectMethod* method() const { return method_.get(); }
 
   // Total irradiance E = E_direct + sum of the bounces, per object, dilated into the gutters.
   std::vector<Lightmap> lightmaps() const;
@@ -115,6 +123,7 @@ class Engine {
   const RayScene* rays_;
   std::unique_ptr<TraceBackend> backend_;
   EngineParams params_;
+  std::unique_ptr<IndirectMethod> method_;  // null: radiance cells on the backend
   SurfaceTexels texels_;
   ProbeGrid probes_;
   ProbeStats probe_stats_;

@@ -12,6 +12,7 @@
 #include "irradcast/atlas.h"
 #include "irradcast/engine_params.h"
 #include "irradcast/lightmap.h"
+#include "irradcast/ray_scene.h"
 #include "irradcast/world.h"
 
 namespace irradcast {
@@ -58,6 +59,9 @@ struct RadianceField {
   const Atlas* atlas = nullptr;
   const std::vector<Lightmap>* irradiance = nullptr;  // E_prev per object, dilated
 };
+
+// Outgoing radiance albedo / pi * E_prev at a hit (bilinear in the hit object's lightmap).
+glm::vec3 radiance_at(const RadianceField& f, const Hit& h);
 
 struct PassInput {
   const World& world;

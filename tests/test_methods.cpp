@@ -1,0 +1,164 @@
+// The indirect methods other than radiance cells (docs/METHODS.md): instant radiosity (VPL) and
+// the irradiance cache, each against analytic irradiance and against the reference path tracer.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "engine_setup.h"
+#include "irradcast/builtin.h"
+#include "irradcast/camera.h"
+#include "irradcast/compositor.h"
+#include "irradcast/engine.h"
+#include "irradcast/error.h"
+#include "irradcast/halton.h"
+#include "irradcast/irradiance_cache.h"
+#include "irradcast/path_tracer.h"
+#include "irradcast/vpl_method.h"
+#include "scene_builders.h"
+
+using namespace irradcast;
+using test::EngineSetup;
+using test::mean_valid;
+
+namespace {
+EngineParams method_params(Method m) {
+  EngineParams p;
+  p.method = m;
+  p.indirect_bounces = 2;
+  return p;
+}
+}  // namespace
+
+TEST(Halton, IsTheRadicalInverseAndStaysInTheUnitInterval) {
+  EXPECT_FLOAT_EQ(halton(1, 0), 0.5f);
+  EXPECT_FLOAT_EQ(halton(2, 0), 0.25f);
+  EXPECT_FLOAT_EQ(halton(3, 0), 0.75f);
+  EXPECT_FLOAT_EQ(halton(1, 1), 1.0f / 3.0f);
+  EXPECT_FLOAT_EQ(halton(5, 1), 2.0f / 3.0f + 1.0f / 9.0f);  // 5 = 12 in base 3: 0.21
+  for (std::uint64_t i = 0; i < 2000; ++i)
+    for (int d = 0; d < 32; ++d) {
+      const float v = halton(i, d, 0.7f);
+      ASSERT_GE(v, 0.0f);
+      ASSERT_LT(v, 1.0f);
+    }
+  EXPECT_THROW(halton(1, 32), Error);
+}
+
+class MethodFurnace : public ::testing::TestWithParam<std::tuple<Method, float>> {};
+
+// Closed box, every surface emitting Le = 1 with albedo rho: bounce k brings pi rho^k, the
+// total is pi (1 - rho^3) / (1 - rho) with 1 direct + 2 indirect bounces. Each bounce of the
+// method within 3 % (the direct pass is the engine's, the same for every method). VPL with a
+// clamp distance of 1 % of the box: the light lost to clamping stays below 1 % (measured
+// 0.1 %); the default 5 % is tested below.
+TEST_P(MethodFurnace, BouncesConvergeToTheAnalyticIrradiance) {
+  auto [method, rho] = GetParam();
+  EngineSetup s(test::closed_box(glm::vec3(rho), glm::vec3(1.0f)), 24.0f);
+  EngineParams p = method_params(method);
+  p.vpl_clamp = 0.01f;
+  auto engine = s.engine(p);
+  for (int u = 0; u < 8; ++u) engine->update();
+  for (int b = 1; b <= 2; ++b) {
+    const double measured = mean_valid(s, engine->component(b));
+    const double expected = kPi * std::pow(rho, b);
+    RecordProperty("bounce" + std::to_string(b) + "_relative_error",
+                   std::to_string(measured / expected - 1.0));
+    EXPECT_NEAR(measured, expected, 0.03 * expected)
+        << method_name(method) << " rho " << rho << " bounce " << b << ": "
+        << engine->method_summary();
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Methods, MethodFurnace,
+                         ::testing::Combine(::testing::Values(Method::Vpl, Method::IrradianceCache),
+                                            ::testing::Values(0.5f, 0.8f)));
+
+// Clamping is instant radiosity's bias (seed 003's clamped splats, Keller's bounded 1/d^2): with
+// the default clamp distance (5 % of the scene) the furnace's first bounce loses light, but
+// boundedly: measured -4.7 %, bound [-8 %, -2 %]; without clamping it is within 3 %.
+TEST(Methods, VplClampingLosesBoundedLightNearCorners) {
+  EngineSetup s(test::closed_box(glm::vec3(0.5f), glm::vec3(1.0f)), 24.0f);
+  auto bounce1 = [&](float clamp) {
+    EngineParams p = method_params(Method::Vpl);
+    p.vpl_clamp = clamp;
+    auto engine = s.engine(p);
+    for (int u = 0; u < 8; ++u) engine->update();
+    return mean_valid(s, engine->component(1)) / (kPi * 0.5) - 1.0;
+  };
+  const double clamped = bounce1(0.05f), unclamped = bounce1(0.0f);
+  RecordProperty("clamped", std::to_string(clamped));
+  RecordProperty("unclamped", std::to_string(unclamped));
+  EXPECT_LT(clamped, -0.02);
+  EXPECT_GT(clamped, -0.08);
+  EXPECT_NEAR(unclamped, 0.0, 0.03);
+}
+
+// The composed Cornell view against the reference path tracer (1024 spp, 2 bounces), as
+// EngineCornell does for the cells. Bound: relative MSE below 0.002 after 16 updates (measured
+// 0.0004 for both; the cells measure 0.001 in the same set-up), which leaves room for the
+// reference's own noise and the clamping bias, and the error must fall from the first update.
+class MethodCornell : public ::testing::TestWithParam<Method> {};
+
+TEST_P(MethodCornell, ComposedViewMatchesTheReference) {
+  const Method method = GetParam();
+  EngineSetup s(make_cornell_box(), 64.0f);
+  CameraPose cam = default_camera(s.scene, s.world);
+  const int w = 48, h = 48;
+  PathTracer tracer(s.world, s.rays, s.lights, PathTracerOptions{2, true, 99});
+  ImageRGB ref = tracer.render(cam, w, h, 1024);
+  auto engine = s.engine(method_params(method));
+  engine->update();
+  const double first =
+      compare(compose(s.world, s.rays, s.atlas, engine->lightmaps(), cam, w, h), ref).rel_mse;
+  for (int u = 1; u < 16; ++u) engine->update();
+  const double last =
+      compare(compose(s.world, s.rays, s.atlas, engine->lightmaps(), cam, w, h), ref).rel_mse;
+  RecordProperty("rel_mse_1_update", std::to_string(first));
+  RecordProperty("rel_mse_16_updates", std::to_string(last));
+  std::printf("%s: rel MSE %.5f after 1 update, %.5f after 16 (%s)\n", method_name(method).c_str(),
+              first, last, engine->method_summary().c_str());
+  EXPECT_LT(last, 0.002);
+  EXPECT_LT(last, first);
+}
+
+INSTANTIATE_TEST_SUITE_P(Methods, MethodCornell,
+                         ::testing::Values(Method::Vpl, Method::IrradianceCache),
+                         [](const auto& info) {
+                           return info.param == Method::Vpl ? std::string("Vpl")
+                                                            : std::string("IrradianceCache");
+                         });
+
+TEST(Methods, BadParametersAreRefusedWithTheirName) {
+  EXPECT_THROW(parse_method("photon-map"), Error);
+  try {
+    parse_method("photon-map");
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("photon-map"), std::string::npos);
+  }
+  EXPECT_EQ(parse_method("irradiance-cache"), Method::IrradianceCache);
+  EXPECT_EQ(method_name(parse_method("vpl")), "vpl");
+  auto refused = [](auto change, const std::string& name) {
+    EngineParams p;
+    change(p);
+    try {
+      p.validate();
+      ADD_FAILURE() << name << " accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
+  };
+  refused([](EngineParams& p) { p.vpl_paths = 0; }, "vpl_paths");
+  refused([](EngineParams& p) { p.vpl_paths = 8; }, "vpl_paths");  // < 4 sets x 16 subsets
+  refused([](EngineParams& p) { p.vpl_clamp = -1.0f; }, "vpl_clamp");
+  refused([](EngineParams& p) { p.vpl_interleave = 0; }, "vpl_interleave");
+  refused([](EngineParams& p) { p.ic_accuracy = 0.0f; }, "ic_accuracy");
+  refused([](EngineParams& p) { p.ic_rays = 1; }, "ic_rays");
+  refused([](EngineParams& p) { p.ic_min_radius = 0.5f; }, "ic radii");
+  // A method other than cells needs the lights.
+  EngineSetup s(make_cornell_box(), 16.0f);
+  EXPECT_THROW(
+      Engine(s.world, s.atlas, s.gbuffers, s.rays,
+             std::make_unique<EmbreeBackend>(s.rays, s.lights), method_params(Method::Vpl)),
+      Error);
+}
