@@ -83,10 +83,30 @@ TEST(BakeCli, BadInputGetsAClearErrorAndNonZeroExit) {
            {"--scene cornell --width 0 --out /tmp/x", "--width"},
            {"--bogus-flag", "bogus"},
            {"--scene cornell", "--out"},
+           {"--scene cornell --out /tmp/x --method photon-map", "photon-map"},
+           {"--scene cornell --out /tmp/x --method vpl --vpl-paths 8", "vpl_paths"},
+           {"--scene cornell --out /tmp/x --method irradiance-cache --ic-accuracy 0",
+            "ic_accuracy"},
        }) {
     Result r = run_bake(c.args);
     EXPECT_NE(r.status, 0) << c.args;
     EXPECT_NE(r.output.find(c.expect), std::string::npos) << c.args << "\n" << r.output;
+  }
+}
+
+// Every method of docs/METHODS.md bakes from the command line and says which it ran.
+TEST(BakeCli, EveryMethodBakesAndNamesItself) {
+  for (const char* method : {"cells", "vpl", "irradiance-cache", "reference"}) {
+    fs::path out = temp_dir(std::string("method_") + method);
+    Result r = run_bake(std::string("--scene cornell --out ") + out.string() +
+                        " --width 24 --height 24 --updates 2 --lightmap-spp 2"
+                        " --texels-per-scene 24 --quiet --method " + method);
+    ASSERT_EQ(r.status, 0) << method << "\n" << r.output;
+    std::ifstream f(out / "report.json");
+    const nlohmann::json report = nlohmann::json::parse(f);
+    EXPECT_EQ(report["settings"]["method"], method) << report.dump();
+    EXPECT_GT(report["rays"]["lightmaps"].get<double>(), 0.0) << method;
+    fs::remove_all(out);
   }
 }
 

@@ -122,6 +122,10 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
                           std::to_string(package_->bytes.size()) + " bytes");
 }
 
+std::string EngineHost::method_summary() const {
+  return impl_->engine->method_summary();
+}
+
 std::shared_ptr<const wire::ScenePackage> EngineHost::package() const {
   std::lock_guard lock(mutex_);
   return package_;

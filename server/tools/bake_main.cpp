@@ -49,7 +49,7 @@ struct Options {
   int height = 512;
   std::string camera;
   std::string export_gltf;
-  std::string method = "engine";
+  std::string method = "cells";
   int updates = 8;
   int lightmap_spp = 64;
   irradcast::tools::EngineOptions engine;
@@ -84,6 +84,18 @@ void write_png_tonemapped(const std::string& path, const irradcast::ImageRGB& im
   irradcast::write_png(path, image.width, image.height, irradcast::tonemap_srgb8(image, tm));
 }
 
+// --method is the engine's (cells | vpl | irradiance-cache), plus bake's own "reference" (the
+// path tracer per texel); "engine" is the old name of the default.
+void normalize_method(Options& o) {
+  if (o.engine.method == "engine") o.engine.method = "cells";
+  o.method = o.engine.method;
+  if (o.method == "reference") o.engine.method = "cells";
+  if (o.method != "reference" && o.method != "cells" && o.method != "vpl" &&
+      o.method != "irradiance-cache")
+    throw Error("unknown --method '" + o.method +
+                "' (expected cells, vpl, irradiance-cache or reference)");
+}
+
 int run(const Options& o) {
   using namespace irradcast;
   log::set_level(log::parse_level(o.log_level));
@@ -100,8 +112,6 @@ int run(const Options& o) {
       throw Error("--exposure must be 'auto' or a number of stops, not '" + o.exposure + "'");
     }
   }
-  if (o.method != "engine" && o.method != "reference")
-    throw Error("unknown --method '" + o.method + "' (expected engine or reference)");
   const EngineParams ep = o.engine.params();
   const BackendOptions bo = o.engine.backend_options();
   std::unique_ptr<tbb::global_control> threads;
@@ -173,10 +183,11 @@ int run(const Options& o) {
     lightmap_seconds = lm_stats.seconds;
     timings["lightmaps"] = sw.lap();
   } else {
-    Engine engine(world, atlas, gbuffers, rays, make_backend(bo, world, rays, lights).backend, ep);
+    Engine engine(world, atlas, gbuffers, rays, make_backend(bo, world, rays, lights).backend, ep,
+                  &lights);
     timings["engine_setup"] = sw.lap();
     const ProbeStats& ps = engine.probe_stats();
-    if (!ep.unbiased())
+    if (ep.uses_probes())
       log::info("bake", std::to_string(ps.probes) + " probes (" + std::to_string(ps.relocated) +
                             " moved out of geometry, " + std::to_string(ps.unusable) +
                             " unusable)");
@@ -198,6 +209,8 @@ int run(const Options& o) {
       progress.advance(1);
     }
     progress.finish();
+    if (!engine.method_summary().empty())
+      log::info("bake", method_name(ep.method) + ": " + engine.method_summary());
     maps = engine.lightmaps();
     timings["lightmaps"] = sw.lap();
     auto pass = [](const std::string& name, const PassTiming& t) {
@@ -356,9 +369,6 @@ int main(int argc, char** argv) {
   app.add_option("--camera", o.camera,
                  "override the camera: eye=x,y,z:target=x,y,z:fov=deg[:up=x,y,z]");
   app.add_option("--export-gltf", o.export_gltf, "write the loaded scene as glTF (.gltf or .glb)");
-  app.add_option(
-      "--method", o.method,
-      "engine (radiance cells, probes, tracing range) | reference (path tracer per texel)");
   app.add_option("--updates", o.updates, "engine: progressive updates to run")
       ->check(CLI::Range(1, 1 << 20));
   app.add_option("--lightmap-spp", o.lightmap_spp, "reference method: samples per texel")
@@ -376,6 +386,7 @@ int main(int argc, char** argv) {
     return app.exit(e);
   }
   try {
+    normalize_method(o);
     return run(o);
   } catch (const Error& e) {
     std::fprintf(stderr, "irradcast-bake: error: %s\n", e.what());

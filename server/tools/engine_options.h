@@ -46,7 +46,8 @@ struct EngineOptions {
   void add_to(CLI::App& app) {
     app.add_option("--method", method,
                    "engine: indirect light by cells (radiance cells, seed 001) | vpl (instant "
-                   "radiosity, seeds 003/000) | irradiance-cache (seed 004); docs/METHODS.md")
+                   "radiosity, seeds 003/000) | irradiance-cache (seed 004); docs/METHODS.md. "
+                   "irradcast-bake also takes reference (the path tracer per texel)")
         ->capture_default_str();
     app.add_option("--vpl-paths", vpl_paths, "vpl: light paths in the pool")->capture_default_str();
     app.add_option("--vpl-sets", vpl_sets, "vpl: temporal sets, one gathered per update")

@@ -134,6 +134,8 @@ class EngineHost {
   const Scene& scene() const { return scene_; }
   const World& world() const { return world_; }
   const Atlas& atlas() const { return atlas_; }
+  // The indirect method's state in one line ("" for radiance cells); engine thread or stopped.
+  std::string method_summary() const;
   // The scene package at the current revision (a new one after every edit). Any thread.
   std::shared_ptr<const wire::ScenePackage> package() const;
   // Identifies the lineage of tile versions (Welcome.tile_epoch): a hash of everything that
