@@ -144,17 +144,66 @@ float IrradianceCache::weight(const IrradianceRecord& r, glm::vec3 p, glm::vec3 
   return w > 1.0f / params_.ic_accuracy ? w : 0.0f;
 }
 
-float IrradianceCache::coverage(glm::vec3 p, glm::vec3 n, std::size_t first_record) const {
+bool IrradianceCache::visible(const IrradianceRecord& r, glm::vec3 p, glm::vec3 ng) const {
+  const glm::vec3 target = r.position + rays_->epsilon() * r.geo_normal;
+  glm::vec3 d = target - p;
+  const float len = glm::length(d);
+  if (!(len > 4.0f * rays_->epsilon())) return true;
+  d /= len;
+  Ray ray;
+  ray.origin = rays_->offset(p, ng, d);
+  const glm::vec3 to = target - ray.origin;
+  const float tl = glm::length(to);
+  if (!(tl > rays_->epsilon())) return true;
+  ray.direction = to / tl;
+  ray.tmax = tl - rays_->epsilon();
+  return !rays_->occluded(ray);
+}
+
+float IrradianceCache::coverage(glm::vec3 p, glm::vec3 n, glm::vec3 ng,
+                                std::size_t first_record) const {
   float sum = 0.0f;
-  for (std::uint32_t k : cell_records(p))
-    if (k >= first_record) sum += weight(records_[k], p, n);
+  for (std::uint32_t k : cell_records(p)) {
+    if (k < first_record) continue;
+    const float w = weight(records_[k], p, n);
+    if (w > 0.0f && visible(records_[k], p, ng)) sum += w;
+  }
   return sum;
+}
+
+void IrradianceCache::build_splats(const PassInput& in) {
+  // Per texel: the records that may contribute (Ward weight above 1 / a, not in front) and that
+  // it can see. Without the visibility test a record on one side of a thin wall lights texels
+  // on the other (the cache's classic leak, measured on rooms:2). Fixed until the texels or the
+  // records change, so the rays are paid once.
+  const std::size_t n = in.texels.size();
+  std::vector<std::vector<std::pair<std::uint32_t, float>>> lists(n);
+  tbb::parallel_for(std::size_t(0), in.unit_texels.size(), [&](std::size_t j) {
+    const std::uint32_t i = in.unit_texels[j];
+    const glm::vec3 p = in.texels.position[i], nn = in.texels.normal[i];
+    for (std::uint32_t k : cell_records(p)) {
+      const float w = weight(records_[k], p, nn);
+      if (w > 0.0f && visible(records_[k], p, in.texels.geo_normal[i])) lists[i].push_back({k, w});
+    }
+  });
+  splat_offsets_.assign(n + 1, 0);
+  for (std::size_t i = 0; i < n; ++i)
+    splat_offsets_[i + 1] = splat_offsets_[i] + static_cast<std::uint32_t>(lists[i].size());
+  splat_.resize(splat_offsets_[n]);
+  for (std::size_t i = 0; i < n; ++i)
+    std::copy(lists[i].begin(), lists[i].end(), splat_.begin() + splat_offsets_[i]);
+  splat_generation_ = in.generation;
 }
 
 PassResult IrradianceCache::prepare(const PassInput& in) {
   PassResult r;
-  if (!place_) return r;
   const auto start = Clock::now();
+  if (!place_) {
+    if (splat_generation_ != in.generation || splat_offsets_.size() != in.texels.size() + 1)
+      build_splats(in);
+    r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    return r;
+  }
   place_ = false;
   const float extent = std::max(world_->bounds.max_extent(), 1e-6f);
   const float rmin = params_.ic_min_radius * extent, rmax = params_.ic_max_radius * extent;
@@ -173,7 +222,9 @@ PassResult IrradianceCache::prepare(const PassInput& in) {
     std::vector<std::uint8_t> uncovered(c1 - c0, 0);
     tbb::parallel_for(c0, c1, [&](std::size_t j) {
       const std::uint32_t i = order[j];
-      uncovered[j - c0] = coverage(in.texels.position[i], in.texels.normal[i]) > 0.0f ? 0 : 1;
+      uncovered[j - c0] =
+          coverage(in.texels.position[i], in.texels.normal[i], in.texels.geo_normal[i]) > 0.0f ? 0
+                                                                                               : 1;
     });
     std::vector<std::uint32_t> candidates;
     for (std::size_t j = c0; j < c1; ++j)
@@ -195,8 +246,8 @@ PassResult IrradianceCache::prepare(const PassInput& in) {
     const std::size_t chunk_first = records_.size();
     for (std::size_t j = 0; j < candidates.size(); ++j) {
       const std::uint32_t i = candidates[j];
-      if (records_.size() > chunk_first &&
-          coverage(in.texels.position[i], in.texels.normal[i], chunk_first) > 0.0f)
+      if (records_.size() > chunk_first && coverage(in.texels.position[i], in.texels.normal[i],
+                                                    in.texels.geo_normal[i], chunk_first) > 0.0f)
         continue;
       records_.push_back(
           {in.texels.position[i], in.texels.normal[i], in.texels.geo_normal[i], radius[j]});
@@ -204,6 +255,7 @@ PassResult IrradianceCache::prepare(const PassInput& in) {
     }
   }
   placed_last_ = records_.size() - before;
+  build_splats(in);
   r.rays = rays.load();
   r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return r;
@@ -224,17 +276,16 @@ PassResult IrradianceCache::bounce(const PassInput& in, const RadianceField& pre
                              params_.ic_rays, rng);
   });
   r.rays = records_.size() * static_cast<std::uint64_t>(4 * params_.ic_rays * params_.ic_rays);
-  // 2. Splat into the texels (gathered per texel from the grid; the same sums as splatting
-  //    each record over its zone of influence).
+  // 2. Splat into the texels: per texel the records it sees with their weights (build_splats),
+  //    extrapolated with the gradients; the same sums as splatting each record over its zone.
   tbb::parallel_for(std::size_t(0), in.unit_texels.size(), [&](std::size_t j) {
     const std::uint32_t i = in.unit_texels[j];
     const glm::vec3 p = in.texels.position[i], n = in.texels.normal[i];
     glm::vec3 sum(0.0f);
     float wsum = 0.0f;
-    for (std::uint32_t k : cell_records(p)) {
+    for (std::uint32_t s = splat_offsets_[i]; s < splat_offsets_[i + 1]; ++s) {
+      const auto [k, w] = splat_[s];
       const IrradianceRecord& rec = records_[k];
-      const float w = weight(rec, p, n);
-      if (w <= 0.0f) continue;
       const RecordEstimate& e = est[k];
       const glm::vec3 rot = glm::cross(rec.normal, n), d = p - rec.position;
       glm::vec3 v = e.irradiance;

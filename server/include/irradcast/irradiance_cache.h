@@ -11,7 +11,9 @@
 //   - Every update re-estimates every record with new rays, with its rotational and
 //     translational gradients, and splats the records into the lightmap texels:
 //     E(p) = sum_k w_k (E_k + (n_k x n) . grad_r E_k + (p - p_k) . grad_t E_k) / sum_k w_k over
-//     the records with w_k > 1 / a (and not in front of p).
+//     the records with w_k > 1 / a (and not in front of p) that p sees: a visibility ray per
+//     (texel, record) pair, paid once per placement, keeps records from lighting texels
+//     behind a wall (Ward's cache has no such test and leaks through thin walls).
 //   - A scene edit drops the records within their radius of a changed region; the next update
 //     places new ones where texels are no longer covered.
 #pragma once
@@ -62,7 +64,11 @@ class IrradianceCache final : public IndirectMethod {
  private:
   // Ward weight of record k at (p, n), 0 if it may not contribute (below 1/a or in front).
   float weight(const IrradianceRecord& r, glm::vec3 p, glm::vec3 n) const;
-  float coverage(glm::vec3 p, glm::vec3 n, std::size_t first_record = 0) const;
+  bool visible(const IrradianceRecord& r, glm::vec3 p, glm::vec3 ng) const;
+  // Sum of the weights of the records (from `first_record` on) that may contribute at p and
+  // that p sees.
+  float coverage(glm::vec3 p, glm::vec3 n, glm::vec3 ng, std::size_t first_record = 0) const;
+  void build_splats(const PassInput& in);
   void insert(std::uint32_t record);
   glm::ivec3 cell_of(glm::vec3 p) const;
   const std::vector<std::uint32_t>& cell_records(glm::vec3 p) const;
@@ -78,6 +84,11 @@ class IrradianceCache final : public IndirectMethod {
   float cell_ = 1.0f;
   std::vector<std::vector<std::uint32_t>> grid_;
   std::size_t placed_last_ = 0;
+  // Per texel (engine order) the records it uses and their weights: splat_offsets_[i] ..
+  // splat_offsets_[i + 1] in splat_.
+  std::vector<std::uint32_t> splat_offsets_;
+  std::vector<std::pair<std::uint32_t, float>> splat_;
+  std::uint64_t splat_generation_ = ~0ull;
 };
 
 }  // namespace irradcast
