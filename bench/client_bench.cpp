@@ -230,7 +230,7 @@ int run(const Options& o) {
   }
   if (!o.plot_out.empty()) {
     plot::XYPlot p;
-    p.title = "Client frame time along the camera path (" + o.scene + ", " +
+    p.title = "Client frame time, " + o.path + " path (" + o.scene + ", " +
               std::to_string(o.width) + "x" + std::to_string(o.height) + ")";
     p.x_label = "frame";
     p.y_label = "ms per frame";
