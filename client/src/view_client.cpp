@@ -416,6 +416,13 @@ ImageRGB ViewClient::compose(const CameraPose& camera, int width, int height) co
                             tiles_.lightmaps(), camera, width, height);
 }
 
+ImageRGB ViewClient::compose(const CameraPose& camera, int width, int height, ClientPasses& passes,
+                             ClientFrameStats* stats) const {
+  if (!loaded_) throw Error("no scene yet");
+  return passes.compose(loaded_->world, *loaded_->rays, loaded_->unpacked.atlas, tiles_.lightmaps(),
+                        camera, width, height, stats);
+}
+
 const Scene& ViewClient::scene() const {
   if (!loaded_) throw Error("no scene yet");
   return loaded_->unpacked.scene;

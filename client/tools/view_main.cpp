@@ -1,6 +1,7 @@
 // irradcast-view: a thin viewer. Connects to irradcast-server, gets the scene (cached by hash),
 // keeps its tile cache current, and composes its own viewpoint: primary rays, lightmap lookup,
-// tone mapping. Headless: writes the final frame to a PNG or EXR file.
+// tone mapping. Headless: writes the final frame to a PNG or EXR file. Optional client passes
+// (docs/CLIENT_PASSES.md): --ssao, --reproject, and --camera-path to move along a path.
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -9,9 +10,13 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <optional>
+#include <sstream>
 #include <string>
 
 #include "irradcast/camera.h"
+#include "irradcast/camera_path.h"
+#include "irradcast/client_passes.h"
 #include "irradcast/error.h"
 #include "irradcast/host_port.h"
 #include "irradcast/image.h"
@@ -44,7 +49,59 @@ struct Options {
   std::string json;
   std::string log_level = "info";
   bool no_reconnect = false;
+  // Client passes (seed 002).
+  bool ssao = false;
+  float ssao_radius = irradcast::SsaoParams{}.radius;
+  float ssao_strength = irradcast::SsaoParams{}.strength;
+  bool reproject = false;
+  float reproject_epsilon = irradcast::ReprojectionParams{}.epsilon;
+  int reproject_frames = irradcast::ReprojectionParams{}.converge_frames;
+  float reproject_refresh = irradcast::ReprojectionParams{}.refresh;
+  float reproject_bias = irradcast::ReprojectionParams{}.confidence_bias;
+  std::string camera_path;
+  double path_dt = 1.0 / 30.0;
+  double path_period = 20.0;
+  std::uint64_t path_seed = 1;
 };
+
+std::string num(double v) {
+  std::ostringstream ss;
+  ss << v;
+  return ss.str();
+}
+
+// The pass options from the flags; throws irradcast::Error naming the flag of a bad value.
+irradcast::ClientPassOptions pass_options(const Options& o) {
+  using irradcast::Error;
+  auto range = [](const char* flag, double v, double lo, bool lo_open, double hi,
+                  const char* what) {
+    if (!((lo_open ? v > lo : v >= lo) && v <= hi))
+      throw Error(std::string(flag) + " " + num(v) + " must be in " + (lo_open ? "(" : "[") +
+                  num(lo) + ", " + num(hi) + "]" + what);
+  };
+  range("--ssao-radius", o.ssao_radius, 0.0, true, 1.0,
+        " (a fraction of the scene's largest extent)");
+  range("--ssao-strength", o.ssao_strength, 0.0, false, 10.0, "");
+  range("--reproject-epsilon", o.reproject_epsilon, 0.0, true, 1.0,
+        " (a fraction of the scene's largest extent)");
+  range("--reproject-frames", o.reproject_frames, 1.0, false, 250.0, "");
+  range("--reproject-refresh", o.reproject_refresh, 0.0, false, 1.0,
+        " (the fraction of 64 x 64 tiles recomputed per frame)");
+  range("--reproject-bias", o.reproject_bias, 0.0, true, 100.0, "");
+  range("--path-dt", o.path_dt, 0.0, true, 3600.0, " seconds");
+  range("--path-period", o.path_period, 0.0, true, 1e6, " seconds");
+  irradcast::ClientPassOptions p;
+  p.ssao = o.ssao;
+  p.ssao_params.radius = o.ssao_radius;
+  p.ssao_params.strength = o.ssao_strength;
+  p.reproject = o.reproject;
+  p.reprojection.epsilon = o.reproject_epsilon;
+  p.reprojection.converge_frames = o.reproject_frames;
+  p.reprojection.refresh = o.reproject_refresh;
+  p.reprojection.confidence_bias = o.reproject_bias;
+  p.validate();
+  return p;
+}
 
 std::string default_cache_dir() {
   if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) return std::string(x) + "/irradcast";
@@ -84,6 +141,13 @@ int run(const Options& o) {
     }
   }
 
+  // Everything the flags say is checked before connecting.
+  ClientPasses passes(pass_options(o));
+  std::vector<CameraKeyframe> keyframes;
+  const bool on_path = !o.camera_path.empty();
+  if (on_path && o.camera_path != "orbit" && o.camera_path != "random-walk")
+    keyframes = load_camera_keyframes(o.camera_path);
+
   const auto start = Clock::now();
   const auto deadline =
       start + std::chrono::milliseconds(static_cast<long long>(o.timeout_s * 1e3));
@@ -92,7 +156,17 @@ int run(const Options& o) {
   const double t_scene = std::chrono::duration<double>(Clock::now() - start).count();
   CameraPose camera = default_camera(client.scene(), client.world());
   if (!o.camera.empty()) camera = parse_camera(o.camera, camera);
+  std::optional<CameraPath> path;
+  if (o.camera_path == "orbit")
+    path = CameraPath::orbit(client.world().bounds, o.path_period, 0.0);
+  else if (o.camera_path == "random-walk")
+    path = CameraPath::random_walk(client.world().bounds, o.path_seed);
+  else if (on_path)
+    path = CameraPath::keyframes(keyframes, 0.0);
+  if (path) camera = path->at(0.0);
   client.send_camera(camera);
+  std::uint64_t revision = client.scene_revision();
+  double compose_s = 0.0, ssao_s = 0.0, reproject_s = 0.0, reused = 0.0;
 
   ImageRGB frame;
   int frames = 0;
@@ -114,7 +188,20 @@ int run(const Options& o) {
     // viewer has no one to show the others to, and composing them would take CPU from the
     // server on a shared machine).
     if (!o.until_converged || converged || timed_out) {
-      frame = client.compose(camera, o.width, o.height);
+      if (path) {
+        camera = path->at(static_cast<double>(frames) * o.path_dt);
+        client.send_camera(camera);
+      }
+      if (client.scene_revision() != revision) {  // the history shows the old scene
+        passes.reset();
+        revision = client.scene_revision();
+      }
+      ClientFrameStats fs;
+      frame = client.compose(camera, o.width, o.height, passes, &fs);
+      compose_s += fs.total_s;
+      ssao_s += fs.ssao_s;
+      reproject_s += fs.reproject_s;
+      reused += fs.reprojection.reused_fraction();
       ++frames;
     }
     if (o.until_converged ? converged : frames >= o.frames) break;
@@ -141,6 +228,12 @@ int run(const Options& o) {
                                   : "done after",
                 o.until_converged && converged ? t_converged : t_total, c.connections);
   std::printf("%s\n", line);
+  const double per_frame = frames > 0 ? 1e3 / frames : 0.0;
+  std::printf(
+      "compose: %.2f ms/frame (ssao %.2f ms, reprojection %.2f ms), SSAO reused on "
+      "%.1f%% of the pixels%s\n",
+      compose_s * per_frame, ssao_s * per_frame, reproject_s * per_frame,
+      frames > 0 ? 100.0 * reused / frames : 0.0, path ? " along the camera path" : "");
   if (!o.json.empty()) {
     nlohmann::json j = {{"out", o.out},
                         {"frames", frames},
@@ -152,7 +245,11 @@ int run(const Options& o) {
                         {"seconds_to_scene", t_scene},
                         {"converged", converged},
                         {"seconds_to_converged", t_converged},
-                        {"seconds_total", t_total}};
+                        {"seconds_total", t_total},
+                        {"compose_ms_per_frame", compose_s * per_frame},
+                        {"ssao_ms_per_frame", ssao_s * per_frame},
+                        {"reproject_ms_per_frame", reproject_s * per_frame},
+                        {"ssao_reused_fraction", frames > 0 ? reused / frames : 0.0}};
     std::ofstream f(o.json);
     f << j.dump(2) << "\n";
     if (!f) throw Error(o.json + ": cannot write");
@@ -199,6 +296,32 @@ int main(int argc, char** argv) {
   app.add_flag("--no-reconnect", o.no_reconnect,
                "fail instead of reconnecting when the connection drops");
   app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
+  // Client passes (seed 002; docs/CLIENT_PASSES.md).
+  app.add_flag("--ssao", o.ssao,
+               "screen-space ambient occlusion on the lightmap term (contact shadows finer "
+               "than a lightmap texel)");
+  app.add_option("--ssao-radius", o.ssao_radius,
+                 "SSAO search radius, a fraction of the scene's largest extent, in (0, 1]");
+  app.add_option("--ssao-strength", o.ssao_strength,
+                 "SSAO strength: visibility = 1 - strength * occlusion, in [0, 10]");
+  app.add_flag("--reproject", o.reproject,
+               "reverse reprojection of the previous frame: reuse converged SSAO while the "
+               "camera moves, recompute disoccluded pixels and refresh tiles (needs --ssao)");
+  app.add_option("--reproject-epsilon", o.reproject_epsilon,
+                 "disocclusion tolerance |W_t - W_t-1|, a fraction of the scene's largest extent");
+  app.add_option("--reproject-frames", o.reproject_frames,
+                 "frames (turned SSAO patterns) accumulated before a pixel is reused as is");
+  app.add_option("--reproject-refresh", o.reproject_refresh,
+                 "fraction of the 64 x 64 tiles recomputed from scratch every frame");
+  app.add_option("--reproject-bias", o.reproject_bias,
+                 "confidence bias of the accumulation (history keeps >= bias / (1 + bias))");
+  app.add_option("--camera-path", o.camera_path,
+                 "move the camera, one step of --path-dt per frame: orbit | random-walk | FILE "
+                 "(keyframes 't ex ey ez tx ty tz [yfov]'); replaces --camera")
+      ->excludes("--camera");
+  app.add_option("--path-dt", o.path_dt, "seconds along the camera path per frame");
+  app.add_option("--path-period", o.path_period, "seconds per turn of the orbit path");
+  app.add_option("--path-seed", o.path_seed, "random-walk path seed");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

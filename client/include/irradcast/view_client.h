@@ -14,6 +14,7 @@
 
 #include "irradcast.pb.h"
 #include "irradcast/atlas.h"
+#include "irradcast/client_passes.h"
 #include "irradcast/image.h"
 #include "irradcast/lightmap.h"
 #include "irradcast/scene.h"
@@ -66,6 +67,10 @@ class ViewClient {
   void close();
 
   ImageRGB compose(const CameraPose& camera, int width, int height) const;
+  // The same frame through the client passes (SSAO, reprojection; client_passes.h). Reset
+  // `passes` when scene_revision() changes: its history belongs to the old scene.
+  ImageRGB compose(const CameraPose& camera, int width, int height, ClientPasses& passes,
+                   ClientFrameStats* stats = nullptr) const;
   const Scene& scene() const;
   const World& world() const;
   const Atlas& atlas() const;
