@@ -1,13 +1,13 @@
 #include "irradcast/frame_gbuffer.h"
 
 #include <tbb/blocked_range.h>
-#include <tbb/blocked_range2d.h>
 #include <tbb/parallel_for.h>
 
 #include <cmath>
 
 #include "irradcast/camera.h"
 #include "irradcast/error.h"
+#include "irradcast/primary_hits.h"
 #include "irradcast/sampling.h"
 
 namespace irradcast {
@@ -50,51 +50,19 @@ FrameGBuffer trace_frame(const World& world, const RayScene& rays, const Atlas& 
   g.depth.assign(n, 0.0f);
   g.diffuse.assign(n, glm::vec3(0.0f));
   g.emission.assign(n, glm::vec3(0.0f));
-  // The packet layout and the shading of compose(): 4 x 2 pixel packets, 16 x 8 pixel tiles.
-  constexpr int kBw = 4, kBh = 2;
-  tbb::parallel_for(
-      tbb::blocked_range2d<int>(0, (height + kBh - 1) / kBh, 4, 0, (width + kBw - 1) / kBw, 4),
-      [&](const tbb::blocked_range2d<int>& r) {
-        Ray packet[8];
-        Hit hits[8];
-        int px[8], py[8];
-        for (int by = r.rows().begin(); by < r.rows().end(); ++by) {
-          for (int bx = r.cols().begin(); bx < r.cols().end(); ++bx) {
-            int cnt = 0;
-            for (int j = 0; j < kBh; ++j)
-              for (int i = 0; i < kBw; ++i) {
-                int x = bx * kBw + i, y = by * kBh + j;
-                if (x >= width || y >= height) continue;
-                px[cnt] = x;
-                py[cnt] = y;
-                packet[cnt++] = camera_ray(camera, width, height, static_cast<float>(x) + 0.5f,
-                                           static_cast<float>(y) + 0.5f);
-              }
-            rays.intersect8(packet, cnt, hits);
-            for (int k = 0; k < cnt; ++k) {
-              const Hit& h = hits[k];
-              if (!h.valid()) continue;
-              const std::size_t idx = g.index(px[k], py[k]);
-              const WorldObject& obj = world.objects[h.object];
-              const glm::vec3 p = packet[k].origin + h.t * packet[k].direction;
-              glm::vec3 ns = obj.shading_normal(h.triangle, h.u, h.v);
-              if (glm::dot(ns, packet[k].direction) > 0.0f) ns = -ns;
-              g.position[idx] = p;
-              g.normal[idx] = ns;
-              g.depth[idx] = std::max(glm::dot(p - camera.eye, camera.forward), 1e-30f);
-              glm::vec2 uv = atlas.objects[h.object].uv(h.triangle, h.u, h.v);
-              glm::vec3 e = lightmaps[h.object].bilinear(uv);
-              glm::vec3 albedo = world.albedo(h.object, h.triangle, h.u, h.v);
-              const Material& m = world.material(h.object, h.triangle);
-              if (m.is_emissive()) {
-                glm::vec3 ng = obj.geometric_normal(h.triangle);
-                if (m.double_sided || glm::dot(ng, packet[k].direction) < 0.0f)
-                  g.emission[idx] = world.emission(h.object, h.triangle, h.u, h.v);
-              }
-              g.diffuse[idx] = albedo * kInvPi * e;
-            }
-          }
-        }
+  // The pixels and the shading of compose().
+  for_each_primary_hit(
+      rays, camera, width, height, [&](int x, int y, const Ray& ray, const Hit& h) {
+        const std::size_t idx = g.index(x, y);
+        const glm::vec3 p = ray.origin + h.t * ray.direction;
+        glm::vec3 ns = world.objects[h.object].shading_normal(h.triangle, h.u, h.v);
+        if (glm::dot(ns, ray.direction) > 0.0f) ns = -ns;
+        g.position[idx] = p;
+        g.normal[idx] = ns;
+        g.depth[idx] = std::max(glm::dot(p - camera.eye, camera.forward), 1e-30f);
+        const HitShade s = shade_hit(world, atlas, lightmaps, ray, h);
+        g.diffuse[idx] = s.diffuse;
+        g.emission[idx] = s.emission;
       });
   return g;
 }

@@ -33,15 +33,16 @@ struct EngineOptions {
   float edit_batch = 0.25f;
   int edit_keep = 2;
   std::string method = "cells";
-  int vpl_paths = 1024;
-  int vpl_sets = 4;
-  int vpl_interleave = 4;
-  float vpl_clamp = 0.05f;
-  int vpl_replace = 0;
-  float ic_accuracy = 0.25f;
-  int ic_rays = 4;
-  float ic_min_radius = 0.01f;
-  float ic_max_radius = 0.25f;
+  // The methods' defaults are EngineParams' (docs/METHODS.md).
+  int vpl_paths = EngineParams{}.vpl_paths;
+  int vpl_sets = EngineParams{}.vpl_sets;
+  int vpl_interleave = EngineParams{}.vpl_interleave;
+  float vpl_clamp = EngineParams{}.vpl_clamp;
+  int vpl_replace = EngineParams{}.vpl_replace;
+  float ic_accuracy = EngineParams{}.ic_accuracy;
+  int ic_rays = EngineParams{}.ic_rays;
+  float ic_min_radius = EngineParams{}.ic_min_radius;
+  float ic_max_radius = EngineParams{}.ic_max_radius;
 
   void add_to(CLI::App& app) {
     app.add_option("--method", method,
