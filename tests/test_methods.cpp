@@ -162,3 +162,33 @@ TEST(Methods, BadParametersAreRefusedWithTheirName) {
              std::make_unique<EmbreeBackend>(s.rays, s.lights), method_params(Method::Vpl)),
       Error);
 }
+
+// Seed 000's replacement after an edit: a light edit invalidates every path, and the next full
+// update (vpl_replace 0: no cap) shoots every one of them again from the same Halton point, once
+// each, so the pool comes back exactly as it was in an unchanged scene.
+TEST(Methods, VplEditShootsEveryInvalidPathAgain) {
+  EngineSetup s(make_cornell_box(), 24.0f);
+  auto engine = s.engine(method_params(Method::Vpl));
+  engine->update();
+  const auto* vpl = dynamic_cast<const VplMethod*>(engine->method());
+  ASSERT_NE(vpl, nullptr);
+  auto valid = [&] {
+    std::size_t n = 0;
+    for (const VirtualPointLight& v : vpl->vpls()) n += v.valid ? 1 : 0;
+    return n;
+  };
+  const std::vector<VirtualPointLight> pool = vpl->vpls();
+  const std::size_t before = valid();
+  ASSERT_GT(before, 100u);
+  SceneChange change;
+  change.light_points.push_back(glm::vec3(0.0f));
+  engine->scene_changed(change, {});
+  EXPECT_EQ(valid(), 0u);
+  EXPECT_GT(vpl->invalid(), 0u);
+  while (engine->stale_texels() > 0) engine->update();  // catch-up batches: direct light only
+  engine->update();                                     // the first full update replaces
+  EXPECT_EQ(vpl->invalid(), 0u) << vpl->summary();
+  EXPECT_EQ(valid(), before) << vpl->summary();
+  for (std::size_t i = 0; i < pool.size(); ++i)
+    ASSERT_EQ(pool[i].position, vpl->vpls()[i].position) << "VPL " << i;
+}

@@ -291,10 +291,12 @@ PassResult IrradianceCache::bounce(const PassInput& in, const RadianceField& pre
       glm::vec3 v = e.irradiance;
       for (int c = 0; c < 3; ++c)
         v[c] += glm::dot(rot, e.rotation[c]) + glm::dot(d, e.translation[c]);
-      sum += w * glm::max(v, glm::vec3(0.0f));
+      sum += w * v;
       wsum += w;
     }
-    out[i] = wsum > 0.0f ? sum / wsum : glm::vec3(0.0f);
+    // Clamped once, after the weighted mean, so the splat stays linear in the records' estimates
+    // (the running means of the splats are then the splat of the records' means).
+    out[i] = wsum > 0.0f ? glm::max(sum / wsum, glm::vec3(0.0f)) : glm::vec3(0.0f);
   });
   r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return r;
@@ -308,7 +310,7 @@ void IrradianceCache::scene_changed(const SceneChange& change) {
   for (const IrradianceRecord& r : records_) {
     bool near = false;
     for (const Bounds& b : change.regions)
-      if (distance_to(b, r.position) < r.radius) near = true;
+      if (distance_to(b, r.position) < std::max(1.0f, params_.ic_accuracy) * r.radius) near = true;
     if (!near) kept.push_back(r);
   }
   records_ = std::move(kept);

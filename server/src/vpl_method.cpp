@@ -198,8 +198,9 @@ PassResult VplMethod::prepare(const PassInput& in) {
     std::vector<std::size_t> redo;
     std::size_t budget =
         params_.vpl_replace > 0 ? static_cast<std::size_t>(params_.vpl_replace) : vpls_.size();
+    const std::size_t from = replace_cursor_;
     for (std::size_t n = 0; n < paths && budget > 0; ++n) {
-      const std::size_t p = (replace_cursor_ + n) % paths;
+      const std::size_t p = (from + n) % paths;
       if (pending_[p] == 0) continue;
       const auto count = static_cast<std::size_t>(depth_ - (pending_[p] - 1));
       redo.push_back(p);
@@ -295,10 +296,14 @@ PassResult VplMethod::bounce(const PassInput& in, const RadianceField& /*prev*/,
   // 2. The discontinuity filter: the mean over the n x n lightmap neighbourhood (one texel of
   //    every subset) of the neighbours on the same surface: similar normal and in the texel's
   //    tangent plane.
+  //    Neighbours further than the window's own world size (another chart that happens to be
+  //    coplanar) are not the same surface either.
   const int lo = -(n / 2);
   tbb::parallel_for(std::size_t(0), in.unit_texels.size(), [&](std::size_t j) {
     const std::uint32_t i = in.unit_texels[j];
     const std::uint32_t o = in.texels.object[i], t = in.texels.texel[i];
+    const float density = in.atlas.objects[o].texels_per_unit;
+    const float reach = density > 0.0f ? 1.5f * static_cast<float>(n) / density : 3.4e38f;
     const int w = in.atlas.objects[o].width, h = in.atlas.objects[o].height;
     const int x = static_cast<int>(t % static_cast<std::uint32_t>(w));
     const int y = static_cast<int>(t / static_cast<std::uint32_t>(w));
@@ -314,7 +319,8 @@ PassResult VplMethod::bounce(const PassInput& in, const RadianceField& /*prev*/,
         const auto qi = static_cast<std::size_t>(q);
         if (glm::dot(in.texels.normal[qi], nrm) < 0.9f) continue;
         const glm::vec3 d = in.texels.position[qi] - p;
-        if (std::fabs(glm::dot(d, nrm)) > 0.25f * glm::length(d) + 1e-6f) continue;
+        const float len = glm::length(d);
+        if (len > reach || std::fabs(glm::dot(d, nrm)) > 0.25f * len + 1e-6f) continue;
         sum += raw[qi];
         ++count;
       }
@@ -336,13 +342,13 @@ void VplMethod::scene_changed(const SceneChange& change) {
   const bool all = change.surfaces || !change.light_points.empty();
   const float pad = 1e-3f * world_->bounds.max_extent();
   tbb::parallel_for(std::size_t(0), paths, [&](std::size_t p) {
-    if (!starts_[p].live) return;
-    if (all) {
+    if (all) {  // including paths that found no light before: the edit may have turned one on
       pending_[p] = 1;
       for (int k = 0; k < depth_; ++k)
         vpls_[p * static_cast<std::size_t>(depth_) + static_cast<std::size_t>(k)].valid = false;
       return;
     }
+    if (!starts_[p].live) return;
     glm::vec3 parent = starts_[p].origin;
     for (int k = 0; k < depth_; ++k) {
       const VirtualPointLight& v =
@@ -350,7 +356,8 @@ void VplMethod::scene_changed(const SceneChange& change) {
       bool bad = !v.valid;
       bool changed = false;
       for (const Bounds& b : change.regions)
-        if (inside(b, v.position, pad) || (k == 0 && inside(b, parent, pad))) changed = true;
+        if ((v.valid && inside(b, v.position, pad)) || (k == 0 && inside(b, parent, pad)))
+          changed = true;
       if (v.valid && !changed) {
         Ray shadow;
         glm::vec3 target = v.position + rays_->epsilon() * v.normal;
