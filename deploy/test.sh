@@ -5,12 +5,18 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash deploy/install-deps.sh
+# Wall seconds and the CPU time (user, system) of everything run so far, after each step.
+step() { echo "test.sh: $1 done at ${SECONDS} s; CPU so far (user system):" $(times | tail -n 1); }
 if [ "${1:-}" = "--sanitize" ]; then
   bash deploy/build.sh build-asan -DIRRADCAST_SANITIZE=ON -DIRRADCAST_BUILD_BENCH=OFF
+  step "build-asan"
   export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1
   export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
   ctest --test-dir build-asan --output-on-failure -j "$(nproc)"
+  step "ctest build-asan"
 else
   bash deploy/build.sh build
+  step "build"
   ctest --test-dir build --output-on-failure -j "$(nproc)"
+  step "ctest build"
 fi
