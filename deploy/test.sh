@@ -5,8 +5,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash deploy/install-deps.sh
-# Wall seconds and the CPU time (user, system) of everything run so far, after each step.
-step() { echo "test.sh: $1 done at ${SECONDS} s; CPU so far (user system):" $(times | tail -n 1); }
+# After each step: wall seconds so far, then `times`: the CPU time (user system) of this shell,
+# then of everything it ran so far (the compilers and tests).
+step() { echo "test.sh: $1 done at ${SECONDS} s; CPU (user system) of the shell, then of its commands:"; times; }
 if [ "${1:-}" = "--sanitize" ]; then
   bash deploy/build.sh build-asan -DIRRADCAST_SANITIZE=ON -DIRRADCAST_BUILD_BENCH=OFF
   step "build-asan"
