@@ -21,6 +21,7 @@ if [ ! -f "$dir/CMakeCache.txt" ]; then
 fi
 targets=(fuzz_frame_decoder fuzz_tile_decoder)
 cmake --build "$dir" --parallel "$(nproc)" --target "${targets[@]}"
+echo "fuzz.sh: build done at ${SECONDS} s; CPU (user system) of the shell, then of its commands:"; times
 
 export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1

@@ -5,12 +5,19 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash deploy/install-deps.sh
+# After each step: wall seconds so far, then `times`: the CPU time (user system) of this shell,
+# then of everything it ran so far (the compilers and tests).
+step() { echo "test.sh: $1 done at ${SECONDS} s; CPU (user system) of the shell, then of its commands:"; times; }
 if [ "${1:-}" = "--sanitize" ]; then
   bash deploy/build.sh build-asan -DIRRADCAST_SANITIZE=ON -DIRRADCAST_BUILD_BENCH=OFF
+  step "build-asan"
   export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1
   export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
   ctest --test-dir build-asan --output-on-failure -j "$(nproc)"
+  step "ctest build-asan"
 else
   bash deploy/build.sh build
+  step "build"
   ctest --test-dir build --output-on-failure -j "$(nproc)"
+  step "ctest build"
 fi
