@@ -8,7 +8,7 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config git
   # libraries
   libembree-dev libtbb-dev libopenexr-dev libtinygltf-dev libstb-dev nlohmann-json3-dev
-  libglm-dev libasio-dev libprotobuf-dev protobuf-compiler libzstd-dev libcli11-dev
+  libglm-dev libasio-dev libssl-dev libprotobuf-dev protobuf-compiler libzstd-dev libcli11-dev
   # Vulkan compute backend: loader, lavapipe, shader compiler, validation layers
   libvulkan-dev mesa-vulkan-drivers glslang-tools glslang-dev spirv-tools vulkan-validationlayers
   # tests and benchmarks

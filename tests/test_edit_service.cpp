@@ -29,6 +29,9 @@ using namespace std::chrono_literals;
 
 namespace {
 
+// At least kMinTokenLength characters.
+const std::string kToken = "secret-token-for-tests";
+
 EngineHostOptions quick_host() {
   Progress::set_enabled(false);
   log::set_level(log::Level::Warn);
@@ -140,7 +143,7 @@ int node_index(const Scene& s, const std::string& name) {
 TEST(EditService, EditsNeedTheControlToken) {
   EngineHost host(make_cornell_box(), "cornell", quick_host());
   {
-    Server server(host, edit_server("secret"));
+    Server server(host, edit_server(kToken));
     server.start();
     Raw r(server.port());
     auto [code, message] = refused(r, kMove, "");
@@ -172,18 +175,18 @@ TEST(EditService, EditsNeedTheControlToken) {
 TEST(EditService, BadEditsAndCamerasGetBadRequestAndChangeNothing) {
   EngineHost host(make_cornell_box(), "cornell", quick_host());
   const std::string hash = host.package()->hash;
-  Server server(host, edit_server("secret"));
+  Server server(host, edit_server(kToken));
   server.start();
   Raw r(server.port());
   auto [code, message] =
-      refused(r, R"({"op": "move", "node": "no_such_node", "by": [1, 0, 0]})", "secret");
+      refused(r, R"({"op": "move", "node": "no_such_node", "by": [1, 0, 0]})", kToken);
   EXPECT_EQ(code, wire::BAD_REQUEST);
   EXPECT_NE(message.find("no node 'no_such_node'"), std::string::npos) << message;
 
   {  // NaN cannot be written in JSON: straight into the message.
     wire::Envelope e;
     wire::SceneEdit* m = e.mutable_scene_edit();
-    m->set_token("secret");
+    m->set_token(kToken);
     wire::EditOp* op = m->add_ops();
     op->set_kind(wire::EditOp::MOVE);
     op->set_target("tall_block");
@@ -206,12 +209,12 @@ TEST(EditService, BadEditsAndCamerasGetBadRequestAndChangeNothing) {
         << err->error().message();
   }
   std::tie(code, message) = refused(
-      r, R"({"op": "rotate", "node": "tall_block", "axis": [0, 0, 0], "degrees": 30})", "secret");
+      r, R"({"op": "rotate", "node": "tall_block", "axis": [0, 0, 0], "degrees": 30})", kToken);
   EXPECT_EQ(code, wire::BAD_REQUEST);
   EXPECT_NE(message.find("rotation axis is zero"), std::string::npos) << message;
   {  // An empty edit.
     wire::Envelope e;
-    e.mutable_scene_edit()->set_token("secret");
+    e.mutable_scene_edit()->set_token(kToken);
     r.send(e);
     auto err = r.reply();
     ASSERT_TRUE(err && err->has_error());
@@ -250,7 +253,7 @@ TEST(EditService, AnEditIsAcknowledgedBroadcastAndAppliedByViewers) {
   ASSERT_GE(tall, 0);
   const glm::mat4 before = host.scene().nodes[static_cast<std::size_t>(tall)].local;
   const std::string hash_before = host.package()->hash;
-  Server server(host, edit_server("secret"));
+  Server server(host, edit_server(kToken));
   server.start();
   host.start();
 
@@ -272,7 +275,7 @@ TEST(EditService, AnEditIsAcknowledgedBroadcastAndAppliedByViewers) {
 
   // The editor gets the acknowledgement, then (like every client) the applied edit.
   Raw editor(server.port());
-  editor.edit(kMove, "secret", 77);
+  editor.edit(kMove, kToken, 77);
   auto ack = editor.reply();
   ASSERT_TRUE(ack && ack->has_scene_edit())
       << (ack && ack->has_error() ? ack->error().message() : std::string("none"));
@@ -338,7 +341,7 @@ TEST(EditService, AnEditIsAcknowledgedBroadcastAndAppliedByViewers) {
 
 TEST(EditService, IrradcastEditReportsRefusalsAndAppliedEdits) {
   EngineHost host(make_cornell_box(), "cornell", quick_host());
-  Server server(host, edit_server("secret"));
+  Server server(host, edit_server(kToken));
   server.start();
   host.start();
   const std::string exe = IRRADCAST_EDIT_EXE;
@@ -351,21 +354,21 @@ TEST(EditService, IrradcastEditReportsRefusalsAndAppliedEdits) {
   r = test::run_cli(exe, connect + " --token wrong --hide short_block");
   EXPECT_EQ(r.status, 2) << r.output;
 
-  r = test::run_cli(exe, connect + " --token secret --move no_such_node 0.05,0,0");
+  r = test::run_cli(exe, connect + " --token " + kToken + " --move no_such_node 0.05,0,0");
   EXPECT_EQ(r.status, 1) << r.output;
   EXPECT_NE(r.output.find("irradcast-edit: edit op 1 (move): the scene has no node 'no_such_node'"),
             std::string::npos)
       << r.output;
   EXPECT_EQ(host.revision(), 0u);
 
-  r = test::run_cli(exe, connect + " --token secret --move tall_block 0.05,0,0");
+  r = test::run_cli(exe, connect + " --token " + kToken + " --move tall_block 0.05,0,0");
   EXPECT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("revision 1 applied in"), std::string::npos) << r.output;
   EXPECT_EQ(host.revision(), 1u);
 
   r = test::run_cli(exe,
-                    connect +
-                        " --token secret --no-wait --json "
+                    connect + " --token " + kToken +
+                        " --no-wait --json "
                         "'{\"op\": \"albedo\", \"material\": \"red\", \"color\": [0.5, 0, 0]}'");
   EXPECT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("revision 2 queued"), std::string::npos) << r.output;
@@ -373,7 +376,7 @@ TEST(EditService, IrradcastEditReportsRefusalsAndAppliedEdits) {
   // A script with a delay, the token from a file.
   const std::string dir = ::testing::TempDir();
   {
-    std::ofstream(dir + "/edit_token") << "  secret \n";
+    std::ofstream(dir + "/edit_token") << "  " << kToken << " \n";
     std::ofstream(dir + "/edit_script.json") << R"([{"op": "hide", "node": "short_block"},
                {"after_ms": 50, "op": "show", "node": "short_block"}])";
   }
@@ -385,10 +388,10 @@ TEST(EditService, IrradcastEditReportsRefusalsAndAppliedEdits) {
   EXPECT_EQ(host.revision(), 4u);
 
   // Usage errors: no edit, two edits.
-  r = test::run_cli(exe, connect + " --token secret");
+  r = test::run_cli(exe, connect + " --token " + kToken);
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("give exactly one edit"), std::string::npos) << r.output;
-  r = test::run_cli(exe, connect + " --token secret --show a --hide b");
+  r = test::run_cli(exe, connect + " --token " + kToken + " --show a --hide b");
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("give exactly one edit"), std::string::npos) << r.output;
   server.stop();

@@ -357,6 +357,13 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   s.tiles_coalesced = 12;
   s.scene_bytes_sent = 4567;
   s.errors_sent = 4;
+  s.peer_refused = 5;
+  s.banned_refused = 6;
+  s.accept_errors = 7;
+  s.token_failures = 8;
+  s.edits_dropped = 9;
+  s.log_lines_suppressed = 10;
+  s.partial_bytes = 11;
   s.queue_depth = 40;
   s.queue_depth_max = 25;
   for (std::size_t r = 0; r < kCloseReasons; ++r) s.sessions_closed[r] = 100 + r;
@@ -409,6 +416,13 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   u("irradcast_clients", 3);
   u("irradcast_connections_total", 17);
   u("irradcast_clients_refused_total", 2);
+  u("irradcast_peer_refused_total", 5);
+  u("irradcast_banned_refused_total", 6);
+  u("irradcast_accept_errors_total", 7);
+  u("irradcast_token_failures_total", 8);
+  u("irradcast_edits_dropped_total", 9);
+  u("irradcast_log_lines_suppressed_total", 10);
+  u("irradcast_partial_frame_bytes", 11);
   for (std::size_t r = 0; r < kCloseReasons; ++r)
     u("irradcast_sessions_closed_total", 100 + r,
       {{"reason", close_reason_name(static_cast<CloseReason>(r))}});
@@ -448,7 +462,7 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   EXPECT_EQ(x.family("irradcast_engine_pass_seconds").size(), e.passes.size());
   // Nothing else: every sample above was checked.
   EXPECT_EQ(checked.size(), x.samples.size()) << text;
-  EXPECT_EQ(x.samples.size(), 30 + kCloseReasons + 4 * e.passes.size());
+  EXPECT_EQ(x.samples.size(), 37 + kCloseReasons + 4 * e.passes.size());
 }
 
 TEST(Metrics, FormatterHandlesAnEmptySnapshotAndSpecialValues) {

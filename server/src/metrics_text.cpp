@@ -142,6 +142,24 @@ std::string format_metrics(const MetricsSnapshot& m) {
   w.counter("irradcast_clients_refused_total",
             "Connections closed at once because the server had its maximum number of clients.",
             s.clients_refused);
+  w.counter("irradcast_peer_refused_total",
+            "Connections closed at once because their address had its maximum of sessions.",
+            s.peer_refused);
+  w.counter("irradcast_banned_refused_total",
+            "Connections closed at once because their address is refused after wrong tokens.",
+            s.banned_refused);
+  w.counter("irradcast_accept_errors_total",
+            "Failed accepts (out of file descriptors and the like); accepting pauses on them.",
+            s.accept_errors);
+  w.counter("irradcast_token_failures_total", "Scene edits with a wrong control token.",
+            s.token_failures);
+  w.counter("irradcast_edits_dropped_total",
+            "Edit broadcasts dropped for clients that lagged (they load the scene again).",
+            s.edits_dropped);
+  w.counter("irradcast_log_lines_suppressed_total",
+            "Log lines a session caused over its rate, not written.", s.log_lines_suppressed);
+  w.gauge("irradcast_partial_frame_bytes", "Bytes of incomplete frames the sessions hold.",
+          s.partial_bytes);
   w.family("irradcast_sessions_closed_total", "counter", "Sessions that ended, by reason.");
   for (std::size_t r = 0; r < kCloseReasons; ++r)
     w.sample({{"reason", close_reason_name(static_cast<CloseReason>(r))}}, s.sessions_closed[r]);

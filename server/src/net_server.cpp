@@ -2,6 +2,8 @@
 
 #include <asio.hpp>
 
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -11,6 +13,7 @@
 #include <optional>
 #include <set>
 #include <thread>
+#include <unordered_map>
 #include <vector>
 
 #include "irradcast/edit_message.h"
@@ -19,6 +22,7 @@
 #include "irradcast/log.h"
 #include "irradcast/send_queue.h"
 #include "irradcast/thread_priority.h"
+#include "irradcast/transport.h"
 
 namespace irradcast {
 
@@ -36,12 +40,26 @@ class Session;
 // would make a cycle through the io_context that owns the handler). The engine listener holds a
 // weak_ptr.
 struct Server::Impl {
-  Impl(EngineHost& h, ServerOptions o) : host(h), options(std::move(o)), acceptor(io) {}
+  Impl(EngineHost& h, ServerOptions o)
+      : host(h), options(std::move(o)), acceptor(io), accept_timer(io) {}
+
+  // What the server remembers of one peer address (an IPv4 address, or an IPv6 peer's /64).
+  struct Peer {
+    std::uint32_t sessions = 0;
+    std::uint32_t token_failures = 0;
+    Clock::time_point banned_until{};
+    Clock::time_point last_seen{};
+  };
+  enum class Admission { Ok, Full, PeerLimit, Banned };
 
   EngineHost& host;
   ServerOptions options;
+  std::shared_ptr<asio::ssl::context> tls;  // null: plain TCP
   asio::io_context io;
   tcp::acceptor acceptor;
+  asio::steady_timer accept_timer;  // the pause after accept() ran out of descriptors
+  std::chrono::milliseconds accept_backoff{0};
+  std::size_t hello_frame_cap = 0;  // the decoder's cap before Hello
   std::vector<std::thread> threads;
   std::optional<asio::executor_work_guard<asio::io_context::executor_type>> work;
   std::atomic<bool> stopping{false};
@@ -51,13 +69,26 @@ struct Server::Impl {
   mutable std::mutex sessions_mutex;
   std::set<std::shared_ptr<Session>> sessions;
 
+  // Peers by address key; sessions count themselves in and out (admit, release).
+  std::mutex peers_mutex;
+  std::unordered_map<std::string, Peer> peers;
+
   // Counters (sessions add to them).
   std::atomic<std::uint64_t> connections{0}, clients_refused{0}, bytes_sent{0}, bytes_received{0},
       frames_received{0}, tiles_sent{0}, tile_bytes_sent{0}, tiles_coalesced{0},
-      scene_bytes_sent{0}, errors_sent{0};
+      scene_bytes_sent{0}, errors_sent{0}, peer_refused{0}, banned_refused{0}, accept_errors{0},
+      token_failures{0}, edits_dropped{0}, log_lines_suppressed{0};
+  std::atomic<std::int64_t> partial_bytes{0};  // incomplete frames in every session's decoder
   std::array<std::atomic<std::uint64_t>, kCloseReasons> sessions_closed{};
 
   void accept();
+  void refuse(tcp::socket& socket, const std::string& message);
+  Admission admit(const std::string& peer_key);
+  void release(const std::string& peer_key);
+  // A wrong token from this peer: the delay before the answer, and whether the peer is now
+  // refused (banned).
+  std::pair<std::chrono::milliseconds, bool> token_failed(const std::string& peer_key);
+  void token_passed(const std::string& peer_key);
   void on_publish(const std::vector<std::uint32_t>& tiles);
   void on_edit(const AppliedEdit& applied);
   void remove(const std::shared_ptr<Session>& s) {
@@ -97,28 +128,45 @@ CloseReason reason_of(wire::ErrorCode code) {
 // needs no locks; the engine thread reaches it only through asio::post.
 class Session : public std::enable_shared_from_this<Session> {
  public:
-  Session(Server::Impl* server, tcp::socket socket)
+  // The socket was accepted on a strand of the server's io_context, which becomes the
+  // session's strand. peer_key: the address the server counts this session under (admit()).
+  Session(Server::Impl* server, tcp::socket socket, std::string peer_key)
       : server_(server),
-        socket_(std::move(socket)),
-        strand_(asio::make_strand(server_->io)),
+        strand_(socket.get_executor()),
+        stream_(std::move(socket), server_->tls.get()),
         idle_timer_(strand_),
         rate_timer_(strand_),
         close_timer_(strand_),
-        decoder_(server_->options.max_frame),
-        id_(server_->next_session++) {
+        hello_timer_(strand_),
+        penalty_timer_(strand_),
+        stall_timer_(strand_),
+        decoder_(server_->hello_frame_cap),
+        id_(server_->next_session++),
+        peer_key_(std::move(peer_key)) {
     const TileStore& tiles = server_->host.tiles();
     known_.assign(tiles.tile_count(), 0);
     queue_.resize(tiles.tile_count());
     subscribed_.assign(tiles.lightmap_count(), 0);
     std::error_code ec;
-    auto ep = socket_.remote_endpoint(ec);
+    auto ep = stream_.socket().remote_endpoint(ec);
     peer_ = ec ? std::string("?") : ep.address().to_string() + ":" + std::to_string(ep.port());
   }
 
   void start() {
     asio::post(strand_, [self = shared_from_this()] {
       self->arm_idle_timer();
-      self->read();
+      self->arm_hello_timer();
+      self->stream_.async_handshake(
+          asio::ssl::stream_base::server,
+          asio::bind_executor(self->strand_, [self](std::error_code ec) {
+            if (self->closed_) return;
+            if (ec) {
+              self->note(log::Level::Info, "TLS handshake failed: " + wire::describe_tls_error(ec));
+              self->close(CloseReason::Tls);
+              return;
+            }
+            self->read();
+          }));
     });
   }
 
@@ -137,10 +185,17 @@ class Session : public std::enable_shared_from_this<Session> {
   // Engine thread: an edit the engine applied, as an encoded SceneEdit frame. Posted like the
   // tile notifications, so it reaches the client before the tiles that show it (control frames
   // go first in pump()).
+  // Broadcasts wait in their own bounded queue (not with the replies, whose bound drops the
+  // client): past max_pending_edits the oldest are dropped, and the client, seeing the revision
+  // gap, loads the current scene package. Somebody else's burst of edits never drops a viewer.
   void edit_applied(std::shared_ptr<const std::string> frame) {
-    asio::post(strand_, [self = shared_from_this(), frame] {
+    asio::post(strand_, [self = shared_from_this(), frame = std::move(frame)]() mutable {
       if (self->closed_ || self->closing_ || self->state_ != State::Ready) return;
-      self->send_frame(*frame);
+      self->edits_.push_back(std::move(frame));
+      while (self->edits_.size() > self->server_->options.max_pending_edits) {
+        self->edits_.pop_front();
+        ++self->server_->edits_dropped;
+      }
       self->pump();
     });
   }
@@ -166,6 +221,69 @@ class Session : public std::enable_shared_from_this<Session> {
     coalesced_counted_ = c;
   }
 
+  // A log line this session causes, within its budget (ServerOptions::session_log_burst and
+  // session_log_per_s); lines over it are counted, and the next line says how many.
+  void note(log::Level level, const std::string& message) {
+    if (static_cast<int>(level) < static_cast<int>(log::level())) return;
+    const auto now = Clock::now();
+    const ServerOptions& o = server_->options;
+    log_tokens_ =
+        std::min(o.session_log_burst,
+                 log_tokens_ + o.session_log_per_s *
+                                   std::chrono::duration<double>(now - log_refill_).count());
+    log_refill_ = now;
+    if (log_tokens_ < 1.0) {
+      ++log_suppressed_;
+      ++server_->log_lines_suppressed;
+      return;
+    }
+    log_tokens_ -= 1.0;
+    std::string line = "session " + std::to_string(id_) + " (" + peer_ + "): " + message;
+    if (log_suppressed_ > 0) {
+      line += " [" + std::to_string(log_suppressed_) + " earlier lines of this session suppressed]";
+      log_suppressed_ = 0;
+    }
+    log::write(level, "server", line);
+  }
+
+  // No Hello (after the TLS handshake) within the hello timeout: close.
+  void arm_hello_timer() {
+    hello_timer_.expires_after(server_->options.hello_timeout);
+    hello_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
+      if (ec || self->closed_ || self->state_ != State::AwaitHello) return;
+      const std::string text =
+          "no hello within " + std::to_string(self->server_->options.hello_timeout.count()) + " ms";
+      if (self->handshaking()) {
+        // Still in the TLS handshake: no frame can be sent.
+        self->note(log::Level::Info, "closed: " + text + " (TLS handshake not completed)");
+        self->close(CloseReason::HelloTimeout);
+        return;
+      }
+      self->fail(wire::IDLE_TIMEOUT, text, CloseReason::HelloTimeout);
+    });
+  }
+  bool handshaking() const { return !reading_started_; }
+
+  // Watches a write in flight: one that made no progress for the write stall timeout means a
+  // client that does not read, and it is closed as slow. Armed while writes are in flight.
+  void arm_stall_timer() {
+    if (stall_armed_) return;
+    stall_armed_ = true;
+    stall_timer_.expires_after(server_->options.write_stall_timeout / 4);
+    stall_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
+      self->stall_armed_ = false;
+      if (ec || self->closed_ || !self->writing_) return;
+      if (Clock::now() - self->write_progress_at_ >= self->server_->options.write_stall_timeout) {
+        self->note(log::Level::Info,
+                   "closed: slow client (no write progress for " +
+                       std::to_string(self->server_->options.write_stall_timeout.count()) + " ms)");
+        self->close(CloseReason::SlowClient);
+        return;
+      }
+      self->arm_stall_timer();
+    });
+  }
+
   void arm_idle_timer() {
     idle_timer_.expires_after(server_->options.idle_timeout);
     idle_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
@@ -177,10 +295,13 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   void read() {
-    if (closed_ || closing_) return;
-    socket_.async_read_some(asio::buffer(buffer_),
+    reading_started_ = true;
+    if (closed_ || closing_ || read_pending_) return;
+    read_pending_ = true;
+    stream_.async_read_some(asio::buffer(buffer_),
                             asio::bind_executor(strand_, [self = shared_from_this()](
                                                              std::error_code ec, std::size_t n) {
+                              self->read_pending_ = false;
                               self->on_read(ec, n);
                             }));
   }
@@ -195,8 +316,14 @@ class Session : public std::enable_shared_from_this<Session> {
     }
     server_->bytes_received += n;
     decoder_.feed(buffer_.data(), n);
+    drain();
+  }
+
+  // Handles the frames the decoder holds, then reads on; stops while a wrong token's answer is
+  // delayed or while the client's replies pile up (it reads on once they are written).
+  void drain() {
     wire::Envelope env;
-    for (;;) {
+    while (!closed_ && !closing_ && !paused()) {
       const wire::DecodeStatus st = decoder_.next(env);
       if (st == wire::DecodeStatus::NeedMore) break;
       if (st == wire::DecodeStatus::TooLarge) {
@@ -210,9 +337,30 @@ class Session : public std::enable_shared_from_this<Session> {
       ++server_->frames_received;
       arm_idle_timer();
       handle(env);
-      if (closed_ || closing_) return;
     }
-    read();
+    if (closed_ || closing_) return;
+    if (!account_partial()) return;
+    if (!paused()) read();
+  }
+  bool paused() const {
+    return penalty_ || control_.size() >= server_->options.max_control_frames / 2;
+  }
+
+  // Adds this session's incomplete frame to the server's total. A session holding more than
+  // 64 KiB of one while the total is over the cap is closed; below 64 KiB (any frame that spans
+  // two reads) is always allowed, so well-behaved clients never meet the cap. False: closed.
+  bool account_partial() {
+    const auto held = static_cast<std::int64_t>(decoder_.buffered());
+    const std::int64_t total = server_->partial_bytes += held - partial_counted_;
+    partial_counted_ = held;
+    if (held > (64 << 10) &&
+        total > static_cast<std::int64_t>(server_->options.max_partial_bytes)) {
+      fail(wire::FRAME_TOO_LARGE,
+           "the server holds too many incomplete frames; send smaller frames (" +
+               std::to_string(held) + " bytes of one held)");
+      return false;
+    }
+    return true;
   }
 
   void handle(const wire::Envelope& env) {
@@ -249,14 +397,13 @@ class Session : public std::enable_shared_from_this<Session> {
         break;
       }
       case E::kBye:
-        log::debug("server", "session " + std::to_string(id_) + ": bye: " + env.bye().reason());
+        note(log::Level::Debug, "bye: " + log::quote(env.bye().reason()));
         close(CloseReason::Bye);
         break;
       case E::kPong:
         break;
       case E::kError:
-        log::info("server",
-                  "session " + std::to_string(id_) + " reports an error: " + env.error().message());
+        note(log::Level::Info, "reports an error: " + log::quote(env.error().message()));
         break;
       default:
         error(wire::UNEXPECTED_MESSAGE,
@@ -289,7 +436,9 @@ class Session : public std::enable_shared_from_this<Session> {
         std::int64_t i = tiles.index(k.lightmap(), k.tile_x(), k.tile_y());
         if (i >= 0) known_[static_cast<std::size_t>(i)] = k.version();
       }
-    client_name_ = h.client_name().substr(0, 64);
+    client_name_ = log::quote(h.client_name(), 64);
+    hello_timer_.cancel();
+    decoder_.set_max_frame(server_->options.max_frame);
     wire::Envelope w;
     wire::Welcome* wm = w.mutable_welcome();
     wm->set_protocol_version(wire::kProtocolVersion);
@@ -312,8 +461,8 @@ class Session : public std::enable_shared_from_this<Session> {
     wm->set_tile_epoch(host.tile_epoch());
     send(w);
     state_ = State::Ready;
-    log::info("server", "session " + std::to_string(id_) + " (" + peer_ + ", '" + client_name_ +
-                            "') joined; " + std::to_string(h.known_size()) + " tiles known");
+    note(log::Level::Info,
+         client_name_ + " joined; " + std::to_string(h.known_size()) + " tiles known");
   }
 
   void on_scene_request(const wire::SceneRequest& r) {
@@ -397,9 +546,30 @@ class Session : public std::enable_shared_from_this<Session> {
       return;
     }
     if (!same_secret(m.token(), token)) {
-      error(wire::PERMISSION_DENIED, "scene edits need the control token");
+      // Answered after a delay that doubles with each failure of the address; nothing else of
+      // this session is handled meanwhile. Too many: the address is refused for a while.
+      ++server_->token_failures;
+      const auto [delay, banned] = server_->token_failed(peer_key_);
+      penalty_ = true;
+      penalty_timer_.expires_after(delay);
+      penalty_timer_.async_wait([self = shared_from_this(), banned = banned](std::error_code ec) {
+        self->penalty_ = false;
+        if (ec || self->closed_) return;
+        if (banned) {
+          self->fail(wire::PERMISSION_DENIED,
+                     "scene edits need the control token; too many wrong tokens: this address is "
+                     "refused for " +
+                         std::to_string(self->server_->options.ban_duration.count() / 1000) + " s",
+                     CloseReason::TokenFailures);
+          return;
+        }
+        self->error(wire::PERMISSION_DENIED, "scene edits need the control token");
+        self->pump();
+        self->drain();
+      });
       return;
     }
+    server_->token_passed(peer_key_);
     std::uint64_t revision = 0;
     try {
       revision = server_->host.submit_edit(wire::from_proto(m));
@@ -407,9 +577,8 @@ class Session : public std::enable_shared_from_this<Session> {
       error(wire::BAD_REQUEST, e.what());
       return;
     }
-    log::info("server", "session " + std::to_string(id_) + " ('" + client_name_ +
-                            "') submitted edit " + std::to_string(revision) + " (" +
-                            std::to_string(m.ops_size()) + " operations)");
+    note(log::Level::Info, client_name_ + " submitted edit " + std::to_string(revision) + " (" +
+                               std::to_string(m.ops_size()) + " operations)");
     wire::Envelope ack;
     wire::SceneEdit* a = ack.mutable_scene_edit();
     a->set_request_id(m.request_id());
@@ -483,7 +652,7 @@ class Session : public std::enable_shared_from_this<Session> {
 
   // A reply or notice; the connection stays open.
   void error(wire::ErrorCode code, const std::string& message) {
-    log::info("server", "session " + std::to_string(id_) + ": error sent: " + message);
+    note(log::Level::Info, "error sent: " + log::quote(message, 200));
     ++server_->errors_sent;
     send(wire::make_error(code, message));
   }
@@ -495,7 +664,7 @@ class Session : public std::enable_shared_from_this<Session> {
   }
   void fail(wire::ErrorCode code, const std::string& message, CloseReason reason) {
     if (closed_ || closing_) return;
-    log::info("server", "session " + std::to_string(id_) + " (" + peer_ + ") closed: " + message);
+    note(log::Level::Info, "closed: " + log::quote(message, 200));
     ++server_->errors_sent;
     control_.push_back(wire::encode_frame(wire::make_error(code, message)));
     closing_ = true;
@@ -525,10 +694,14 @@ class Session : public std::enable_shared_from_this<Session> {
   void pump() {
     if (closed_ || writing_) return;
     std::string frame;
+    std::shared_ptr<const std::string> shared;  // an edit broadcast, shared by every session
     bool is_tile = false, is_scene = false;
     if (!control_.empty()) {
       frame = std::move(control_.front());
       control_.pop_front();
+    } else if (!edits_.empty() && !closing_) {
+      shared = std::move(edits_.front());
+      edits_.pop_front();
     } else if (closing_) {
       close(CloseReason::Disconnect);  // the reason fail() gave stands
       return;
@@ -542,8 +715,20 @@ class Session : public std::enable_shared_from_this<Session> {
       return;
     }
     writing_ = true;
-    auto data = std::make_shared<std::string>(std::move(frame));
-    asio::async_write(socket_, asio::buffer(*data),
+    write_progress_at_ = Clock::now();
+    write_progress_ = 0;
+    arm_stall_timer();
+    auto data = shared ? std::move(shared) : std::make_shared<const std::string>(std::move(frame));
+    // The completion condition runs before each partial write: it notes progress for the
+    // stall timer.
+    auto progress = [self = this](const std::error_code& ec, std::size_t n) -> std::size_t {
+      if (n > self->write_progress_) {
+        self->write_progress_ = n;
+        self->write_progress_at_ = Clock::now();
+      }
+      return asio::transfer_all()(ec, n);
+    };
+    asio::async_write(stream_, asio::buffer(*data), progress,
                       asio::bind_executor(strand_, [self = shared_from_this(), data, is_tile,
                                                     is_scene](std::error_code ec, std::size_t n) {
                         self->writing_ = false;
@@ -557,7 +742,10 @@ class Session : public std::enable_shared_from_this<Session> {
                           self->server_->tile_bytes_sent += n;
                         }
                         if (is_scene) self->server_->scene_bytes_sent += n;
+                        const bool was_paused = self->paused();
                         self->pump();
+                        if (was_paused && !self->paused())
+                          self->drain();  // replies written: read on
                       }));
   }
 
@@ -639,12 +827,16 @@ class Session : public std::enable_shared_from_this<Session> {
     if (closed_) return;
     closed_ = true;
     if (!close_reason_) close_reason_ = reason;
-    std::error_code ec;
     idle_timer_.cancel();
     rate_timer_.cancel();
     close_timer_.cancel();
-    socket_.shutdown(tcp::socket::shutdown_both, ec);
-    socket_.close(ec);
+    hello_timer_.cancel();
+    penalty_timer_.cancel();
+    stall_timer_.cancel();
+    stream_.close();
+    server_->partial_bytes -= partial_counted_;
+    partial_counted_ = 0;
+    server_->release(peer_key_);
     server_->host.set_camera(id_, std::nullopt);
     queue_changed();
     ++server_->sessions_closed[static_cast<std::size_t>(*close_reason_)];
@@ -655,17 +847,29 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   Server::Impl* server_;
-  tcp::socket socket_;
-  asio::strand<asio::io_context::executor_type> strand_;
-  asio::steady_timer idle_timer_, rate_timer_, close_timer_;
+  asio::any_io_executor strand_;  // the strand the socket was accepted on
+  wire::Stream stream_;
+  asio::steady_timer idle_timer_, rate_timer_, close_timer_, hello_timer_, penalty_timer_,
+      stall_timer_;
   wire::FrameDecoder decoder_;
   std::array<char, 64 * 1024> buffer_{};
   std::uint64_t id_;
+  std::string peer_key_;  // what admit() counted this session under
   std::string peer_, client_name_;
   State state_ = State::AwaitHello;
   bool closed_ = false, closing_ = false, writing_ = false;
+  bool reading_started_ = false, read_pending_ = false;
+  bool penalty_ = false;  // a wrong token's answer is being delayed
+  bool stall_armed_ = false;
+  std::size_t write_progress_ = 0;  // bytes of the write in flight written so far
+  Clock::time_point write_progress_at_{};
+  std::int64_t partial_counted_ = 0;  // of the server's partial_bytes
+  double log_tokens_ = 1e9;           // clamped to the burst at the first line
+  Clock::time_point log_refill_ = Clock::now();
+  std::uint64_t log_suppressed_ = 0;
   std::deque<std::string> control_;
-  std::shared_ptr<const wire::ScenePackage> package_;  // set by Hello
+  std::deque<std::shared_ptr<const std::string>> edits_;  // broadcasts not yet written
+  std::shared_ptr<const wire::ScenePackage> package_;     // set by Hello
   bool scene_active_ = false;
   std::uint64_t scene_offset_ = 0;
   bool streaming_ = false;
@@ -685,36 +889,162 @@ class Session : public std::enable_shared_from_this<Session> {
 
 }  // namespace
 
+namespace {
+
+// The address a peer is counted under: an IPv4 address (IPv4-mapped IPv6 included), or the /64
+// of an IPv6 address (one subscriber's network gets one).
+std::string peer_key_of(const tcp::socket& socket) {
+  std::error_code ec;
+  const tcp::endpoint ep = socket.remote_endpoint(ec);
+  if (ec) return "?";
+  asio::ip::address a = ep.address();
+  if (a.is_v6() && a.to_v6().is_v4_mapped())
+    a = asio::ip::make_address_v4(asio::ip::v4_mapped, a.to_v6());
+  if (a.is_v4()) return a.to_string();
+  asio::ip::address_v6::bytes_type b = a.to_v6().to_bytes();
+  std::fill(b.begin() + 8, b.end(), 0);
+  return asio::ip::address_v6(b).to_string() + "/64";
+}
+
+bool out_of_descriptors(const std::error_code& ec) {
+  return ec == asio::error::no_descriptors || ec.value() == ENFILE ||
+         ec == asio::error::no_buffer_space || ec == asio::error::no_memory;
+}
+
+}  // namespace
+
+Server::Impl::Admission Server::Impl::admit(const std::string& key) {
+  const auto now = Clock::now();
+  std::lock_guard lock(peers_mutex);
+  // Forget peers with no session, no recent failure and no ban (bounded by the sessions and
+  // the addresses that failed within the ban duration).
+  if (peers.size() > 4 * static_cast<std::size_t>(options.max_clients) + 1024)
+    std::erase_if(peers, [&](const auto& kv) {
+      return kv.second.sessions == 0 && kv.second.banned_until <= now &&
+             now - kv.second.last_seen > options.ban_duration;
+    });
+  Peer& p = peers[key];
+  p.last_seen = now;
+  if (p.banned_until > now) return Admission::Banned;
+  if (options.max_clients_per_peer > 0 && p.sessions >= options.max_clients_per_peer)
+    return Admission::PeerLimit;
+  {
+    std::lock_guard sl(sessions_mutex);
+    if (sessions.size() >= options.max_clients) return Admission::Full;
+  }
+  ++p.sessions;
+  return Admission::Ok;
+}
+
+void Server::Impl::release(const std::string& key) {
+  std::lock_guard lock(peers_mutex);
+  auto it = peers.find(key);
+  if (it == peers.end() || it->second.sessions == 0) return;
+  --it->second.sessions;
+  it->second.last_seen = Clock::now();
+}
+
+std::pair<std::chrono::milliseconds, bool> Server::Impl::token_failed(const std::string& key) {
+  const auto now = Clock::now();
+  std::lock_guard lock(peers_mutex);
+  Peer& p = peers[key];
+  // Failures older than the ban duration are forgiven.
+  if (now - p.last_seen > options.ban_duration) p.token_failures = 0;
+  p.last_seen = now;
+  ++p.token_failures;
+  const std::uint32_t doublings = std::min<std::uint32_t>(p.token_failures - 1, 5);
+  const auto delay = options.token_failure_delay * (1 << doublings);
+  if (p.token_failures >= options.max_token_failures) {
+    p.banned_until = now + options.ban_duration;
+    p.token_failures = 0;
+    log::warn("server", "peer " + key + ": " + std::to_string(options.max_token_failures) +
+                            " wrong control tokens; refused for " +
+                            std::to_string(options.ban_duration.count() / 1000) + " s");
+    return {delay, true};
+  }
+  return {delay, false};
+}
+
+void Server::Impl::token_passed(const std::string& key) {
+  std::lock_guard lock(peers_mutex);
+  auto it = peers.find(key);
+  if (it != peers.end()) it->second.token_failures = 0;
+}
+
+// Closes a connection that is not admitted: one Error frame, best effort (never blocks: the
+// socket is non-blocking and the frame is small), then close.
+void Server::Impl::refuse(tcp::socket& socket, const std::string& message) {
+  std::error_code ignored;
+  if (!tls) {
+    socket.non_blocking(true, ignored);
+    const std::string frame = wire::encode_frame(wire::make_error(wire::INTERNAL, message));
+    socket.write_some(asio::buffer(frame), ignored);
+  }
+  socket.close(ignored);
+}
+
 void Server::Impl::accept() {
-  acceptor.async_accept(
-      asio::make_strand(io), [self = this](std::error_code ec, tcp::socket socket) {
-        if (self->stopping) return;
-        if (!ec) {
-          ++self->connections;
-          std::shared_ptr<Session> s;
+  acceptor.async_accept(asio::make_strand(io), [self = this](std::error_code ec,
+                                                             tcp::socket socket) {
+    if (self->stopping) return;
+    if (!ec) {
+      if (self->accept_backoff.count() > 0) {
+        log::warn("server", "accepting connections again");
+        self->accept_backoff = std::chrono::milliseconds(0);
+      }
+      ++self->connections;
+      const std::string key = peer_key_of(socket);
+      switch (self->admit(key)) {
+        case Admission::Ok: {
+          std::error_code ignored;
+          if (self->options.socket_send_buffer > 0)
+            socket.set_option(asio::socket_base::send_buffer_size(self->options.socket_send_buffer),
+                              ignored);
+          auto s = std::make_shared<Session>(self, std::move(socket), key);
           {
             std::lock_guard lock(self->sessions_mutex);
-            if (self->sessions.size() < self->options.max_clients) {
-              s = std::make_shared<Session>(self, std::move(socket));
-              self->sessions.insert(s);
-            }
+            self->sessions.insert(s);
           }
-          if (s) {
-            s->start();
-          } else {
-            // Full: one Error frame, best effort, then close.
-            ++self->clients_refused;
-            std::string frame =
-                wire::encode_frame(wire::make_error(wire::INTERNAL, "the server is full"));
-            std::error_code ignored;
-            asio::write(socket, asio::buffer(frame), ignored);
-            socket.close(ignored);
-          }
-        } else if (ec != asio::error::operation_aborted) {
-          log::warn("server", "accept: " + ec.message());
+          s->start();
+          break;
         }
-        self->accept();
-      });
+        case Admission::Full:
+          ++self->clients_refused;
+          self->refuse(socket, "the server is full");
+          break;
+        case Admission::PeerLimit:
+          ++self->peer_refused;
+          self->refuse(socket, "too many connections from this address (" +
+                                   std::to_string(self->options.max_clients_per_peer) + ")");
+          break;
+        case Admission::Banned:
+          ++self->banned_refused;
+          self->refuse(socket, "this address is refused for a while (wrong control tokens)");
+          break;
+      }
+    } else if (ec == asio::error::operation_aborted) {
+      return;
+    } else {
+      ++self->accept_errors;
+      if (out_of_descriptors(ec)) {
+        // Out of file descriptors (or kernel memory): the pending connection stays in the
+        // backlog. Pause accepting, doubling the pause up to 1 s, and say so once.
+        if (self->accept_backoff.count() == 0)
+          log::warn("server", "accept: " + ec.message() + " (" +
+                                  std::to_string(self->client_count()) +
+                                  " sessions); pausing accepts until descriptors are free");
+        self->accept_backoff = std::clamp(self->accept_backoff * 2, std::chrono::milliseconds(10),
+                                          std::chrono::milliseconds(1000));
+        self->accept_timer.expires_after(self->accept_backoff);
+        self->accept_timer.async_wait([self](std::error_code tec) {
+          if (!tec && !self->stopping) self->accept();
+        });
+        return;
+      }
+      log::warn("server", "accept: " + ec.message());
+    }
+    self->accept();
+  });
 }
 
 void Server::Impl::on_publish(const std::vector<std::uint32_t>& tiles) {
@@ -741,7 +1071,17 @@ void Server::Impl::on_edit(const AppliedEdit& applied) {
 
 Server::Server(EngineHost& host, ServerOptions options)
     : impl_(std::make_shared<Impl>(host, std::move(options))) {
-  if (impl_->options.io_threads < 1) throw Error("the server needs at least one I/O thread");
+  Impl& im = *impl_;
+  const ServerOptions& o = im.options;
+  if (o.io_threads < 1) throw Error("the server needs at least one I/O thread");
+  if (!o.control_token.empty() && o.control_token.size() < kMinTokenLength)
+    throw Error("the control token has " + std::to_string(o.control_token.size()) +
+                " characters; it needs at least " + std::to_string(kMinTokenLength) +
+                " (e.g. head -c 18 /dev/urandom | base64)");
+  if (o.tls_cert.empty() != o.tls_key.empty())
+    throw Error("TLS needs both --tls-cert and --tls-key");
+  if (!o.tls_cert.empty()) im.tls = wire::make_server_tls(o.tls_cert, o.tls_key);
+  im.hello_frame_cap = std::min(o.max_frame, o.max_hello_frame + 32 * host.tiles().tile_count());
 }
 
 Server::~Server() {
@@ -795,6 +1135,7 @@ void Server::stop() {
   asio::post(im.io, [&im] {
     std::error_code ec;
     im.acceptor.close(ec);
+    im.accept_timer.cancel();
   });
   {
     std::lock_guard lock(im.sessions_mutex);
@@ -836,6 +1177,13 @@ ServerStats Server::Impl::stats() const {
   s.tiles_coalesced = im.tiles_coalesced.load();
   s.scene_bytes_sent = im.scene_bytes_sent.load();
   s.errors_sent = im.errors_sent.load();
+  s.peer_refused = im.peer_refused.load();
+  s.banned_refused = im.banned_refused.load();
+  s.accept_errors = im.accept_errors.load();
+  s.token_failures = im.token_failures.load();
+  s.edits_dropped = im.edits_dropped.load();
+  s.log_lines_suppressed = im.log_lines_suppressed.load();
+  s.partial_bytes = static_cast<std::uint64_t>(std::max<std::int64_t>(0, im.partial_bytes.load()));
   for (std::size_t r = 0; r < kCloseReasons; ++r)
     s.sessions_closed[r] = im.sessions_closed[r].load();
   s.uptime_seconds = std::chrono::duration<double>(Clock::now() - im.started).count();
@@ -846,6 +1194,17 @@ ServerStats Server::Impl::stats() const {
     s.queue_depth_max = std::max(s.queue_depth_max, depth);
   }
   return s;
+}
+
+std::uint64_t raise_open_file_limit() {
+  rlimit r{};
+  if (getrlimit(RLIMIT_NOFILE, &r) != 0) return 0;
+  if (r.rlim_cur < r.rlim_max) {
+    const rlim_t before = r.rlim_cur;
+    r.rlim_cur = r.rlim_max;
+    if (setrlimit(RLIMIT_NOFILE, &r) != 0) return before;
+  }
+  return r.rlim_cur;
 }
 
 const char* close_reason_name(CloseReason reason) {
@@ -870,6 +1229,12 @@ const char* close_reason_name(CloseReason reason) {
       return "shutdown";
     case CloseReason::Internal:
       return "internal";
+    case CloseReason::HelloTimeout:
+      return "hello_timeout";
+    case CloseReason::TokenFailures:
+      return "token_failures";
+    case CloseReason::Tls:
+      return "tls";
   }
   return "unknown";
 }

@@ -45,6 +45,9 @@ struct Options {
   std::string log_level = "info";
   std::string control_token;
   std::string control_token_file;
+  std::string tls_cert, tls_key;
+  std::uint32_t max_clients = irradcast::ServerOptions().max_clients;
+  std::uint32_t max_clients_per_peer = irradcast::ServerOptions().max_clients_per_peer;
   irradcast::tools::EngineOptions engine;
 };
 
@@ -91,6 +94,10 @@ int run(const Options& o, sigset_t signals) {
   ho.tiles.refresh_ratio = o.tile_refresh;
   ho.engine_nice = o.engine_nice;
   ho.max_updates = o.max_updates;
+  if (!token.empty() && token.size() < kMinTokenLength)
+    throw Error("the control token from " + token_source + " has " + std::to_string(token.size()) +
+                " characters; it needs at least " + std::to_string(kMinTokenLength) +
+                " (e.g. head -c 18 /dev/urandom | base64)");
   log::info("server", "loading " + o.scene);
   EngineHost host(load_scene(o.scene, o.detail), o.scene, ho);
 
@@ -100,6 +107,15 @@ int run(const Options& o, sigset_t signals) {
   so.io_threads = o.io_threads;
   so.idle_timeout = std::chrono::seconds(o.idle_timeout_s);
   so.control_token = token;
+  so.tls_cert = o.tls_cert;
+  so.tls_key = o.tls_key;
+  so.max_clients = o.max_clients;
+  so.max_clients_per_peer = o.max_clients_per_peer;
+  const std::uint64_t files = raise_open_file_limit();
+  if (files < so.max_clients + 64u)
+    log::warn("server", "this process may open " + std::to_string(files) +
+                            " files, fewer than --max-clients " + std::to_string(so.max_clients) +
+                            " needs (raise the hard limit: ulimit -Hn)");
   log::info("server", token.empty()
                           ? std::string("scene edits: disabled")
                           : "scene edits: enabled (control token from " + token_source + ")");
@@ -230,6 +246,19 @@ int main(int argc, char** argv) {
   app.add_option("--control-token-file", o.control_token_file,
                  "read the control token for scene edits from the first line of this file")
       ->default_str("none");
+  app.add_option("--max-clients", o.max_clients,
+                 "the most sessions at once, all addresses together; past it a new connection "
+                 "gets the error 'the server is full' and is closed")
+      ->check(CLI::Range(1u, 1000000u));
+  app.add_option("--max-clients-per-peer", o.max_clients_per_peer,
+                 "the most sessions from one address (an IPv6 /64) at once; past it a new "
+                 "connection is refused (0 = no limit; irradcast-load users on one machine count "
+                 "as one address)");
+  app.add_option("--tls-cert", o.tls_cert,
+                 "serve TLS on the protocol port and the metrics endpoint with this PEM "
+                 "certificate chain (with --tls-key; docs/OPERATIONS.md)")
+      ->default_str("none");
+  app.add_option("--tls-key", o.tls_key, "the PEM private key of --tls-cert")->default_str("none");
   app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
   bool list_devices = false;
   app.add_flag("--list-devices", list_devices,

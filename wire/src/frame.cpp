@@ -54,6 +54,10 @@ const char* to_string(DecodeStatus s) {
 FrameDecoder::FrameDecoder(std::size_t max_frame)
     : max_frame_(std::min<std::size_t>(max_frame, std::numeric_limits<int>::max())) {}
 
+void FrameDecoder::set_max_frame(std::size_t max_frame) {
+  max_frame_ = std::min<std::size_t>(max_frame, std::numeric_limits<int>::max());
+}
+
 void FrameDecoder::feed(const void* data, std::size_t n) {
   if (n == 0 || failed_ != DecodeStatus::NeedMore) return;  // a broken stream keeps no bytes
   // Drop consumed bytes before growing, so the buffer holds at most one partial frame plus

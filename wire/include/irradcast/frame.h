@@ -53,6 +53,8 @@ class FrameDecoder {
   DecodeStatus next(Envelope& out);
 
   const std::string& error() const { return error_; }
+  // A new cap for frames not yet decoded (the server raises it once a client said Hello).
+  void set_max_frame(std::size_t max_frame);
   std::size_t buffered() const { return buffer_.size() - start_; }
   std::size_t max_frame() const { return max_frame_; }
   // Frames decoded so far.

@@ -1,0 +1,97 @@
+#include "irradcast/transport.h"
+
+#include <openssl/err.h>
+#include <openssl/ssl.h>
+
+#include <fstream>
+
+#include "irradcast/error.h"
+
+namespace irradcast::wire {
+
+namespace {
+
+// OpenSSL's reason for the last failure, for an error message.
+std::string openssl_reason(const std::error_code& ec) {
+  const unsigned long e = ERR_peek_last_error();
+  if (e != 0) {
+    const char* reason = ERR_reason_error_string(e);
+    ERR_clear_error();
+    if (reason) return reason;
+  }
+  return ec.message();
+}
+
+void require_readable(const std::string& file, const char* what) {
+  if (file.empty()) throw Error(std::string(what) + ": no file given");
+  std::ifstream f(file);
+  if (!f) throw Error(std::string(what) + ": cannot read '" + file + "'");
+}
+
+}  // namespace
+
+std::shared_ptr<asio::ssl::context> make_server_tls(const std::string& cert_file,
+                                                    const std::string& key_file) {
+  require_readable(cert_file, "--tls-cert");
+  require_readable(key_file, "--tls-key");
+  auto ctx = std::make_shared<asio::ssl::context>(asio::ssl::context::tls_server);
+  ctx->set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
+                   asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 |
+                   asio::ssl::context::no_tlsv1_1 | asio::ssl::context::single_dh_use);
+  std::error_code ec;
+  ctx->use_certificate_chain_file(cert_file, ec);
+  if (ec)
+    throw Error("--tls-cert: '" + cert_file + "' is not a PEM certificate chain (" +
+                openssl_reason(ec) + ")");
+  ctx->use_private_key_file(key_file, asio::ssl::context::pem, ec);
+  if (ec)
+    throw Error("--tls-key: '" + key_file + "' is not a PEM private key (" + openssl_reason(ec) +
+                ")");
+  if (SSL_CTX_check_private_key(ctx->native_handle()) != 1)
+    throw Error("--tls-key: '" + key_file + "' does not match the certificate in '" + cert_file +
+                "'");
+  return ctx;
+}
+
+std::shared_ptr<asio::ssl::context> make_client_tls(const std::string& ca_file) {
+  auto ctx = std::make_shared<asio::ssl::context>(asio::ssl::context::tls_client);
+  ctx->set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
+                   asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 |
+                   asio::ssl::context::no_tlsv1_1);
+  std::error_code ec;
+  if (ca_file.empty()) {
+    ctx->set_default_verify_paths(ec);
+    if (ec) throw Error("TLS: cannot load the system's trusted CAs (" + openssl_reason(ec) + ")");
+  } else {
+    require_readable(ca_file, "--tls-ca");
+    ctx->load_verify_file(ca_file, ec);
+    if (ec)
+      throw Error("--tls-ca: '" + ca_file + "' is not a PEM certificate (" + openssl_reason(ec) +
+                  ")");
+  }
+  ctx->set_verify_mode(asio::ssl::verify_peer);
+  return ctx;
+}
+
+void Stream::expect_server_name(const std::string& host) {
+  if (!tls_) return;
+  // SNI takes DNS names only; an IP address is checked against the certificate all the same.
+  asio::error_code not_ip;
+  (void)asio::ip::make_address(host, not_ip);
+  if (not_ip) SSL_set_tlsext_host_name(tls_->native_handle(), host.c_str());
+  tls_->set_verify_mode(asio::ssl::verify_peer);
+  tls_->set_verify_callback(asio::ssl::host_name_verification(host));
+}
+
+std::string describe_tls_error(const std::error_code& ec) {
+  if (ec.category() == asio::error::get_ssl_category()) {
+    const unsigned long e = static_cast<unsigned long>(ec.value());
+    const char* reason = ERR_reason_error_string(e);
+    if (reason) return std::string("TLS: ") + reason;
+    return "TLS: " + ec.message();
+  }
+  if (ec == asio::ssl::error::stream_truncated) return "TLS: the peer closed the connection";
+  return ec.message();
+}
+
+}  // namespace irradcast::wire
