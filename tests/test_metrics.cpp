@@ -1,6 +1,7 @@
 // Server metrics: the Prometheus text formatter, the HTTP endpoint (good and bad requests,
 // timeouts), and the numbers it and the Stats frame report for a live engine host and server.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 
 #include <asio.hpp>
 
@@ -336,6 +337,117 @@ bool eventually(F condition, std::chrono::milliseconds limit = 10000ms) {
   return condition();
 }
 
+// ---------------------------------------------------------------------------------------------
+// Many connections at once, all on one io_context in the test's thread.
+
+// Raises the soft descriptor limit to the hard one. Empty when at least `need` descriptors are
+// allowed, else why not (for GTEST_SKIP).
+std::string descriptors_for(rlim_t need) {
+  rlimit lim{};
+  if (getrlimit(RLIMIT_NOFILE, &lim) != 0) return "getrlimit(RLIMIT_NOFILE) failed";
+  if (lim.rlim_cur < lim.rlim_max) {
+    rlimit raised = lim;
+    raised.rlim_cur = lim.rlim_max;
+    if (setrlimit(RLIMIT_NOFILE, &raised) != 0 && lim.rlim_max >= need) {
+      raised.rlim_cur = need;  // a hard limit of "unlimited" cannot be the soft one
+      setrlimit(RLIMIT_NOFILE, &raised);
+    }
+    getrlimit(RLIMIT_NOFILE, &lim);
+  }
+  if (lim.rlim_cur >= need) return {};
+  return "needs " + std::to_string(need) +
+         " file descriptors (a thousand client sockets, their server ends, and the endpoint "
+         "takes at most a quarter of the limit); RLIMIT_NOFILE allows " +
+         std::to_string(lim.rlim_cur) + " (hard limit " + std::to_string(lim.rlim_max) +
+         "): raise it with ulimit -Hn";
+}
+
+constexpr rlim_t kThousandConnectionsDescriptors = 4096;
+
+struct RawClient {
+  explicit RawClient(asio::io_context& io) : socket(io) {}
+  tcp::socket socket;
+  bool connected = false;
+  bool closed = false;  // the server closed (EOF or an error)
+  std::string received;
+  std::array<char, 4096> buffer{};
+};
+using RawClients = std::vector<std::unique_ptr<RawClient>>;
+
+// Opens `n` connections at once; returns once each has connected or failed, or `limit` passed.
+RawClients connect_all(asio::io_context& io, std::uint16_t port, int n,
+                       std::chrono::milliseconds limit = 20000ms) {
+  const tcp::endpoint at(asio::ip::make_address("127.0.0.1"), port);
+  RawClients clients;
+  for (int i = 0; i < n; ++i) {
+    clients.push_back(std::make_unique<RawClient>(io));
+    RawClient* c = clients.back().get();
+    c->socket.async_connect(at, [c](std::error_code ec) { c->connected = !ec; });
+  }
+  io.restart();
+  io.run_for(limit);
+  return clients;
+}
+
+// Reads until the server closes.
+void read_to_end(RawClient* c) {
+  c->socket.async_read_some(asio::buffer(c->buffer), [c](std::error_code ec, std::size_t n) {
+    c->received.append(c->buffer.data(), n);
+    if (ec) {
+      if (ec != asio::error::operation_aborted) c->closed = true;
+      return;
+    }
+    read_to_end(c);
+  });
+}
+
+// Every connected client sends `request` (all at once), then reads its response to the end.
+void exchange_all(asio::io_context& io, RawClients& clients, const std::string& request,
+                  std::chrono::milliseconds limit = 20000ms) {
+  for (auto& client : clients) {
+    RawClient* c = client.get();
+    if (!c->connected) continue;
+    asio::async_write(c->socket, asio::buffer(request), [c](std::error_code ec, std::size_t) {
+      if (ec)
+        c->closed = true;
+      else
+        read_to_end(c);
+    });
+  }
+  io.restart();
+  io.run_for(limit);
+}
+
+// The clients that the server has closed within `wait`.
+std::size_t closed_within(asio::io_context& io, RawClients& clients,
+                          std::chrono::milliseconds wait) {
+  for (auto& c : clients)
+    if (c->connected && !c->closed) read_to_end(c.get());
+  io.restart();
+  io.run_for(wait);
+  for (auto& c : clients) {
+    std::error_code ignored;
+    c->socket.cancel(ignored);
+  }
+  io.restart();
+  io.run();
+  std::size_t closed = 0;
+  for (auto& c : clients) closed += c->closed ? 1 : 0;
+  return closed;
+}
+
+// A metrics text of realistic size: the formatter's output for a server with a few clients.
+std::string realistic_metrics_text() {
+  MetricsSnapshot m;
+  m.scene = "rooms:3";
+  m.backend = "embree";
+  m.server.clients = 3;
+  m.engine.passes = {{"direct", 0, 0.001, 1000, 0.009, 9000},
+                     {"probes", 1, 0.002, 2000, 0.018, 18000},
+                     {"scatter", 1, 0.003, 3000, 0.027, 27000}};
+  return format_metrics(m);
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -389,6 +501,14 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
               {"scatter", 1, 0.003, 3000, 0.027, 27000},
               {"probes", 2, 0.004, 4000, 0.036, 36000},
               {"scatter", 2, 5e-320, 5000, 0.045, 45000}};  // a denormal round-trips too
+  MetricsEndpointStats& x_stats = m.endpoint;
+  x_stats.connections = 1001;
+  x_stats.open = 7;
+  x_stats.dropped = 11;
+  x_stats.timeouts = 13;
+  x_stats.ok = 950;
+  x_stats.bad = 17;
+  x_stats.collections = 19;
 
   const std::string text = format_metrics(m);
   const Exposition x = parse_exposition(text);
@@ -460,6 +580,13 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
     u("irradcast_engine_pass_rays_total", p.rays_total, l);
   }
   EXPECT_EQ(x.family("irradcast_engine_pass_seconds").size(), e.passes.size());
+  u("irradcast_metrics_connections_total", 1001);
+  u("irradcast_metrics_connections_open", 7);
+  u("irradcast_metrics_connections_dropped_total", 11);
+  u("irradcast_metrics_connections_timed_out_total", 13);
+  u("irradcast_metrics_scrapes_total", 950);
+  u("irradcast_metrics_errors_total", 17);
+  u("irradcast_metrics_collections_total", 19);
   // Nothing else: every sample above was checked.
   EXPECT_EQ(checked.size(), x.samples.size()) << text;
   EXPECT_EQ(x.samples.size(), 37 + kCloseReasons + 4 * e.passes.size());
@@ -544,8 +671,10 @@ TEST(Metrics, EndpointAnswersBadRequestsAndKeepsServing) {
       {"absolute target", "GET http://a/metrics HTTP/1.1\r\n\r\n", 400},
       {"header without colon", "GET /metrics HTTP/1.1\r\nHost a\r\n\r\n", 400},
       {"folded header", "GET /metrics HTTP/1.1\r\nX-A: 1\r\n  2\r\n\r\n", 400},
-      {"oversized header", "GET /metrics HTTP/1.1\r\nX-Big: " + big + "\r\n\r\n", 400},
-      {"oversized, never ending", "GET /metrics HTTP/1.1\r\nX-Big: " + big, 400},
+      {"CR inside a line", "GET /metrics HTTP/1.1\r\nX-A: 1\r2\r\n\r\n", 400},
+      {"oversized header", "GET /metrics HTTP/1.1\r\nX-Big: " + big + "\r\n\r\n", 431},
+      {"oversized, never ending", "GET /metrics HTTP/1.1\r\nX-Big: " + big, 431},
+      {"oversized request line", "GET /metrics?" + big + " HTTP/1.1\r\n\r\n", 414},
       {"JSON", "{\"get\": \"/metrics\"}\r\n\r\n", 400},
   };
   for (const Bad& b : bad) {
@@ -568,7 +697,6 @@ TEST(Metrics, EndpointAnswersBadRequestsAndKeepsServing) {
 
 TEST(Metrics, EndpointClosesIdleConnectionsAfterTheTimeout) {
   MetricsEndpointOptions o = local_endpoint(300ms);
-  o.max_connections = 2;
   MetricsEndpoint ep([] { return std::string("irradcast_test 1\n"); }, o);
   ep.start();
   {  // Connects and sends nothing.
@@ -594,23 +722,6 @@ TEST(Metrics, EndpointClosesIdleConnectionsAfterTheTimeout) {
   }
   EXPECT_EQ(get(ep.port()).status, 200);
   EXPECT_EQ(ep.stats().timeouts, 2u);
-  {  // max_connections idle connections: a third is closed at once, and the endpoint serves
-    // again once the idle ones time out.
-    asio::io_context io;
-    tcp::socket a(io), b(io), c(io);
-    const tcp::endpoint at(asio::ip::make_address("127.0.0.1"), ep.port());
-    a.connect(at);
-    b.connect(at);
-    ASSERT_TRUE(eventually([&] { return ep.stats().connections >= 5; }));
-    c.connect(at);
-    bool closed = false;
-    const auto t0 = std::chrono::steady_clock::now();
-    read_until_closed(io, c, 3000ms, closed);
-    EXPECT_TRUE(closed);
-    EXPECT_LT(std::chrono::steady_clock::now() - t0, 250ms);
-    EXPECT_EQ(ep.stats().refused, 1u);
-  }
-  EXPECT_TRUE(eventually([&] { return get(ep.port()).status == 200; }, 3000ms));
   // stop() does not wait for an idle connection's timeout.
   {
     MetricsEndpoint slow([] { return std::string(); }, local_endpoint(60000ms));
@@ -623,6 +734,225 @@ TEST(Metrics, EndpointClosesIdleConnectionsAfterTheTimeout) {
     slow.stop();
     EXPECT_LT(std::chrono::steady_clock::now() - t0, 1000ms);
   }
+}
+
+// Issue 16, item 13: the endpoint answered 64 of 1000 concurrent scrapes (it closed every
+// connection past 64 open at once).
+TEST(Metrics, EndpointAnswersAThousandConcurrentScrapes) {
+  if (const std::string why = descriptors_for(kThousandConnectionsDescriptors); !why.empty())
+    GTEST_SKIP() << why;
+  const std::string text = realistic_metrics_text();
+  std::atomic<int> calls{0};
+  MetricsEndpoint ep(
+      [&] {
+        ++calls;
+        return text;
+      },
+      local_endpoint());
+  ep.start();
+  ASSERT_GE(ep.max_connections(), 1000u);
+  constexpr int kClients = 1000;
+  asio::io_context io;
+  RawClients clients = connect_all(io, ep.port(), kClients);
+  int connected = 0;
+  for (const auto& c : clients) connected += c->connected ? 1 : 0;
+  ASSERT_EQ(connected, kClients);
+  // All connected before any sends: a thousand requests open at once.
+  const auto t0 = std::chrono::steady_clock::now();
+  exchange_all(io, clients, "GET /metrics HTTP/1.1\r\nHost: localhost\r\nUser-Agent: t\r\n\r\n");
+  const auto elapsed = std::chrono::steady_clock::now() - t0;
+  int answered = 0;
+  for (const auto& c : clients) {
+    const HttpResult r = parse_http(c->received, c->closed);
+    if (r.status == 200 && r.body == text && r.closed) ++answered;
+  }
+  EXPECT_EQ(answered, kClients);
+  const MetricsEndpointStats st = ep.stats();
+  EXPECT_EQ(st.ok, static_cast<std::uint64_t>(kClients));
+  EXPECT_EQ(st.dropped, 0u);
+  EXPECT_EQ(st.timeouts, 0u);
+  // The text was made at most once per cache_for (100 ms), not once per scrape.
+  const auto windows = std::chrono::duration_cast<std::chrono::milliseconds>(elapsed) / 100ms;
+  EXPECT_LE(calls.load(), 1 + windows) << "in " << elapsed / 1ms << " ms";
+  EXPECT_EQ(st.collections, static_cast<std::uint64_t>(calls.load()));
+}
+
+// A thousand connections that never finish their request (half a request, or nothing) stay open
+// (their deadlines are far away here), and a well-behaved scrape is still answered at once.
+TEST(Metrics, EndpointServesAScrapeWhileAThousandConnectionsStall) {
+  if (const std::string why = descriptors_for(kThousandConnectionsDescriptors); !why.empty())
+    GTEST_SKIP() << why;
+  MetricsEndpointOptions o = local_endpoint(60000ms);
+  o.header_timeout = 30000ms;
+  MetricsEndpoint ep([] { return std::string("irradcast_test 1\n"); }, o);
+  ep.start();
+  constexpr int kStalled = 1000;
+  asio::io_context io;
+  RawClients stalled = connect_all(io, ep.port(), kStalled);
+  const std::string half = "GET /metrics HTTP/1.1\r\nHo";
+  for (std::size_t i = 0; i < stalled.size(); i += 2) {
+    ASSERT_TRUE(stalled[i]->connected);
+    asio::write(stalled[i]->socket, asio::buffer(half));
+  }
+  ASSERT_TRUE(eventually([&] { return ep.stats().connections >= kStalled; }));
+  const auto t0 = std::chrono::steady_clock::now();
+  const HttpResult r = http(ep.port(), "GET /metrics HTTP/1.1\r\nHost: a\r\n\r\n", 0, 2000ms);
+  const auto waited = std::chrono::steady_clock::now() - t0;
+  EXPECT_EQ(r.status, 200) << r.raw;
+  EXPECT_EQ(r.body, "irradcast_test 1\n");
+  EXPECT_LT(waited, 2000ms);
+  // The stalled connections were not touched: none closed, none dropped, none timed out.
+  EXPECT_EQ(closed_within(io, stalled, 50ms), 0u);
+  const MetricsEndpointStats st = ep.stats();
+  EXPECT_EQ(st.dropped, 0u);
+  EXPECT_EQ(st.timeouts, 0u);
+  EXPECT_TRUE(eventually([&] { return ep.stats().open == kStalled; }));
+}
+
+// With max_connections open, a new connection takes the place of the oldest one that cannot be
+// a live scrape: an answered one (still open) first, then the oldest incomplete request.
+TEST(Metrics, EndpointDropsTheOldestStalledConnectionForANewOne) {
+  MetricsEndpointOptions o = local_endpoint(60000ms);
+  o.header_timeout = 30000ms;
+  o.max_connections = 16;
+  MetricsEndpoint ep([] { return std::string("irradcast_test 1\n"); }, o);
+  ep.start();
+  const tcp::endpoint at(asio::ip::make_address("127.0.0.1"), ep.port());
+  asio::io_context io;
+  // An answered connection that the client keeps open (the server lingers on it).
+  RawClients answered = connect_all(io, ep.port(), 1);
+  ASSERT_TRUE(answered[0]->connected);
+  asio::write(answered[0]->socket, asio::buffer(std::string("GET /metrics HTTP/1.1\r\n\r\n")));
+  ASSERT_TRUE(eventually([&] { return ep.stats().ok == 1; }));
+  // 40 stalled ones, connected in order (the kernel's accept queue is first in, first out).
+  RawClients stalled;
+  for (int i = 0; i < 40; ++i) {
+    stalled.push_back(std::make_unique<RawClient>(io));
+    stalled.back()->socket.connect(at);
+    stalled.back()->connected = true;
+  }
+  ASSERT_TRUE(eventually([&] { return ep.stats().connections == 41; }));
+  // 41 connections, 16 places: the answered one went first, then the 24 oldest stalled ones.
+  EXPECT_EQ(ep.stats().dropped, 25u);
+  EXPECT_EQ(ep.stats().open, 16u);
+  EXPECT_EQ(closed_within(io, answered, 200ms), 1u);
+  HttpResult first = parse_http(answered[0]->received, true);
+  EXPECT_EQ(first.status, 200);  // it had its response before it was dropped
+  const std::size_t closed = closed_within(io, stalled, 200ms);
+  EXPECT_EQ(closed, 24u);
+  for (std::size_t i = 0; i < stalled.size(); ++i)
+    EXPECT_EQ(stalled[i]->closed, i < 24) << "stalled connection " << i;
+  // A scraper gets its answer: it takes the place of the oldest stalled connection left.
+  EXPECT_EQ(get(ep.port()).status, 200);
+  EXPECT_EQ(ep.stats().dropped, 26u);
+  EXPECT_EQ(closed_within(io, stalled, 200ms), 25u);
+  EXPECT_TRUE(stalled[24]->closed);
+  EXPECT_EQ(ep.stats().timeouts, 0u);
+}
+
+// Slowloris: the request head must be complete within header_timeout of the connection, however
+// steadily its bytes trickle in.
+TEST(Metrics, EndpointClosesASlowRequestAtTheHeaderDeadline) {
+  MetricsEndpointOptions o = local_endpoint(10000ms);
+  o.header_timeout = 300ms;
+  MetricsEndpoint ep([] { return std::string("irradcast_test 1\n"); }, o);
+  ep.start();
+  asio::io_context io;
+  tcp::socket s(io);
+  s.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), ep.port()));
+  const auto t0 = std::chrono::steady_clock::now();
+  asio::write(s, asio::buffer(std::string("GET /metrics HTTP/1.1\r\n")));
+  std::error_code ec;
+  for (int i = 0; i < 60 && !ec; ++i) {  // a header line every 50 ms, for up to 3 s
+    asio::write(s, asio::buffer("X-Slow-" + std::to_string(i) + ": 1\r\n"), ec);
+    std::this_thread::sleep_for(50ms);
+  }
+  bool closed = false;
+  EXPECT_EQ(read_until_closed(io, s, 3000ms, closed), "");  // closed without a response
+  EXPECT_TRUE(closed);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 2000ms);
+  EXPECT_EQ(ep.stats().timeouts, 1u);
+  EXPECT_EQ(ep.stats().ok, 0u);
+  EXPECT_EQ(get(ep.port()).status, 200);
+}
+
+// An oversized request head: an error status at once, `Connection: close`, and the connection
+// closed, also when the client goes on sending.
+TEST(Metrics, EndpointAnswersAnOversizedHeadWithAnErrorAndCloses) {
+  MetricsEndpoint ep([] { return std::string("irradcast_test 1\n"); }, local_endpoint());
+  ep.start();
+  std::string many_headers = "GET /metrics HTTP/1.1\r\n";
+  for (int i = 0; many_headers.size() < 9000; ++i)
+    many_headers += "X-Header-" + std::to_string(i) + ": some value\r\n";
+  struct Case {
+    std::string what, request;
+    int status;
+  };
+  const std::vector<Case> cases = {
+      {"one long header", "GET /metrics HTTP/1.1\r\nX-Big: " + std::string(9000, 'a') + "\r\n\r\n",
+       431},
+      {"many headers", many_headers + "\r\n", 431},
+      {"a long request line", "GET /metrics?" + std::string(9000, 'q') + " HTTP/1.1\r\n\r\n", 414},
+  };
+  for (const Case& c : cases) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const HttpResult r = http(ep.port(), c.request, 0, 3000ms);
+    EXPECT_EQ(r.status, c.status) << c.what << ": " << r.head;
+    EXPECT_EQ(r.header("Connection"), "close") << c.what;
+    EXPECT_TRUE(r.closed) << c.what;
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, 1500ms) << c.what;
+  }
+  {  // A client that streams header bytes without end: answered, then closed within the linger.
+    asio::io_context io;
+    tcp::socket s(io);
+    s.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), ep.port()));
+    asio::write(s, asio::buffer(std::string("GET /metrics HTTP/1.1\r\nX-Endless: ")));
+    const std::string chunk(1024, 'z');
+    const auto t0 = std::chrono::steady_clock::now();
+    std::error_code ec;
+    while (!ec && std::chrono::steady_clock::now() - t0 < 5000ms) {
+      asio::write(s, asio::buffer(chunk), ec);
+      std::this_thread::sleep_for(5ms);
+    }
+    EXPECT_TRUE(ec) << "the server never closed the connection";
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, 3000ms);
+    bool closed = false;
+    const HttpResult r = parse_http(read_until_closed(io, s, 1000ms, closed), closed);
+    // The response may be lost to the reset (the client's unread bytes); the status is checked
+    // above. Here the point is that the connection ends.
+    if (r.status != 0) {
+      EXPECT_EQ(r.status, 431);
+    }
+  }
+  EXPECT_EQ(ep.stats().bad, cases.size() + 1);
+  EXPECT_EQ(get(ep.port()).status, 200);
+}
+
+// The body function runs at most once per cache_for; 0 calls it for every scrape.
+TEST(Metrics, EndpointReusesTheMetricsTextForCacheFor) {
+  std::atomic<int> calls{0};
+  auto body = [&] { return "irradcast_test " + std::to_string(++calls) + "\n"; };
+  MetricsEndpointOptions o = local_endpoint();
+  o.cache_for = 500ms;
+  MetricsEndpoint cached(body, o);
+  cached.start();
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string first = get(cached.port()).body, second = get(cached.port()).body;
+  if (std::chrono::steady_clock::now() - t0 < 400ms) {
+    EXPECT_EQ(first, "irradcast_test 1\n");
+    EXPECT_EQ(second, first);
+    EXPECT_EQ(cached.stats().collections, 1u);
+  }
+  std::this_thread::sleep_for(550ms);
+  EXPECT_NE(get(cached.port()).body, second);
+  cached.stop();
+  o.cache_for = 0ms;
+  MetricsEndpoint uncached(body, o);
+  uncached.start();
+  const int before = calls;
+  get(uncached.port());
+  get(uncached.port());
+  EXPECT_EQ(calls, before + 2);
 }
 
 TEST(Metrics, EndpointAnswers500WhenTheBodyFunctionThrows) {
@@ -661,8 +991,12 @@ TEST(Metrics, EndToEndScrapeMatchesTheServerAndEngine) {
   host.step();
   Server server(host, loopback());
   server.start();
-  MetricsEndpoint ep([&] { return format_metrics(collect_metrics(server, host)); },
-                     local_endpoint());
+  // Every scrape below must see the state of the moment: no cached text.
+  MetricsEndpointOptions mo = local_endpoint();
+  mo.cache_for = 0ms;
+  const MetricsEndpoint* endpoint = nullptr;
+  MetricsEndpoint ep([&] { return format_metrics(collect_metrics(server, host, endpoint)); }, mo);
+  endpoint = &ep;
   ep.start();
 
   ViewClient c(client_of(server, "metrics-viewer"));
@@ -689,6 +1023,11 @@ TEST(Metrics, EndToEndScrapeMatchesTheServerAndEngine) {
   EXPECT_EQ(x.value("irradcast_engine_updates_total"), 2.0);
   EXPECT_EQ(es.updates, 2u);
   EXPECT_EQ(x.value("irradcast_connections_total"), 1.0);
+  // The endpoint's own counters: this scrape's connection, no 200 before it.
+  EXPECT_EQ(x.value("irradcast_metrics_connections_total"), 1.0);
+  EXPECT_EQ(x.value("irradcast_metrics_connections_open"), 1.0);
+  EXPECT_EQ(x.value("irradcast_metrics_scrapes_total"), 0.0);
+  EXPECT_EQ(x.value("irradcast_metrics_connections_dropped_total"), 0.0);
   EXPECT_GT(ss.scene_bytes_sent, c.counters().scene_bytes_downloaded);  // frames > their data
   EXPECT_EQ(x.value("irradcast_scene_bytes_sent_total"), static_cast<double>(ss.scene_bytes_sent));
   EXPECT_GE(x.value("irradcast_bytes_sent_total"), x.value("irradcast_tile_bytes_sent_total") +
@@ -727,6 +1066,7 @@ TEST(Metrics, EndToEndScrapeMatchesTheServerAndEngine) {
   ASSERT_TRUE(eventually([&] { return server.stats().clients == 0; }));
   const Exposition y = parse_exposition(get(ep.port()).body);
   EXPECT_EQ(y.value("irradcast_clients"), 0.0);
+  EXPECT_EQ(y.value("irradcast_metrics_scrapes_total"), 1.0);
   EXPECT_EQ(y.value("irradcast_sessions_closed_total", {{"reason", "bye"}}), 1.0);
   EXPECT_EQ(y.value("irradcast_sessions_closed_total", {{"reason", "idle_timeout"}}), 0.0);
   {  // A frame that does not parse: the session ends for that reason, though the client closes.

@@ -1,13 +1,15 @@
 #include "irradcast/metrics_endpoint.h"
 
+#include <sys/resource.h>
+
 #include <asio.hpp>
 
 #include <algorithm>
 #include <array>
 #include <atomic>
 #include <cstring>
+#include <list>
 #include <optional>
-#include <set>
 #include <string_view>
 #include <thread>
 
@@ -17,6 +19,7 @@
 namespace irradcast {
 
 using asio::ip::tcp;
+using Clock = std::chrono::steady_clock;
 
 namespace {
 
@@ -24,8 +27,18 @@ namespace {
 // closing with unread request bytes does not reset the connection before the client read the
 // response).
 constexpr std::chrono::milliseconds kLinger{1000};
+// After an accept failed for want of descriptors or memory, the next try waits this long (the
+// failed connection stays in the kernel's queue, so trying again at once would spin).
+constexpr std::chrono::milliseconds kAcceptRetry{50};
+// At most one log line per this interval about failing accepts.
+constexpr std::chrono::seconds kAcceptWarnEvery{10};
 
 class Connection;
+
+// Where a connection is in its exchange; the endpoint keeps one list per phase, oldest first,
+// and drops from them in the order Lingering, Reading, Writing when it needs room.
+enum Phase : std::size_t { kReading = 0, kWriting = 1, kLingering = 2, kPhases = 3 };
+using ConnectionList = std::list<std::shared_ptr<Connection>>;
 
 bool is_tchar(unsigned char c) {
   return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') ||
@@ -35,7 +48,9 @@ bool is_ctl(unsigned char c) {
   return (c < 0x20 && c != '\t') || c == 0x7f;
 }
 
-enum class Parse { NeedMore, Bad, Done };
+// NeedMore: the head is incomplete; Bad: the bytes cannot start a valid request (400);
+// LineTooLong: the request line passes the byte cap (414); HeadTooLarge: the headers do (431).
+enum class Parse { NeedMore, Bad, LineTooLong, HeadTooLarge, Done };
 
 struct Request {
   std::string method;
@@ -63,54 +78,78 @@ bool parse_request_line(std::string_view line, Request& req) {
   return true;
 }
 
-// Parses the head (request line and headers, lines ending in CRLF or LF) from the bytes received
-// so far. Bad as soon as the bytes cannot be the start of a valid request, or when the head does
-// not end within `max` bytes.
-Parse parse_request(std::string_view data, std::size_t max, Request& req) {
-  const std::string_view head = data.substr(0, max);
-  bool have_request_line = false;
-  std::size_t pos = 0;
-  for (;;) {
-    const std::size_t nl = head.find('\n', pos);
-    const bool complete = nl != std::string_view::npos;
-    std::string_view line = head.substr(pos, complete ? nl - pos : std::string_view::npos);
-    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
-    for (unsigned char c : line)
-      if (is_ctl(c)) return Parse::Bad;
-    if (!complete) {
-      // A partial line: the method so far must be a token.
-      if (!have_request_line)
-        for (unsigned char c : line.substr(0, line.find(' ')))
-          if (!is_tchar(c)) return Parse::Bad;
-      return data.size() >= max ? Parse::Bad : Parse::NeedMore;
+// The request head (request line and headers, lines ending in CRLF or LF), fed as it arrives.
+// Every byte is looked at once, so a client that trickles its request costs no more than one
+// that sends it at once. Bad as soon as the bytes cannot be the start of a valid request.
+class HeadParser {
+ public:
+  explicit HeadParser(std::size_t max_bytes) : max_(max_bytes) {}
+
+  // Bytes after the end of the head (a body, a pipelined request) are not looked at.
+  Parse feed(std::string_view bytes) {
+    for (const char ch : bytes) {
+      const auto c = static_cast<unsigned char>(ch);
+      if (++bytes_ > max_) return have_request_line_ ? Parse::HeadTooLarge : Parse::LineTooLong;
+      if (c == '\n') {
+        const Parse p = end_line();
+        if (p != Parse::NeedMore) return p;
+        continue;
+      }
+      if (cr_ || is_ctl(c)) {  // a CR is only allowed right before the LF
+        if (c != '\r' || cr_) return Parse::Bad;
+        cr_ = true;
+        continue;
+      }
+      if (!have_request_line_ && !method_done_) {  // the method so far must be a token
+        if (c == ' ')
+          method_done_ = true;
+        else if (!is_tchar(c))
+          return Parse::Bad;
+      }
+      line_ += ch;
     }
-    pos = nl + 1;
-    if (!have_request_line) {
-      if (line.empty()) continue;  // empty lines before the request line are ignored (RFC 9112)
-      if (!parse_request_line(line, req)) return Parse::Bad;
-      have_request_line = true;
-      continue;
+    return Parse::NeedMore;
+  }
+  const Request& request() const { return request_; }
+
+ private:
+  Parse end_line() {
+    const std::string line = std::move(line_);
+    line_.clear();
+    cr_ = false;
+    method_done_ = false;
+    if (!have_request_line_) {
+      if (line.empty()) return Parse::NeedMore;  // empty lines before it are ignored (RFC 9112)
+      if (!parse_request_line(line, request_)) return Parse::Bad;
+      have_request_line_ = true;
+      return Parse::NeedMore;
     }
     if (line.empty()) return Parse::Done;
     // A header: a token, a colon, a value (obsolete line folding is refused).
     const std::size_t colon = line.find(':');
-    if (colon == std::string_view::npos || colon == 0) return Parse::Bad;
-    for (unsigned char c : line.substr(0, colon))
+    if (colon == std::string::npos || colon == 0) return Parse::Bad;
+    for (unsigned char c : std::string_view(line).substr(0, colon))
       if (!is_tchar(c)) return Parse::Bad;
+    return Parse::NeedMore;
   }
-}
 
-std::string response(int status, std::string_view reason, std::string_view content_type,
-                     std::string_view body, bool head_only, std::string_view extra_headers = {}) {
+  std::size_t max_;
+  std::size_t bytes_ = 0;
+  std::string line_;  // the current line, without its CR
+  bool cr_ = false, method_done_ = false, have_request_line_ = false;
+  Request request_;
+};
+
+std::string response_head(int status, std::string_view reason, std::string_view content_type,
+                          std::size_t content_length, std::string_view extra_headers = {}) {
   std::string r = "HTTP/1.1 " + std::to_string(status) + " ";
   r += reason;
   r += "\r\nContent-Type: ";
   r += content_type;
-  r += "\r\nContent-Length: " + std::to_string(body.size());
+  r += "\r\nContent-Length: " + std::to_string(content_length);
   r += "\r\nCache-Control: no-store\r\nConnection: close\r\n";
   r += extra_headers;
   r += "\r\n";
-  if (!head_only) r += body;
   return r;
 }
 
@@ -118,20 +157,41 @@ std::string response(int status, std::string_view reason, std::string_view conte
 
 struct MetricsEndpoint::Impl {
   Impl(BodyFunction b, MetricsEndpointOptions o)
-      : body(std::move(b)), options(std::move(o)), acceptor(io) {}
+      : body(std::move(b)),
+        options(std::move(o)),
+        io(1),
+        acceptor(io),
+        accept_retry(io),
+        max_open(options.max_connections) {}
 
   BodyFunction body;
   MetricsEndpointOptions options;
   asio::io_context io;
   tcp::acceptor acceptor;
+  asio::steady_timer accept_retry;
   std::optional<asio::executor_work_guard<asio::io_context::executor_type>> work;
   std::thread thread;
-  bool stopping = false;  // I/O thread only
+  std::uint32_t max_open;  // options.max_connections, lowered by the descriptor limit
+  std::atomic<std::uint32_t> max_open_applied{0};
   std::atomic<bool> stopped{false};
-  std::set<std::shared_ptr<Connection>> open;  // I/O thread only
-  std::atomic<std::uint64_t> connections{0}, refused{0}, ok{0}, bad{0}, timeouts{0};
+
+  // I/O thread only.
+  bool stopping = false;
+  std::array<ConnectionList, kPhases> open;  // by phase, oldest first
+  std::shared_ptr<const std::string> cached;
+  Clock::time_point cached_at;
+  Clock::time_point last_accept_warning;
+  std::uint64_t accept_errors_unlogged = 0;
+
+  std::atomic<std::uint64_t> connections{0}, open_now{0}, dropped{0}, ok{0}, bad{0}, timeouts{0},
+      collections{0};
 
   void accept();
+  void on_accept_error(std::error_code ec);
+  // Closes one connection to make room for a new one.
+  void drop_one();
+  // The body function's text, reused while younger than cache_for. Throws what the body throws.
+  std::shared_ptr<const std::string> metrics_text();
 };
 
 namespace {
@@ -139,33 +199,84 @@ namespace {
 // One HTTP exchange. Everything runs on the endpoint's single I/O thread.
 class Connection : public std::enable_shared_from_this<Connection> {
  public:
-  Connection(MetricsEndpoint::Impl* ep, tcp::socket socket)
-      : ep_(ep), socket_(std::move(socket)), timer_(ep->io) {}
+  // The stream the exchange runs on. Only the functions under "Stream I/O" touch it: for TLS,
+  // make this asio::ssl::stream<tcp::socket>, handshake in start() before the first read, and
+  // shut TLS down in finish_sending().
+  using Stream = tcp::socket;
 
+  Connection(MetricsEndpoint::Impl* ep, Stream stream)
+      : ep_(ep),
+        stream_(std::move(stream)),
+        timer_(ep->io),
+        parser_(ep->options.max_request_bytes),
+        accepted_(Clock::now()) {}
+
+  // Takes its place (the newest) in the endpoint's list of connections being read.
   void start() {
-    timer_.expires_after(ep_->options.timeout);
-    timer_.async_wait([self = shared_from_this()](std::error_code ec) {
-      if (ec || self->closed_) return;
-      if (!self->responded_) ++self->ep_->timeouts;
-      self->close();
-    });
+    ConnectionList& list = ep_->open[kReading];
+    list.push_back(shared_from_this());
+    where_ = std::prev(list.end());
+    ++ep_->open_now;
+    const MetricsEndpointOptions& o = ep_->options;
+    arm(accepted_ + std::min(o.header_timeout, o.timeout));
     read();
   }
 
   void close() {
     if (closed_) return;
+    const auto self = shared_from_this();  // the list below may hold the last reference
     closed_ = true;
-    std::error_code ec;
     timer_.cancel();
-    socket_.shutdown(tcp::socket::shutdown_both, ec);
-    socket_.close(ec);
-    ep_->open.erase(shared_from_this());
+    close_stream();
+    ep_->open[phase_].erase(where_);
+    --ep_->open_now;
   }
 
  private:
+  // ---- Stream I/O
+
+  template <class Handler>
+  void read_some(Handler handler) {
+    stream_.async_read_some(asio::buffer(buffer_), std::move(handler));
+  }
+  template <class Handler>
+  void write_response(Handler handler) {
+    std::array<asio::const_buffer, 2> buffers = {asio::buffer(head_), asio::const_buffer()};
+    if (body_) buffers[1] = asio::buffer(*body_);
+    asio::async_write(stream_, buffers, std::move(handler));
+  }
+  // After the response: tells the client there is nothing more (it reads EOF).
+  void finish_sending() {
+    std::error_code ignored;
+    stream_.shutdown(tcp::socket::shutdown_send, ignored);
+  }
+  void close_stream() {
+    std::error_code ignored;
+    stream_.shutdown(tcp::socket::shutdown_both, ignored);
+    stream_.close(ignored);
+  }
+
+  // ---- The exchange
+
+  void move_to(Phase phase) {
+    ConnectionList& to = ep_->open[phase];
+    to.splice(to.end(), ep_->open[phase_], where_);  // where_ stays valid
+    phase_ = phase;
+  }
+
+  // One deadline at a time: re-arming replaces the previous one.
+  void arm(Clock::time_point at) {
+    timer_.expires_at(at);
+    timer_.async_wait([self = shared_from_this()](std::error_code ec) {
+      if (ec || self->closed_) return;
+      if (self->timer_.expiry() > Clock::now()) return;  // re-armed after this wait completed
+      if (self->phase_ != kLingering) ++self->ep_->timeouts;
+      self->close();
+    });
+  }
+
   void read() {
-    socket_.async_read_some(
-        asio::buffer(buffer_),
+    read_some(
         [self = shared_from_this()](std::error_code ec, std::size_t n) { self->on_read(ec, n); });
   }
 
@@ -175,88 +286,96 @@ class Connection : public std::enable_shared_from_this<Connection> {
       close();  // the client went away before finishing its request
       return;
     }
-    request_.append(buffer_.data(), n);
-    Request req;
-    switch (parse_request(request_, ep_->options.max_request_bytes, req)) {
+    switch (parser_.feed(std::string_view(buffer_.data(), n))) {
       case Parse::NeedMore:
         read();
         return;
       case Parse::Bad:
-        respond(400, "Bad Request", "bad request\n", false);
+        respond_error(400, "Bad Request", "bad request\n", false);
+        return;
+      case Parse::LineTooLong:
+        respond_error(414, "URI Too Long", "request line too long\n", false);
+        return;
+      case Parse::HeadTooLarge:
+        respond_error(431, "Request Header Fields Too Large", "request headers too large\n", false);
         return;
       case Parse::Done:
         break;
     }
+    const Request& req = parser_.request();
     const std::string path = req.target.substr(0, req.target.find('?'));
     const bool head = req.method == "HEAD";
     if (path != "/metrics") {
-      respond(404, "Not Found", "not found: this endpoint serves /metrics\n", head);
+      respond_error(404, "Not Found", "not found: this endpoint serves /metrics\n", head);
     } else if (req.method != "GET" && !head) {
-      respond(405, "Method Not Allowed", "method not allowed: use GET\n", false,
-              "Allow: GET, HEAD\r\n");
+      respond_error(405, "Method Not Allowed", "method not allowed: use GET\n", false,
+                    "Allow: GET, HEAD\r\n");
     } else {
-      std::string body;
+      std::shared_ptr<const std::string> text;
       try {
-        body = ep_->body();
+        text = ep_->metrics_text();
       } catch (const std::exception& e) {
         log::error("metrics", std::string("collecting the metrics failed: ") + e.what());
-        respond(500, "Internal Server Error", "internal error\n", head);
+        respond_error(500, "Internal Server Error", "internal error\n", head);
         return;
       }
       ++ep_->ok;
-      send(response(200, "OK", "text/plain; version=0.0.4; charset=utf-8", body, head));
+      std::string response =
+          response_head(200, "OK", "text/plain; version=0.0.4; charset=utf-8", text->size());
+      send(std::move(response), head ? nullptr : std::move(text));
     }
   }
 
-  void respond(int status, std::string_view reason, std::string_view body, bool head,
-               std::string_view extra_headers = {}) {
+  void respond_error(int status, std::string_view reason, std::string_view body, bool head,
+                     std::string_view extra_headers = {}) {
     ++ep_->bad;
-    send(response(status, reason, "text/plain; charset=utf-8", body, head, extra_headers));
+    send(response_head(status, reason, "text/plain; charset=utf-8", body.size(), extra_headers),
+         head ? nullptr : std::make_shared<const std::string>(body));
   }
 
   // Writes the response, then half-closes and waits (briefly) for the client to close.
-  void send(std::string bytes) {
-    responded_ = true;
-    auto data = std::make_shared<std::string>(std::move(bytes));
-    asio::async_write(
-        socket_, asio::buffer(*data),
-        [self = shared_from_this(), data](std::error_code ec, std::size_t) {
-          if (self->closed_) return;
-          if (ec) {
-            self->close();
-            return;
-          }
-          std::error_code ignored;
-          self->socket_.shutdown(tcp::socket::shutdown_send, ignored);
-          // Re-arming cancels the wait of start(); the deadline only shortens.
-          self->timer_.expires_at(
-              std::min(self->timer_.expiry(), asio::steady_timer::clock_type::now() + kLinger));
-          self->timer_.async_wait([self](std::error_code e) {
-            if (!e) self->close();
-          });
-          self->drain();
-        });
+  void send(std::string head, std::shared_ptr<const std::string> body) {
+    head_ = std::move(head);
+    body_ = std::move(body);
+    move_to(kWriting);
+    arm(accepted_ + ep_->options.timeout);  // the header deadline no longer applies
+    write_response([self = shared_from_this()](std::error_code ec, std::size_t) {
+      if (self->closed_) return;
+      if (ec) {
+        self->close();
+        return;
+      }
+      self->body_.reset();
+      self->move_to(kLingering);
+      self->finish_sending();
+      self->arm(std::min(self->accepted_ + self->ep_->options.timeout, Clock::now() + kLinger));
+      self->drain();
+    });
   }
 
   // Discards what the client still sends (the rest of a request we did not read) until it
   // closes.
   void drain() {
-    socket_.async_read_some(asio::buffer(buffer_),
-                            [self = shared_from_this()](std::error_code ec, std::size_t) {
-                              if (self->closed_) return;
-                              if (ec)
-                                self->close();
-                              else
-                                self->drain();
-                            });
+    read_some([self = shared_from_this()](std::error_code ec, std::size_t) {
+      if (self->closed_) return;
+      if (ec)
+        self->close();
+      else
+        self->drain();
+    });
   }
 
   MetricsEndpoint::Impl* ep_;
-  tcp::socket socket_;
+  Stream stream_;
   asio::steady_timer timer_;
-  std::array<char, 4096> buffer_{};
-  std::string request_;
-  bool responded_ = false, closed_ = false;
+  HeadParser parser_;
+  Clock::time_point accepted_;
+  Phase phase_ = kReading;
+  ConnectionList::iterator where_;  // in ep_->open[phase_]
+  std::array<char, 2048> buffer_{};
+  std::string head_;                         // the response's status line and headers
+  std::shared_ptr<const std::string> body_;  // its body (the cached metrics text, shared)
+  bool closed_ = false;
 };
 
 }  // namespace
@@ -264,30 +383,71 @@ class Connection : public std::enable_shared_from_this<Connection> {
 void MetricsEndpoint::Impl::accept() {
   acceptor.async_accept([this](std::error_code ec, tcp::socket socket) {
     if (stopping) return;
-    if (!ec) {
-      ++connections;
-      if (open.size() >= options.max_connections) {
-        ++refused;
-        std::error_code ignored;
-        socket.close(ignored);
-      } else {
-        auto c = std::make_shared<Connection>(this, std::move(socket));
-        open.insert(c);
-        c->start();
-      }
-    } else if (ec != asio::error::operation_aborted) {
-      log::warn("metrics", "accept: " + ec.message());
+    if (ec) {
+      on_accept_error(ec);
+      return;
     }
+    ++connections;
+    if (open_now.load() >= max_open) drop_one();
+    std::make_shared<Connection>(this, std::move(socket))->start();
     accept();
   });
 }
 
+void MetricsEndpoint::Impl::on_accept_error(std::error_code ec) {
+  const auto now = Clock::now();
+  if (now - last_accept_warning >= kAcceptWarnEvery) {
+    std::string line = "accept: " + ec.message();
+    if (accept_errors_unlogged > 0)
+      line += " (" + std::to_string(accept_errors_unlogged) + " more since the last such line)";
+    log::warn("metrics", line);
+    last_accept_warning = now;
+    accept_errors_unlogged = 0;
+  } else {
+    ++accept_errors_unlogged;
+  }
+  const bool out_of_resources = ec == asio::error::no_descriptors ||
+                                ec == std::errc::too_many_files_open_in_system ||
+                                ec == asio::error::no_buffer_space || ec == asio::error::no_memory;
+  if (!out_of_resources) {
+    accept();
+    return;
+  }
+  accept_retry.expires_after(kAcceptRetry);
+  accept_retry.async_wait([this](std::error_code e) {
+    if (!e && !stopping) accept();
+  });
+}
+
+void MetricsEndpoint::Impl::drop_one() {
+  for (const Phase phase : {kLingering, kReading, kWriting}) {
+    if (open[phase].empty()) continue;
+    const std::shared_ptr<Connection> oldest = open[phase].front();
+    ++dropped;
+    oldest->close();
+    return;
+  }
+}
+
+std::shared_ptr<const std::string> MetricsEndpoint::Impl::metrics_text() {
+  const auto now = Clock::now();
+  if (cached && now - cached_at < options.cache_for) return cached;
+  ++collections;
+  cached = std::make_shared<const std::string>(body());
+  cached_at = now;
+  return cached;
+}
+
 MetricsEndpoint::MetricsEndpoint(BodyFunction body, MetricsEndpointOptions options)
     : impl_(std::make_unique<Impl>(std::move(body), std::move(options))) {
+  const MetricsEndpointOptions& o = impl_->options;
   if (!impl_->body) throw Error("metrics endpoint: no body function");
-  if (impl_->options.max_request_bytes < 16)
-    throw Error("metrics endpoint: max_request_bytes below 16");
-  if (impl_->options.max_connections < 1) throw Error("metrics endpoint: max_connections is 0");
+  if (o.max_request_bytes < 16) throw Error("metrics endpoint: max_request_bytes below 16");
+  if (o.max_connections < 1) throw Error("metrics endpoint: max_connections is 0");
+  if (o.header_timeout.count() <= 0 || o.timeout.count() <= 0)
+    throw Error("metrics endpoint: a timeout is not positive");
+  if (o.listen_backlog < 1) throw Error("metrics endpoint: listen_backlog below 1");
+  if (o.cache_for.count() < 0) throw Error("metrics endpoint: cache_for is negative");
 }
 
 MetricsEndpoint::~MetricsEndpoint() {
@@ -304,10 +464,24 @@ void MetricsEndpoint::start() {
   im.acceptor.open(endpoint.protocol(), ec);
   if (!ec) im.acceptor.set_option(tcp::acceptor::reuse_address(true), ec);
   if (!ec) im.acceptor.bind(endpoint, ec);
-  if (!ec) im.acceptor.listen(asio::socket_base::max_listen_connections, ec);
+  if (!ec) im.acceptor.listen(im.options.listen_backlog, ec);
   if (ec)
     throw Error("metrics: cannot listen on " + im.options.bind + ":" +
                 std::to_string(im.options.port) + ": " + ec.message());
+  // The endpoint takes at most a quarter of the process's descriptors: the rest are the game
+  // server's.
+  rlimit limit{};
+  if (getrlimit(RLIMIT_NOFILE, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY) {
+    const rlim_t quarter = std::max<rlim_t>(1, limit.rlim_cur / 4);
+    if (quarter < im.max_open) {
+      log::info("metrics", "at most " + std::to_string(quarter) + " connections (of " +
+                               std::to_string(im.options.max_connections) +
+                               " asked): a quarter of the descriptor limit (ulimit -n " +
+                               std::to_string(limit.rlim_cur) + ")");
+      im.max_open = static_cast<std::uint32_t>(quarter);
+    }
+  }
+  im.max_open_applied = im.max_open;
   im.work.emplace(asio::make_work_guard(im.io));
   im.accept();
   im.thread = std::thread([&im] {
@@ -331,9 +505,12 @@ void MetricsEndpoint::stop() {
     im.stopping = true;
     std::error_code ec;
     im.acceptor.close(ec);
-    // close() erases from the set: iterate over a copy.
-    const auto open = im.open;
-    for (const auto& c : open) c->close();
+    im.accept_retry.cancel();
+    // close() erases from the lists: iterate over copies.
+    for (const ConnectionList& list : im.open) {
+      const ConnectionList copy = list;
+      for (const auto& c : copy) c->close();
+    }
   });
   im.work.reset();
   im.thread.join();
@@ -351,14 +528,21 @@ std::string MetricsEndpoint::url() const {
   return "http://" + host + ":" + std::to_string(port()) + "/metrics";
 }
 
+std::uint32_t MetricsEndpoint::max_connections() const {
+  const std::uint32_t applied = impl_->max_open_applied.load();
+  return applied > 0 ? applied : impl_->options.max_connections;
+}
+
 MetricsEndpointStats MetricsEndpoint::stats() const {
   const Impl& im = *impl_;
   MetricsEndpointStats s;
   s.connections = im.connections.load();
-  s.refused = im.refused.load();
+  s.open = im.open_now.load();
+  s.dropped = im.dropped.load();
   s.ok = im.ok.load();
   s.bad = im.bad.load();
   s.timeouts = im.timeouts.load();
+  s.collections = im.collections.load();
   return s;
 }
 

@@ -117,8 +117,10 @@ std::string format_metric_value(double value) {
   return std::string(buf, end);
 }
 
-MetricsSnapshot collect_metrics(const Server& server, const EngineHost& host) {
+MetricsSnapshot collect_metrics(const Server& server, const EngineHost& host,
+                                const MetricsEndpoint* endpoint) {
   MetricsSnapshot m;
+  if (endpoint) m.endpoint = endpoint->stats();
   m.scene = host.scene_id();
   m.backend = host.backend_name();
   m.server = server.stats();
@@ -228,6 +230,25 @@ std::string format_metrics(const MetricsSnapshot& m) {
   w.family("irradcast_engine_pass_rays_total", "counter",
            "Rays of each engine pass, summed over all updates.");
   for (const EnginePassStats& p : e.passes) w.sample(pass_labels(p), p.rays_total);
+
+  // The /metrics endpoint itself.
+  const MetricsEndpointStats& x = m.endpoint;
+  w.counter("irradcast_metrics_connections_total", "Connections the metrics endpoint accepted.",
+            x.connections);
+  w.gauge("irradcast_metrics_connections_open", "Connections open at the metrics endpoint.",
+          x.open);
+  w.counter("irradcast_metrics_connections_dropped_total",
+            "Metrics endpoint connections closed to make room for a new one (max_connections "
+            "open): answered ones first, then the oldest with an incomplete request.",
+            x.dropped);
+  w.counter("irradcast_metrics_connections_timed_out_total",
+            "Metrics endpoint connections closed by a deadline (request head or whole "
+            "connection) before their response was written.",
+            x.timeouts);
+  w.counter("irradcast_metrics_scrapes_total", "Metrics endpoint 200 responses.", x.ok);
+  w.counter("irradcast_metrics_errors_total", "Metrics endpoint 4xx and 5xx responses.", x.bad);
+  w.counter("irradcast_metrics_collections_total",
+            "Times the metrics text was made (concurrent scrapes share one).", x.collections);
   return w.take();
 }
 

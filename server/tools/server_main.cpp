@@ -12,6 +12,7 @@
 #include <utility>
 
 #include <pthread.h>
+#include <sys/resource.h>
 
 #include "engine_options.h"
 #include "irradcast/builtin.h"
@@ -76,9 +77,22 @@ std::pair<std::string, std::string> control_token(const Options& o) {
   return {"", ""};
 }
 
+// Every client and every metrics connection is a descriptor: the soft limit goes up to the hard
+// one (often 1024 and 524288), as Go and nginx do. The metrics endpoint takes at most a quarter.
+void raise_descriptor_limit() {
+  rlimit lim{};
+  if (getrlimit(RLIMIT_NOFILE, &lim) != 0 || lim.rlim_cur >= lim.rlim_max) return;
+  const rlim_t before = lim.rlim_cur;
+  lim.rlim_cur = lim.rlim_max;
+  if (setrlimit(RLIMIT_NOFILE, &lim) == 0)
+    irradcast::log::debug("server", "descriptor limit raised from " + std::to_string(before) +
+                                        " to " + std::to_string(lim.rlim_cur));
+}
+
 int run(const Options& o, sigset_t signals) {
   using namespace irradcast;
   log::set_level(log::parse_level(o.log_level));
+  raise_descriptor_limit();
   Progress::set_enabled(false);
   const auto [token, token_source] = control_token(o);
   std::unique_ptr<tbb::global_control> threads;
@@ -126,8 +140,12 @@ int run(const Options& o, sigset_t signals) {
     MetricsEndpointOptions mo;
     mo.bind = o.metrics_bind.empty() ? o.bind : o.metrics_bind;
     mo.port = static_cast<std::uint16_t>(o.metrics_port);
+    // The body runs on the endpoint's thread, after start(): `metrics` is set by then.
     metrics = std::make_unique<MetricsEndpoint>(
-        [&server, &host] { return format_metrics(collect_metrics(server, host)); }, mo);
+        [&server, &host, &metrics] {
+          return format_metrics(collect_metrics(server, host, metrics.get()));
+        },
+        mo);
     metrics->start();  // logs "metrics on http://ADDR:PORT/metrics"
   }
   host.start();

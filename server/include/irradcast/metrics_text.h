@@ -9,6 +9,7 @@
 #include <string_view>
 
 #include "irradcast/engine_host.h"
+#include "irradcast/metrics_endpoint.h"
 #include "irradcast/net_server.h"
 
 namespace irradcast {
@@ -18,10 +19,14 @@ struct MetricsSnapshot {
   std::string backend;  // the engine's backend and device (TraceBackend::describe()): another
   ServerStats server;
   EngineHostStats engine;
+  MetricsEndpointStats endpoint;  // the /metrics endpoint itself (irradcast_metrics_*)
 };
 
-// Reads the stats of a running (or stopped) server and engine host. Thread-safe.
-MetricsSnapshot collect_metrics(const Server& server, const EngineHost& host);
+// Reads the stats of a running (or stopped) server and engine host, and of the endpoint when one
+// is given. Thread-safe; takes the server's session lock and the engine host's stats lock, each
+// briefly (the endpoint caches the text, so this runs at most a few times a second).
+MetricsSnapshot collect_metrics(const Server& server, const EngineHost& host,
+                                const MetricsEndpoint* endpoint = nullptr);
 
 // The exposition text: one family per metric, # HELP and # TYPE before its samples, one sample
 // per line (`name{label="value",...} value`), "\n" line ends.
