@@ -589,7 +589,7 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   u("irradcast_metrics_collections_total", 19);
   // Nothing else: every sample above was checked.
   EXPECT_EQ(checked.size(), x.samples.size()) << text;
-  EXPECT_EQ(x.samples.size(), 37 + kCloseReasons + 4 * e.passes.size());
+  EXPECT_EQ(x.samples.size(), 44 + kCloseReasons + 4 * e.passes.size());
 }
 
 TEST(Metrics, FormatterHandlesAnEmptySnapshotAndSpecialValues) {

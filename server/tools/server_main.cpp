@@ -12,7 +12,6 @@
 #include <utility>
 
 #include <pthread.h>
-#include <sys/resource.h>
 
 #include "engine_options.h"
 #include "irradcast/builtin.h"
@@ -77,22 +76,9 @@ std::pair<std::string, std::string> control_token(const Options& o) {
   return {"", ""};
 }
 
-// Every client and every metrics connection is a descriptor: the soft limit goes up to the hard
-// one (often 1024 and 524288), as Go and nginx do. The metrics endpoint takes at most a quarter.
-void raise_descriptor_limit() {
-  rlimit lim{};
-  if (getrlimit(RLIMIT_NOFILE, &lim) != 0 || lim.rlim_cur >= lim.rlim_max) return;
-  const rlim_t before = lim.rlim_cur;
-  lim.rlim_cur = lim.rlim_max;
-  if (setrlimit(RLIMIT_NOFILE, &lim) == 0)
-    irradcast::log::debug("server", "descriptor limit raised from " + std::to_string(before) +
-                                        " to " + std::to_string(lim.rlim_cur));
-}
-
 int run(const Options& o, sigset_t signals) {
   using namespace irradcast;
   log::set_level(log::parse_level(o.log_level));
-  raise_descriptor_limit();
   Progress::set_enabled(false);
   const auto [token, token_source] = control_token(o);
   std::unique_ptr<tbb::global_control> threads;
