@@ -18,20 +18,22 @@
 #include <thread>
 #include <vector>
 
+#include "irradcast/client_tls.h"
 #include "irradcast/edit_message.h"
 #include "irradcast/error.h"
 #include "irradcast/frame.h"
 #include "irradcast/host_port.h"
 #include "irradcast/log.h"
 #include "irradcast/scene_edit.h"
+#include "tls_flags.h"
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
-using asio::ip::tcp;
 
 struct Options {
   std::string connect;
+  irradcast::ClientTls tls;
   std::string token;
   std::string token_file;
   std::string json;
@@ -162,15 +164,15 @@ std::string token_of(const Options& o) {
 // A blocking connection with read deadlines.
 class Connection {
  public:
-  Connection(const irradcast::HostPort& hp, std::chrono::milliseconds timeout) : socket_(io_) {
+  Connection(const irradcast::HostPort& hp, std::chrono::milliseconds timeout,
+             const irradcast::ClientTls& tls)
+      : tls_(irradcast::make_tls_context(tls)), socket_(io_.get_executor(), tls_.get()) {
     std::error_code ec;
-    tcp::resolver resolver(io_);
-    auto endpoints = resolver.resolve(hp.host, std::to_string(hp.port), ec);
-    if (!ec) asio::connect(socket_, endpoints, ec);
+    std::string what;
+    irradcast::connect_stream(io_, socket_, hp.host, hp.port, timeout, ec, what);
     if (ec)
       throw irradcast::Error("cannot connect to " + hp.host + ":" + std::to_string(hp.port) + ": " +
-                             ec.message());
-    socket_.set_option(tcp::no_delay(true), ec);
+                             what);
     timeout_ = timeout;
   }
 
@@ -212,13 +214,14 @@ class Connection {
       io_.run_for(deadline - now);
       if (result == asio::error::would_block) {
         std::error_code ignored;
-        socket_.cancel(ignored);
+        socket_.socket().cancel(ignored);
         io_.restart();
         io_.run();
       }
       if (result && result != asio::error::would_block && result != asio::error::operation_aborted)
-        throw irradcast::Error(result == asio::error::eof ? "the server closed the connection"
-                                                          : "read: " + result.message());
+        throw irradcast::Error(result == asio::error::eof
+                                   ? "the server closed the connection"
+                                   : "read: " + irradcast::wire::describe_tls_error(result));
       decoder_.feed(buffer_.data(), n);
     }
   }
@@ -251,14 +254,13 @@ class Connection {
       send(irradcast::wire::make_bye("edits sent"));
     } catch (const irradcast::Error&) {
     }
-    std::error_code ec;
-    socket_.shutdown(tcp::socket::shutdown_both, ec);
-    socket_.close(ec);
+    socket_.close();
   }
 
  private:
   asio::io_context io_;
-  tcp::socket socket_;
+  std::shared_ptr<asio::ssl::context> tls_;  // null: plain TCP
+  irradcast::wire::Stream socket_;
   irradcast::wire::FrameDecoder decoder_;
   std::array<char, 64 * 1024> buffer_{};
   std::chrono::milliseconds timeout_{10000};
@@ -269,7 +271,7 @@ int run(const Options& o, const std::vector<irradcast::EditStep>& steps, const s
   using namespace irradcast;
   log::set_level(log::parse_level(o.log_level));
   const HostPort hp = parse_host_port(o.connect);
-  Connection c(hp, std::chrono::milliseconds(o.timeout_ms));
+  Connection c(hp, std::chrono::milliseconds(o.timeout_ms), tools::tls_of(o.tls));
   wire::Envelope hello;
   hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
   hello.mutable_hello()->set_client_name(o.name);
@@ -331,6 +333,7 @@ int main(int argc, char** argv) {
       "irradcast-edit"};
   app.option_defaults()->always_capture_default();
   app.add_option("--connect", o.connect, "server address HOST:PORT")->required();
+  irradcast::tools::add_tls_flags(app, o.tls);
   app.add_option("--token", o.token, "the server's control token");
   app.add_option("--token-file", o.token_file,
                  "read the control token from this file's first line");

@@ -15,6 +15,7 @@
 
 #include "irradcast/error.h"
 #include "irradcast/log.h"
+#include "irradcast/transport.h"
 
 namespace irradcast {
 
@@ -162,10 +163,15 @@ struct MetricsEndpoint::Impl {
         io(1),
         acceptor(io),
         accept_retry(io),
-        max_open(options.max_connections) {}
+        max_open(options.max_connections) {
+    if (options.tls_cert.empty() != options.tls_key.empty())
+      throw Error("metrics: TLS needs both a certificate and a key");
+    if (!options.tls_cert.empty()) tls = wire::make_server_tls(options.tls_cert, options.tls_key);
+  }
 
   BodyFunction body;
   MetricsEndpointOptions options;
+  std::shared_ptr<asio::ssl::context> tls;  // null: plain HTTP
   asio::io_context io;
   tcp::acceptor acceptor;
   asio::steady_timer accept_retry;
@@ -199,14 +205,13 @@ namespace {
 // One HTTP exchange. Everything runs on the endpoint's single I/O thread.
 class Connection : public std::enable_shared_from_this<Connection> {
  public:
-  // The stream the exchange runs on. Only the functions under "Stream I/O" touch it: for TLS,
-  // make this asio::ssl::stream<tcp::socket>, handshake in start() before the first read, and
-  // shut TLS down in finish_sending().
-  using Stream = tcp::socket;
+  // The stream the exchange runs on, plain TCP or TLS (wire::Stream). Only the functions under
+  // "Stream I/O" touch it.
+  using Stream = wire::Stream;
 
-  Connection(MetricsEndpoint::Impl* ep, Stream stream)
+  Connection(MetricsEndpoint::Impl* ep, tcp::socket socket)
       : ep_(ep),
-        stream_(std::move(stream)),
+        stream_(std::move(socket), ep->tls.get()),
         timer_(ep->io),
         parser_(ep->options.max_request_bytes),
         accepted_(Clock::now()) {}
@@ -219,7 +224,17 @@ class Connection : public std::enable_shared_from_this<Connection> {
     ++ep_->open_now;
     const MetricsEndpointOptions& o = ep_->options;
     arm(accepted_ + std::min(o.header_timeout, o.timeout));
-    read();
+    // The TLS handshake (none for plain HTTP) runs under the header deadline.
+    stream_.async_handshake(asio::ssl::stream_base::server,
+                            [self = shared_from_this()](std::error_code ec) {
+                              if (self->closed_) return;
+                              if (ec) {
+                                ++self->ep_->bad;
+                                self->close();
+                                return;
+                              }
+                              self->read();
+                            });
   }
 
   void close() {
@@ -246,15 +261,13 @@ class Connection : public std::enable_shared_from_this<Connection> {
     asio::async_write(stream_, buffers, std::move(handler));
   }
   // After the response: tells the client there is nothing more (it reads EOF).
+  // Over TLS the TCP half-close carries no close_notify: the response's Content-Length says
+  // where it ends.
   void finish_sending() {
     std::error_code ignored;
-    stream_.shutdown(tcp::socket::shutdown_send, ignored);
+    stream_.socket().shutdown(tcp::socket::shutdown_send, ignored);
   }
-  void close_stream() {
-    std::error_code ignored;
-    stream_.shutdown(tcp::socket::shutdown_both, ignored);
-    stream_.close(ignored);
-  }
+  void close_stream() { stream_.close(); }
 
   // ---- The exchange
 
@@ -525,7 +538,7 @@ std::uint16_t MetricsEndpoint::port() const {
 std::string MetricsEndpoint::url() const {
   const std::string& bind = impl_->options.bind;
   const std::string host = bind.find(':') != std::string::npos ? "[" + bind + "]" : bind;
-  return "http://" + host + ":" + std::to_string(port()) + "/metrics";
+  return (impl_->tls ? "https://" : "http://") + host + ":" + std::to_string(port()) + "/metrics";
 }
 
 std::uint32_t MetricsEndpoint::max_connections() const {

@@ -126,6 +126,8 @@ int run(const Options& o, sigset_t signals) {
     MetricsEndpointOptions mo;
     mo.bind = o.metrics_bind.empty() ? o.bind : o.metrics_bind;
     mo.port = static_cast<std::uint16_t>(o.metrics_port);
+    mo.tls_cert = o.tls_cert;
+    mo.tls_key = o.tls_key;
     // The body runs on the endpoint's thread, after start(): `metrics` is set by then.
     metrics = std::make_unique<MetricsEndpoint>(
         [&server, &host, &metrics] {

@@ -43,6 +43,10 @@ struct MetricsEndpointOptions {
   // The body function's text is served again for this long after it was made (0: the function
   // is called for every GET), so concurrent scrapes do not each collect the stats.
   std::chrono::milliseconds cache_for{100};
+  // HTTPS: PEM certificate chain and private key (both, or neither for plain HTTP); the same
+  // files as the protocol port's --tls-cert and --tls-key. The TLS handshake counts against
+  // header_timeout.
+  std::string tls_cert, tls_key;
 };
 
 struct MetricsEndpointStats {
@@ -71,7 +75,7 @@ class MetricsEndpoint {
   // Closes every connection and joins the thread. Idempotent; the endpoint does not restart.
   void stop();
   std::uint16_t port() const;
-  // The address to scrape, e.g. "http://127.0.0.1:9450/metrics".
+  // The address to scrape, e.g. "http://127.0.0.1:9450/metrics" ("https://" with TLS).
   std::string url() const;
   // max_connections as applied by start() (the descriptor limit may lower it).
   std::uint32_t max_connections() const;
