@@ -112,7 +112,10 @@ class ServerProcess {
                                      "--status-every",
                                      "5",
                                      "--idle-timeout",
-                                     "120"};
+                                     "120",
+                                     // every simulated user comes from 127.0.0.1
+                                     "--max-clients-per-peer",
+                                     "0"};
     args.insert(args.end(), o.server_args.begin(), o.server_args.end());
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());

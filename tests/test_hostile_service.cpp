@@ -343,7 +343,8 @@ TEST(Hostile, ShortControlTokensAreRefused) {
   EXPECT_THROW(Server(host, o), Error);
   o.control_token = std::string(kMinTokenLength, 'y');
   EXPECT_NO_THROW(Server(host, o));
-  const test::CliResult r = test::run_cli(std::string("timeout 30 ") + IRRADCAST_SERVER_EXE, "--port 0 --control-token abc");
+  const test::CliResult r = test::run_cli(std::string("timeout 30 ") + IRRADCAST_SERVER_EXE,
+                                          "--port 0 --control-token abc");
   EXPECT_EQ(r.status, 1) << r.output;
   EXPECT_NE(r.output.find("at least 16"), std::string::npos) << r.output;
 }

@@ -267,7 +267,7 @@ class Session : public std::enable_shared_from_this<Session> {
   // Watches a write in flight: one that made no progress for the write stall timeout means a
   // client that does not read, and it is closed as slow. Armed while writes are in flight.
   void arm_stall_timer() {
-    if (stall_armed_) return;
+    if (stall_armed_ || server_->options.write_stall_timeout.count() <= 0) return;
     stall_armed_ = true;
     stall_timer_.expires_after(server_->options.write_stall_timeout / 4);
     stall_timer_.async_wait([self = shared_from_this()](std::error_code ec) {

@@ -44,7 +44,8 @@ struct ServerOptions {
   // All sessions' incomplete frames together; a session holding more than 64 KiB of an
   // incomplete frame when the total is above this is closed (Error FRAME_TOO_LARGE).
   std::size_t max_partial_bytes = 64u << 20;
-  // A session whose writes make no progress for this long is closed as a slow client.
+  // A session whose writes make no progress for this long is closed as a slow client (0: no
+  // watch).
   std::chrono::milliseconds write_stall_timeout{10000};
   // SO_SNDBUF of each client socket, which bounds the kernel memory a client that does not read
   // can hold (0: the kernel's autotuning, up to net.ipv4.tcp_wmem's maximum).
