@@ -1,5 +1,6 @@
 // Clients that outlive their server's troubles: the back-off policy (backoff.h), irradcast-view
-// against a listener that resets its connections and against a server that starts late.
+// against a listener that resets its connections and against a server that starts late, and
+// irradcast-load users across a kill -9 and restart of irradcast-server.
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -319,4 +320,68 @@ TEST(Reconnect, ViewerWaitsForAServerThatStartsTwelveSecondsLate) {
   EXPECT_NE(viewer.output().find("converged image after"), std::string::npos) << viewer.output();
   fs::remove(out);
   fs::remove(out.string() + ".json");
+}
+
+// kill -9 of irradcast-server in the middle of a load test, and a restart on the same port: every
+// user reconnects (with back-off), resumes, and finishes the run; the report counts the
+// reconnects.
+TEST(Reconnect, LoadUsersReconnectAfterTheServerIsKilledAndRestarted) {
+  const std::uint16_t port = free_port();
+  const std::vector<std::string> server_args = command(
+      IRRADCAST_SERVER_EXE, "--scene cornell --bind 127.0.0.1 --port " + std::to_string(port) +
+                                " --texels-per-scene 48 --tile-size 16 --max-updates 3 --threads 1 "
+                                "--io-threads 1 --log-level warn");
+  auto server = std::make_unique<test::Process>(server_args, temp_path("load_server1.log"));
+  // Wait until it listens.
+  ViewClientOptions vo;
+  vo.port = port;
+  vo.name = "watcher";
+  vo.connect_timeout = 30000ms;
+  {
+    ViewClient probe(vo);
+    ASSERT_NO_THROW(probe.connect()) << server->output();
+    probe.close();
+  }
+  const int users = 4;
+  const fs::path json = temp_path("load.json");
+  fs::remove(json);
+  test::Process load(command(IRRADCAST_LOAD_EXE, "--connect 127.0.0.1:" + std::to_string(port) +
+                                                     " --users " + std::to_string(users) +
+                                                     " --duration 10 --threads 1 --camera-hz 5 "
+                                                     "--quiet --json " +
+                                                     json.string()),
+                     temp_path("load.log"));
+  {  // Every user has a session (4 + this watcher).
+    ViewClient watcher(vo);
+    watcher.connect();
+    bool all = false;
+    for (int i = 0; i < 100 && !all; ++i) {
+      auto s = watcher.request_stats(2s);
+      all = s && s->clients() >= static_cast<std::uint32_t>(users + 1);
+      if (!all) std::this_thread::sleep_for(100ms);
+    }
+    ASSERT_TRUE(all) << load.output();
+    watcher.close();
+  }
+  std::this_thread::sleep_for(500ms);
+  server->signal(SIGKILL);
+  ASSERT_TRUE(server->wait_for(5s));
+  std::this_thread::sleep_for(500ms);
+  server = std::make_unique<test::Process>(server_args, temp_path("load_server2.log"));
+  const std::optional<int> status = load.wait_for(60s);
+  ASSERT_TRUE(status) << load.output();
+  EXPECT_EQ(*status, 0) << load.output();
+  std::ifstream f(json);
+  const nlohmann::json rep = nlohmann::json::parse(f);
+  EXPECT_EQ(rep["users"]["connected"], users);
+  EXPECT_EQ(rep["users"]["failed"], 0) << rep.dump(2);
+  EXPECT_GE(rep["users"].value("reconnects", 0), users) << rep.dump(2);
+  for (const auto& u : rep["per_user"]) {
+    EXPECT_EQ(u["failure"], "");
+    EXPECT_GE(u.value("reconnects", 0), 1);
+  }
+  EXPECT_NE(load.output().find("reconnects"), std::string::npos) << load.output();
+  server->signal(SIGINT);
+  server->wait_for(10s);
+  fs::remove(json);
 }
