@@ -8,6 +8,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <set>
 #include <sstream>
@@ -300,6 +301,44 @@ TEST(Reconnect, ViewerRidesOutResetConnectionsAndGetsItsImage) {
   EXPECT_GE(j.value("connect_attempts", 0), 5);
   fs::remove(out);
   fs::remove(out.string() + ".json");
+}
+
+// What reconnecting would not cure still ends the viewer at once, with a clear message: a frame
+// that does not parse, and a server of another protocol version.
+TEST(Reconnect, ViewerStillFailsClearlyOnProtocolErrors) {
+  struct Case {
+    std::string name, says;
+    std::function<void(FlakyListener&, tcp::socket&)> answer;
+  };
+  const std::vector<Case> cases = {
+      {"bad_frame", "bad frame",
+       [](FlakyListener&, tcp::socket& s) {
+         std::string junk("\x10\x00\x00\x00", 4);
+         for (int i = 0; i < 16; ++i) junk += static_cast<char>(0xF7 ^ (i * 37));
+         asio::write(s, asio::buffer(junk));
+       }},
+      {"version", "protocol 99",
+       [](FlakyListener&, tcp::socket& s) {
+         wire::Envelope welcome;
+         welcome.mutable_welcome()->set_protocol_version(99);
+         asio::write(s, asio::buffer(wire::encode_frame(welcome)));
+       }},
+  };
+  for (const Case& c : cases) {
+    FlakyListener flaky;
+    const fs::path out = temp_path(c.name + ".png");
+    test::Process viewer(viewer_args(flaky.port(), out, 60), temp_path(c.name + "_view.log"));
+    auto s = flaky.accept();
+    ASSERT_TRUE(s) << viewer.output();
+    auto hello = flaky.read(*s);
+    ASSERT_TRUE(hello && hello->has_hello());
+    c.answer(flaky, *s);
+    const std::optional<int> status = viewer.wait_for(10s);
+    ASSERT_TRUE(status) << c.name << ": the viewer retries a protocol error\n" << viewer.output();
+    EXPECT_EQ(*status, 1) << viewer.output();
+    EXPECT_NE(viewer.output().find(c.says), std::string::npos) << viewer.output();
+    EXPECT_FALSE(flaky.accept(300ms)) << c.name << ": the viewer connected again";
+  }
 }
 
 // A server that comes up later than the old 10 s connect limit: the viewer keeps trying (with
