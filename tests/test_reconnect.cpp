@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <future>
 #include <map>
 #include <set>
 #include <sstream>
@@ -301,6 +302,53 @@ TEST(Reconnect, ViewerRidesOutResetConnectionsAndGetsItsImage) {
   EXPECT_GE(j.value("connect_attempts", 0), 5);
   fs::remove(out);
   fs::remove(out.string() + ".json");
+}
+
+// A server that accepts and then says nothing is as gone as one that resets: no Welcome, or a
+// scene download that stalls, within the reply timeout is another attempt (the library, with a
+// short reply timeout).
+TEST(Reconnect, ClientRetriesAHandshakeOrDownloadThatTimesOut) {
+  FlakyListener flaky;
+  const std::uint16_t port = flaky.port();
+  ViewClientOptions vo;
+  vo.port = port;
+  vo.name = "patient";
+  vo.reply_timeout = 300ms;
+  vo.deadline = Clock::now() + 60s;
+  vo.backoff_seed = 3;
+  ViewClient client(vo);
+  auto connected = std::async(std::launch::async, [&] { client.connect(); });
+  {  // 1. Reads the Hello and never answers.
+    auto s = flaky.accept();
+    ASSERT_TRUE(s);
+    ASSERT_TRUE(flaky.read(*s));
+    auto next = flaky.accept();
+    ASSERT_TRUE(next) << "no new attempt after a Welcome that never came";
+    // 2. A Welcome, then nothing of the scene.
+    ASSERT_TRUE(flaky.read(*next));
+    wire::Envelope welcome;
+    wire::Welcome* w = welcome.mutable_welcome();
+    w->set_protocol_version(wire::kProtocolVersion);
+    w->set_scene_hash(std::string(32, 'y'));
+    w->set_scene_bytes(4096);
+    w->set_tile_size(16);
+    asio::write(*next, asio::buffer(wire::encode_frame(welcome)));
+    auto request = flaky.read(*next);
+    ASSERT_TRUE(request && request->has_scene_request());
+    auto third = flaky.accept();
+    ASSERT_TRUE(third) << "no new attempt after a stalled download";
+    FlakyListener::reset(*third);
+  }
+  flaky.close();
+  LocalServer server(port);
+  ASSERT_EQ(connected.wait_for(30s), std::future_status::ready);
+  ASSERT_NO_THROW(connected.get());
+  EXPECT_EQ(client.counters().connections, 1u);
+  EXPECT_GE(client.counters().connect_attempts, 4u);
+  const auto until = Clock::now() + 30s;
+  while (!client.all_tiles_received() && Clock::now() < until) client.poll(50ms);
+  EXPECT_TRUE(client.all_tiles_received());
+  client.close();
 }
 
 // What reconnecting would not cure still ends the viewer at once, with a clear message: a frame
