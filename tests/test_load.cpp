@@ -175,7 +175,6 @@ TEST(Load, NoServerMeansFailedUsersAndExitThree) {
   o.port = port;
   o.users = 4;
   o.duration_s = 1.0;
-  o.connect_timeout = 300ms;
   const LoadReport r = run_load(o);
   EXPECT_EQ(r.connected, 0);
   EXPECT_EQ(r.failed, 4);

@@ -17,6 +17,7 @@
 #include "irradcast/error.h"
 #include "irradcast/frame.h"
 #include "irradcast/ray_scene.h"
+#include "irradcast/sampling.h"
 #include "irradcast/scene_package.h"
 #include "irradcast/tile_cache.h"
 
@@ -106,10 +107,11 @@ struct Run {
   asio::io_context io;
   tcp::resolver::results_type endpoints;
   Clock::time_point start = Clock::now();
+  Clock::time_point end = Clock::time_point::max();  // users retry connections until then
   SceneCache scenes;
   std::vector<CameraKeyframe> keyframes;
   std::atomic<int> connected{0}, scene_loaded{0}, full_image{0}, failed{0};
-  std::atomic<std::uint64_t> tiles{0}, bytes{0}, frames{0}, errors{0};
+  std::atomic<std::uint64_t> tiles{0}, bytes{0}, frames{0}, errors{0}, reconnects{0};
   LatencyHistogram latency;
   std::mutex errors_mutex;
   std::map<std::string, std::uint64_t> error_kinds;
@@ -122,6 +124,20 @@ struct Run {
   double elapsed_s() const { return std::chrono::duration<double>(Clock::now() - start).count(); }
 };
 
+// One connection of a user: the socket and everything tied to its byte stream. Every handler
+// holds the connection it was started for, so a handler of a dropped connection finds its
+// buffers alive and sees that it is no longer the user's connection.
+struct Connection {
+  explicit Connection(const asio::strand<asio::io_context::executor_type>& strand)
+      : socket(strand), decoder(64u << 20) {}
+  tcp::socket socket;
+  wire::FrameDecoder decoder;
+  std::array<char, 64 * 1024> buffer{};
+  std::deque<std::string> out;  // frames to write, the front one in flight while `writing`
+  bool writing = false;
+  std::string server_error;  // the last Error frame the server sent on this connection
+};
+
 // One simulated user. Every handler runs on the user's strand.
 class User : public std::enable_shared_from_this<User> {
  public:
@@ -129,21 +145,21 @@ class User : public std::enable_shared_from_this<User> {
       : run_(run),
         index_(index),
         strand_(asio::make_strand(run.io)),
-        socket_(strand_),
         retry_timer_(strand_),
         reply_timer_(strand_),
         camera_timer_(strand_),
         ping_timer_(strand_),
         frame_timer_(strand_),
         close_timer_(strand_),
-        decoder_(64u << 20) {}
+        backoff_(run.options.backoff,
+                 mix64(run.options.seed ^ mix64(static_cast<std::uint64_t>(index) + 1))) {}
 
   void start(Clock::duration delay) {
     retry_timer_.expires_after(delay);
     retry_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
       if (ec || self->finishing_) return;
       self->started_ = Clock::now();
-      self->connect();
+      self->open_connection();
     });
   }
 
@@ -169,86 +185,124 @@ class User : public std::enable_shared_from_this<User> {
   std::vector<double> take_steady_latencies() { return std::move(steady_ms_); }
 
  private:
-  enum class State { Idle, Connecting, AwaitWelcome, Downloading, Streaming, Done };
+  // Waiting: no connection, the next attempt after a back-off delay (or none before the end).
+  enum class State { Idle, Connecting, AwaitWelcome, Downloading, Streaming, Waiting, Done };
 
-  void connect() {
+  using ConnPtr = std::shared_ptr<Connection>;
+
+  // A connection attempt. Socket handling lives here and in read(), write_next() and
+  // drop_connection().
+  void open_connection() {
     state_ = State::Connecting;
-    asio::async_connect(socket_, run_.endpoints,
-                        [self = shared_from_this()](std::error_code ec, const tcp::endpoint&) {
-                          self->on_connect(ec);
-                        });
+    conn_ = std::make_shared<Connection>(strand_);
+    asio::async_connect(
+        conn_->socket, run_.endpoints,
+        [self = shared_from_this(), c = conn_](std::error_code ec, const tcp::endpoint&) {
+          if (c == self->conn_) self->on_connect(ec);
+        });
   }
 
   void on_connect(std::error_code ec) {
-    if (finishing_) return;
+    if (finishing_ || closed_) return;
     if (ec) {
-      std::error_code ignored;
-      socket_.close(ignored);
-      if (Clock::now() - started_ + backoff_ > run_.options.connect_timeout) {
-        fail("connect", ec.message());
-        return;
-      }
-      retry_timer_.expires_after(backoff_);
-      backoff_ = std::min(backoff_ * 2, std::chrono::milliseconds(1000));
-      retry_timer_.async_wait([self = shared_from_this()](std::error_code e) {
-        if (!e && !self->finishing_) self->connect();
-      });
+      // Refused or unreachable: not an error yet, only if it lasts to the end of the run.
+      last_error_ = ec.message();
+      drop_connection();
+      retry_later();
       return;
     }
     std::error_code ignored;
-    socket_.set_option(tcp::no_delay(true), ignored);
-    result_.connected = true;
-    ++run_.connected;
+    conn_->socket.set_option(tcp::no_delay(true), ignored);
+    if (!result_.connected) {
+      result_.connected = true;
+      ++run_.connected;
+    }
     wire::Envelope hello;
-    hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
-    hello.mutable_hello()->set_client_name(run_.options.name + "-" + std::to_string(index_));
+    wire::Hello* h = hello.mutable_hello();
+    h->set_protocol_version(wire::kProtocolVersion);
+    h->set_client_name(run_.options.name + "-" + std::to_string(index_));
+    if (scene_) {
+      // Resume: the scene we hold and the tile versions we have.
+      h->set_cached_scene_hash(welcome_.scene_hash());
+      h->set_known_epoch(welcome_.tile_epoch());
+      tiles_.add_known(*h);
+    }
     send(hello);
     state_ = State::AwaitWelcome;
     arm_reply_timer("no Welcome within the reply timeout");
     read();
   }
 
+  // The next connection attempt after a back-off delay; none when the run ends first (then
+  // do_finish records the user as failed).
+  void retry_later() {
+    state_ = State::Waiting;
+    const auto delay = backoff_.next_before(Clock::now(), run_.end);
+    if (!delay) return;
+    retry_timer_.expires_after(*delay);
+    retry_timer_.async_wait([self = shared_from_this()](std::error_code e) {
+      if (!e && !self->finishing_ && !self->closed_) self->open_connection();
+    });
+  }
+
+  // The connection is gone (reset, EOF, a write error, a server Error that ends it, a timed-out
+  // handshake or download): count it under `kind` ("" = already counted) and reconnect.
+  void lost(const std::string& kind, const std::string& detail) {
+    if (closed_) return;
+    if (finishing_) {
+      close();
+      return;
+    }
+    if (!kind.empty()) run_.count_error(kind);
+    last_error_ = (kind.empty() ? std::string("server error") : kind) + ": " + detail;
+    ++result_.connections_lost;
+    lost_ = true;
+    drop_connection();
+    retry_later();
+  }
+
   void arm_reply_timer(const char* what) {
     reply_timer_.expires_after(run_.options.reply_timeout);
-    reply_timer_.async_wait([self = shared_from_this(), what](std::error_code ec) {
-      if (ec || self->finishing_ || self->closed_) return;
+    reply_timer_.async_wait([self = shared_from_this(), c = conn_, what](std::error_code ec) {
+      if (ec || c != self->conn_ || self->finishing_ || self->closed_) return;
       if (self->state_ == State::AwaitWelcome || self->state_ == State::Downloading)
-        self->fail("timeout", what);
+        self->lost("timeout", what);
     });
   }
 
   void read() {
-    socket_.async_read_some(
-        asio::buffer(buffer_),
-        [self = shared_from_this()](std::error_code ec, std::size_t n) { self->on_read(ec, n); });
+    ConnPtr c = conn_;
+    c->socket.async_read_some(asio::buffer(c->buffer),
+                              [self = shared_from_this(), c](std::error_code ec, std::size_t n) {
+                                self->on_read(c, ec, n);
+                              });
   }
 
-  void on_read(std::error_code ec, std::size_t n) {
-    if (closed_) return;
+  void on_read(const ConnPtr& c, std::error_code ec, std::size_t n) {
+    if (closed_ || c != conn_) return;
     if (ec) {
-      if (finishing_) {
+      if (finishing_)
         close();
-      } else if (server_error_.empty()) {
-        fail("disconnected",
+      else if (!c->server_error.empty())
+        fail("", c->server_error);  // the server refused us (counted as its Error): no retry
+      else
+        lost("disconnected",
              ec == asio::error::eof ? "the server closed the connection" : ec.message());
-      } else {
-        fail("", server_error_);  // already counted as the server's Error
-      }
       return;
     }
     result_.bytes_received += n;
     run_.bytes += n;
-    decoder_.feed(buffer_.data(), n);
+    c->decoder.feed(c->buffer.data(), n);
     wire::Envelope env;
     for (;;) {
-      const wire::DecodeStatus st = decoder_.next(env);
+      const wire::DecodeStatus st = c->decoder.next(env);
       if (st == wire::DecodeStatus::NeedMore) break;
       if (st != wire::DecodeStatus::Frame) {
-        fail("bad frame", decoder_.error());
+        fail("bad frame", c->decoder.error());
         return;
       }
       handle(env);
-      if (closed_) return;
+      if (closed_ || c != conn_) return;
     }
     read();
   }
@@ -266,10 +320,15 @@ class User : public std::enable_shared_from_this<User> {
       case E::kTileUpdate:
         on_tile(env.tile_update());
         break;
-      case E::kError:
-        server_error_ = wire::ErrorCode_Name(env.error().code()) + ": " + env.error().message();
-        run_.count_error("server " + wire::ErrorCode_Name(env.error().code()));
+      case E::kError: {
+        const std::string code = wire::ErrorCode_Name(env.error().code());
+        conn_->server_error = code + ": " + env.error().message();
+        run_.count_error("server " + code);
+        // The server closes after these: reconnect now rather than at the EOF.
+        if (server_error_is_transient(env.error().code()) && !finishing_)
+          lost("", conn_->server_error);
         break;
+      }
       default:
         break;  // Pong, Stats, Bye, anything newer
     }
@@ -284,10 +343,17 @@ class User : public std::enable_shared_from_this<User> {
       fail("protocol", "the server speaks protocol " + std::to_string(w.protocol_version()));
       return;
     }
-    welcome_ = w;
     if (w.idle_timeout_ms() > 0)
       ping_interval_ = std::clamp(std::chrono::milliseconds(w.idle_timeout_ms() / 3),
                                   std::chrono::milliseconds(100), ping_interval_);
+    const bool same_scene = scene_ && w.scene_hash() == welcome_.scene_hash();
+    // Another lineage of versions: any version the server sends is news.
+    if (same_scene && w.tile_epoch() != welcome_.tile_epoch()) tiles_.forget_versions();
+    welcome_ = w;
+    if (same_scene) {  // resumed: the scene is the one we hold
+      subscribe();
+      return;
+    }
     assembler_ = std::make_unique<wire::SceneAssembler>(w.scene_hash(), w.scene_bytes());
     wire::Envelope req;
     req.mutable_scene_request()->set_offset(0);
@@ -314,11 +380,24 @@ class User : public std::enable_shared_from_this<User> {
       return;
     }
     assembler_.reset();
-    reply_timer_.cancel();
-    result_.scene_loaded = true;
-    result_.scene_ms = ms_between(started_, Clock::now());
-    ++run_.scene_loaded;
+    if (!result_.scene_loaded) {
+      result_.scene_loaded = true;
+      result_.scene_ms = ms_between(started_, Clock::now());
+      ++run_.scene_loaded;
+    }
     make_path();
+    subscribe();
+  }
+
+  // The session is set up: subscribe, and start the camera updates, pings and frames.
+  void subscribe() {
+    reply_timer_.cancel();
+    backoff_.reset();
+    if (lost_) {
+      lost_ = false;
+      ++result_.reconnects;
+      ++run_.reconnects;
+    }
     wire::Envelope s;
     s.mutable_subscribe()->set_all(true);
     s.mutable_subscribe()->set_encoding(run_.options.encoding);
@@ -381,20 +460,26 @@ class User : public std::enable_shared_from_this<User> {
     ++run_.full_image;
   }
 
+  // The timers of a session stop with its connection (drop_connection cancels them; a handler
+  // that was already queued sees another connection, or none, and does nothing).
+  bool streaming_on(const ConnPtr& c) const {
+    return c == conn_ && state_ == State::Streaming && !finishing_ && !closed_;
+  }
+
   void send_camera() {
     send(camera_update(path_.at(run_.elapsed_s())));
     ++result_.camera_updates;
     camera_timer_.expires_after(std::chrono::duration_cast<Clock::duration>(
         std::chrono::duration<double>(1.0 / run_.options.camera_hz)));
-    camera_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
-      if (!ec && !self->finishing_ && !self->closed_) self->send_camera();
+    camera_timer_.async_wait([self = shared_from_this(), c = conn_](std::error_code ec) {
+      if (!ec && self->streaming_on(c)) self->send_camera();
     });
   }
 
   void arm_ping() {
     ping_timer_.expires_after(ping_interval_);
-    ping_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
-      if (ec || self->finishing_ || self->closed_) return;
+    ping_timer_.async_wait([self = shared_from_this(), c = conn_](std::error_code ec) {
+      if (ec || !self->streaming_on(c)) return;
       if (Clock::now() - self->last_sent_ >= self->ping_interval_) {
         wire::Envelope p;
         p.mutable_ping()->set_nonce(self->result_.tiles_applied);
@@ -407,8 +492,8 @@ class User : public std::enable_shared_from_this<User> {
 
   void arm_frame(Clock::time_point at) {
     frame_timer_.expires_at(at);
-    frame_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
-      if (!ec && !self->finishing_ && !self->closed_) self->render_frame();
+    frame_timer_.async_wait([self = shared_from_this(), c = conn_](std::error_code ec) {
+      if (!ec && self->streaming_on(c)) self->render_frame();
     });
   }
 
@@ -431,30 +516,31 @@ class User : public std::enable_shared_from_this<User> {
   }
 
   void send(const wire::Envelope& e) {
-    if (closed_) return;
-    out_.push_back(wire::encode_frame(e));
+    if (closed_ || !conn_) return;
+    conn_->out.push_back(wire::encode_frame(e));
     last_sent_ = Clock::now();
     write_next();
   }
 
   void write_next() {
-    if (writing_ || out_.empty() || closed_) return;
-    writing_ = true;
-    asio::async_write(socket_, asio::buffer(out_.front()),
-                      [self = shared_from_this()](std::error_code ec, std::size_t) {
-                        self->writing_ = false;
-                        if (self->closed_) return;
-                        self->out_.pop_front();
+    ConnPtr c = conn_;
+    if (closed_ || !c || c->writing || c->out.empty()) return;
+    c->writing = true;
+    asio::async_write(c->socket, asio::buffer(c->out.front()),
+                      [self = shared_from_this(), c](std::error_code ec, std::size_t) {
+                        c->writing = false;
+                        if (self->closed_ || c != self->conn_) return;
+                        c->out.pop_front();
                         if (ec) {
                           if (self->finishing_)
                             self->close();
-                          else if (!self->server_error_.empty())
-                            self->fail("", self->server_error_);  // counted as the Error
+                          else if (!c->server_error.empty())
+                            self->fail("", c->server_error);  // counted as the Error
                           else
-                            self->fail("disconnected", "write: " + ec.message());
+                            self->lost("disconnected", "write: " + ec.message());
                           return;
                         }
-                        if (self->out_.empty() && self->finishing_)
+                        if (c->out.empty() && self->finishing_)
                           self->close();
                         else
                           self->write_next();
@@ -464,24 +550,33 @@ class User : public std::enable_shared_from_this<User> {
   void do_finish() {
     if (finishing_ || closed_) return;
     finishing_ = true;
-    if (!result_.connected && result_.failure.empty()) {
-      result_.failure = "connect: not connected by the end of the run";
-      run_.count_error("connect");
-      ++run_.failed;
-    }
-    if (result_.connected && state_ != State::Done) {
-      out_.push_back(wire::encode_frame(wire::make_bye("load test done")));
-      write_next();
-      close_timer_.expires_after(std::chrono::seconds(1));
-      close_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
-        if (!ec) self->close();
-      });
-    } else {
+    const bool live = conn_ && (state_ == State::AwaitWelcome || state_ == State::Downloading ||
+                                state_ == State::Streaming);
+    if (!live) {
+      if (result_.failure.empty()) {
+        const std::string last = last_error_.empty() ? "" : " (last: " + last_error_ + ")";
+        if (!result_.connected) {
+          result_.failure = "connect: not connected by the end of the run" + last;
+          run_.count_error("connect");
+        } else {
+          result_.failure = "reconnect: not connected again by the end of the run" + last;
+          run_.count_error("reconnect");
+        }
+        ++run_.failed;
+      }
       close();
+      return;
     }
+    conn_->out.push_back(wire::encode_frame(wire::make_bye("load test done")));
+    write_next();
+    close_timer_.expires_after(std::chrono::seconds(1));
+    close_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
+      if (!ec) self->close();
+    });
   }
 
-  // Records a failure of this user (kind "" = already counted) and closes.
+  // Records a failure of this user (kind "" = already counted) and closes: for what reconnecting
+  // would not cure (a protocol error, a bad frame, tile or scene, a session the server refused).
   void fail(const std::string& kind, const std::string& detail) {
     if (closed_) return;
     if (!kind.empty()) run_.count_error(kind);
@@ -492,41 +587,47 @@ class User : public std::enable_shared_from_this<User> {
     close();
   }
 
+  // Closes the connection (if any) and stops its session's timers; the user lives on.
+  void drop_connection() {
+    for (asio::steady_timer* t : {&reply_timer_, &camera_timer_, &ping_timer_, &frame_timer_})
+      t->cancel();
+    if (!conn_) return;
+    std::error_code ec;
+    conn_->socket.shutdown(tcp::socket::shutdown_both, ec);
+    conn_->socket.close(ec);
+    conn_.reset();
+  }
+
   void close() {
     if (closed_) return;
     closed_ = true;
     state_ = State::Done;
-    std::error_code ec;
-    for (asio::steady_timer* t :
-         {&retry_timer_, &reply_timer_, &camera_timer_, &ping_timer_, &frame_timer_, &close_timer_})
-      t->cancel();
-    socket_.shutdown(tcp::socket::shutdown_both, ec);
-    socket_.close(ec);
+    retry_timer_.cancel();
+    close_timer_.cancel();
+    drop_connection();
     closed_at_ = Clock::now();
-    out_.clear();
   }
 
   Run& run_;
   int index_;
   asio::strand<asio::io_context::executor_type> strand_;
-  tcp::socket socket_;
+  ConnPtr conn_;  // null between connections
   asio::steady_timer retry_timer_, reply_timer_, camera_timer_, ping_timer_, frame_timer_,
       close_timer_;
-  wire::FrameDecoder decoder_;
-  std::array<char, 64 * 1024> buffer_{};
-  std::deque<std::string> out_;
-  bool writing_ = false, finishing_ = false, closed_ = false;
+  Backoff backoff_;
+  bool finishing_ = false, closed_ = false;
+  bool lost_ = false;  // a connection dropped since the last session was set up
   State state_ = State::Idle;
   Clock::time_point started_ = Clock::now(), last_sent_ = Clock::now(), full_image_at_{},
                     closed_at_{};
-  std::chrono::milliseconds backoff_{50}, ping_interval_{5000};
+  std::chrono::milliseconds ping_interval_{5000};
+  std::string last_error_;  // why the last connection attempt failed or the last one dropped
   wire::Welcome welcome_;
   std::unique_ptr<wire::SceneAssembler> assembler_;
   std::shared_ptr<const SharedScene> scene_;
   TileCache tiles_;
   CameraPath path_;
   std::uint64_t subscribed_us_ = 0;
-  std::string server_error_;
   double frame_ms_total_ = 0.0;
   std::vector<double> latencies_ms_, steady_ms_;
   LoadUserResult result_;
@@ -541,6 +642,7 @@ void check(const LoadOptions& o) {
     throw Error("--fps, --camera-hz and --ramp must not be negative");
   if (o.threads < 0) throw Error("--threads must not be negative");
   if (o.ramp_s >= o.duration_s) throw Error("--ramp must be shorter than --duration");
+  o.backoff.validate();
 }
 
 }  // namespace
@@ -590,6 +692,9 @@ LoadReport run_load(const LoadOptions& options,
   std::vector<std::shared_ptr<User>> users;
   users.reserve(static_cast<std::size_t>(options.users));
   run.start = Clock::now();
+  const auto end = run.start + std::chrono::duration_cast<Clock::duration>(
+                                   std::chrono::duration<double>(options.duration_s));
+  run.end = end;
   for (int i = 0; i < options.users; ++i) {
     users.push_back(std::make_shared<User>(run, i));
     const double at = options.users > 1 ? options.ramp_s * i / (options.users - 1) : 0.0;
@@ -615,8 +720,6 @@ LoadReport run_load(const LoadOptions& options,
     });
 
   // The main thread reports progress until the end of the run.
-  const auto end = run.start + std::chrono::duration_cast<Clock::duration>(
-                                   std::chrono::duration<double>(options.duration_s));
   auto next_report = run.start + std::chrono::seconds(1);
   while (Clock::now() < end) {
     std::this_thread::sleep_until(std::min(end, next_report));
@@ -634,6 +737,7 @@ LoadReport run_load(const LoadOptions& options,
         p.bytes_received = run.bytes;
         p.frames = run.frames;
         p.errors = run.errors;
+        p.reconnects = run.reconnects;
         p.latency_p99_ms = run.latency.take_p99_ms();
         on_progress(p);
       }
@@ -691,6 +795,8 @@ LoadReport run_load(const LoadOptions& options,
     r.bytes_received += res.bytes_received;
     r.frames += res.frames;
     r.camera_updates += res.camera_updates;
+    r.connections_lost += res.connections_lost;
+    r.reconnects += res.reconnects;
     r.per_user.push_back(std::move(res));
   }
   r.scene_ms = Percentiles::of(std::move(scene));

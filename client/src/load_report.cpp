@@ -50,6 +50,7 @@ std::string LoadReport::text() const {
   s << "\n";
   s << "  users             " << connected << " connected, " << failed << " failed, " << full_image
     << " with a full image\n";
+  s << "  reconnects        " << reconnects << " (" << connections_lost << " connections lost)\n";
   s << "  scene loaded      " << dist(scene_ms, " ms") << "\n";
   s << "  first full image  " << dist(full_image_ms, " ms") << "\n";
   s << "  tile latency      " << dist(tile_latency_ms, " ms") << "  (" << tiles_live
@@ -88,11 +89,10 @@ std::string LoadReport::json(bool per_user_details) const {
                   {"camera_path", options.camera_path},
                   {"ramp_s", options.ramp_s}};
   j["elapsed_s"] = elapsed_s;
-  j["users"] = {{"total", users},
-                {"connected", connected},
-                {"failed", failed},
-                {"scene_loaded", scene_loaded},
-                {"full_image", full_image}};
+  j["users"] = {{"total", users},           {"connected", connected},
+                {"failed", failed},         {"scene_loaded", scene_loaded},
+                {"full_image", full_image}, {"connections_lost", connections_lost},
+                {"reconnects", reconnects}};
   j["scene_ms"] = to_json(scene_ms);
   j["full_image_ms"] = to_json(full_image_ms);
   j["tile_latency_ms"] = to_json(tile_latency_ms);
@@ -122,6 +122,8 @@ std::string LoadReport::json(bool per_user_details) const {
                       {"tiles_applied", u.tiles_applied},
                       {"tiles_live", u.tiles_live},
                       {"frames", u.frames},
+                      {"connections_lost", u.connections_lost},
+                      {"reconnects", u.reconnects},
                       {"tiles_held", u.tiles_held},
                       {"versions_digest", std::to_string(u.versions_digest)},
                       {"failure", u.failure}});

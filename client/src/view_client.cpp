@@ -4,8 +4,10 @@
 
 #include <algorithm>
 #include <array>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
 #include <thread>
 
@@ -56,7 +58,10 @@ struct ViewClient::Loaded {
   std::unique_ptr<RayScene> rays;
 };
 
-ViewClient::ViewClient(ViewClientOptions options) : options_(std::move(options)) {}
+ViewClient::ViewClient(ViewClientOptions options)
+    : options_(std::move(options)),
+      backoff_(options_.backoff,
+               options_.backoff_seed != 0 ? options_.backoff_seed : std::random_device{}()) {}
 
 ViewClient::~ViewClient() {
   try {
@@ -66,32 +71,78 @@ ViewClient::~ViewClient() {
 }
 
 void ViewClient::connect() {
-  open_connection();
-  handshake();
+  establish(false);
 }
 
-void ViewClient::open_connection() {
-  const auto deadline = Clock::now() + options_.connect_timeout;
-  std::chrono::milliseconds backoff(50);
+void ViewClient::establish(bool after_loss) {
+  const auto start = Clock::now();
+  const auto deadline = options_.deadline != Clock::time_point{} ? options_.deadline
+                                                                 : start + options_.connect_timeout;
+  const std::string where = options_.host + ":" + std::to_string(options_.port);
+  backoff_.reset();
   std::string last_error;
-  for (;;) {
-    net_ = std::make_unique<Net>();
-    std::error_code ec;
-    tcp::resolver resolver(net_->io);
-    auto endpoints = resolver.resolve(options_.host, std::to_string(options_.port), ec);
-    if (!ec) asio::connect(net_->socket, endpoints, ec);
-    if (!ec) {
-      net_->socket.set_option(tcp::no_delay(true), ec);
-      ++counters_.connections;
-      return;
+  for (int attempt = 0;; ++attempt) {
+    if (attempt > 0 || after_loss) {
+      const auto delay = backoff_.next_before(Clock::now(), deadline);
+      if (!delay) {
+        const double waited = std::chrono::duration<double>(Clock::now() - start).count();
+        char secs[32];
+        std::snprintf(secs, sizeof secs, "%.1f", waited);
+        throw Error(std::string(loaded_ ? "cannot reconnect to " : "cannot connect to ") + where +
+                    " (" + std::to_string(attempt) + " attempts in " + secs +
+                    " s): " + (last_error.empty() ? "no attempt before the deadline" : last_error));
+      }
+      std::this_thread::sleep_for(*delay);
     }
-    last_error = ec.message();
-    if (Clock::now() + backoff > deadline)
-      throw Error("cannot connect to " + options_.host + ":" + std::to_string(options_.port) +
-                  ": " + last_error);
-    std::this_thread::sleep_for(backoff);
-    backoff = std::min(backoff * 2, std::chrono::milliseconds(1000));
+    pending_edits_.clear();
+    try {
+      open_connection(deadline);
+      handshake();
+      if (attempt > 0 || after_loss)
+        log::info("view", "connected to " + where + " after " + std::to_string(attempt + 1) +
+                              " attempt(s)");
+      return;
+    } catch (const ConnectionLost& lost) {
+      last_error = lost.what();
+      drop_connection();
+      log::debug("view", "connection attempt " + std::to_string(attempt + 1) + " to " + where +
+                             " failed: " + last_error);
+    }
   }
+}
+
+// One attempt: resolve and connect, bounded by the deadline (a SYN into a black hole would
+// otherwise block for minutes) and by the reply timeout.
+void ViewClient::open_connection(Clock::time_point deadline) {
+  ++counters_.connect_attempts;
+  net_ = std::make_unique<Net>();
+  std::error_code ec;
+  tcp::resolver resolver(net_->io);
+  const auto endpoints = resolver.resolve(options_.host, std::to_string(options_.port), ec);
+  if (ec) throw ConnectionLost("resolve '" + options_.host + "': " + ec.message());
+  std::error_code result = asio::error::would_block;
+  asio::async_connect(net_->socket, endpoints,
+                      [&](std::error_code e, const tcp::endpoint&) { result = e; });
+  const auto now = Clock::now();
+  net_->io.restart();
+  net_->io.run_for(std::max(std::min<Clock::duration>(deadline - now, options_.reply_timeout),
+                            Clock::duration(std::chrono::milliseconds(100))));
+  if (result == asio::error::would_block) {
+    std::error_code ignored;
+    net_->socket.close(ignored);  // ends the connect; let its handler run
+    net_->io.restart();
+    net_->io.run();
+    throw ConnectionLost("connect: timed out");
+  }
+  if (result) throw ConnectionLost(result.message());
+  net_->socket.set_option(tcp::no_delay(true), ec);
+}
+
+void ViewClient::drop_connection() {
+  if (!net_) return;
+  std::error_code ec;
+  net_->socket.close(ec);
+  net_.reset();
 }
 
 void ViewClient::send(const wire::Envelope& e) {
@@ -161,8 +212,14 @@ void ViewClient::handshake() {
   wire::Envelope e;
   const auto deadline = Clock::now() + options_.reply_timeout;
   for (;;) {
-    if (!read_frame(e, deadline)) throw Error("the server did not answer hello in time");
-    if (e.has_error()) throw Error("the server refused the session: " + e.error().message());
+    if (!read_frame(e, deadline))
+      throw ConnectionLost("no Welcome within " + std::to_string(options_.reply_timeout.count()) +
+                           " ms");
+    if (e.has_error()) {
+      if (server_error_is_transient(e.error().code()))
+        throw ConnectionLost("the server says: " + e.error().message());
+      throw Error("the server refused the session: " + e.error().message());
+    }
     if (e.has_welcome()) break;
   }
   const wire::Welcome& w = e.welcome();
@@ -183,6 +240,7 @@ void ViewClient::handshake() {
   if (!loaded_ || w.scene_hash() != scene_hash_) load_scene(w);
   subscribe();
   last_ping_ = Clock::now();
+  ++counters_.connections;
 }
 
 void ViewClient::load_scene(const wire::Welcome& w) {
@@ -222,8 +280,12 @@ void ViewClient::load_scene(const wire::Welcome& w) {
     wire::Envelope e;
     while (!assembler.complete()) {
       if (!read_frame(e, Clock::now() + options_.reply_timeout))
-        throw Error("the scene download stalled");
-      if (e.has_error()) throw Error("scene download: the server says: " + e.error().message());
+        throw ConnectionLost("the scene download stalled");
+      if (e.has_error()) {
+        if (server_error_is_transient(e.error().code()))
+          throw ConnectionLost("scene download: the server says: " + e.error().message());
+        throw Error("scene download: the server says: " + e.error().message());
+      }
       if (e.has_scene_chunk()) {
         counters_.scene_bytes_downloaded += e.scene_chunk().data().size();
         assembler.add(e.scene_chunk());
@@ -283,6 +345,9 @@ void ViewClient::apply(const wire::Envelope& e) {
       break;
     case wire::Envelope::kError:
       ++counters_.errors_received;
+      // The server closes after these: reconnect now rather than at the EOF.
+      if (server_error_is_transient(e.error().code()))
+        throw ConnectionLost("the server says: " + e.error().message());
       log::warn("view", "server error: " + e.error().message());
       break;
     case wire::Envelope::kBye:
@@ -353,22 +418,22 @@ std::size_t ViewClient::poll(std::chrono::milliseconds budget) {
       if (read_frame(e, until)) apply(e);
       if (reload_) {
         reload_ = false;
-        reconnect();
+        close();  // Bye, then a new session with the current scene
+        establish(false);
       }
     } catch (const ConnectionLost& lost) {
-      if (!options_.reconnect) throw Error(std::string("connection lost: ") + lost.what());
-      log::info("view", std::string("connection lost (") + lost.what() + "); reconnecting");
-      reconnect();
+      connection_lost(lost);
     }
   }
   return counters_.tiles_applied - before;
 }
 
-void ViewClient::reconnect() {
-  pending_edits_.clear();
-  net_.reset();
-  open_connection();
-  handshake();
+void ViewClient::connection_lost(const std::exception& lost) {
+  drop_connection();
+  ++counters_.connections_lost;
+  if (!options_.reconnect) throw Error(std::string("connection lost: ") + lost.what());
+  log::info("view", std::string("connection lost (") + lost.what() + "); reconnecting");
+  establish(true);
 }
 
 std::optional<wire::Stats> ViewClient::request_stats(std::chrono::milliseconds timeout) {
@@ -377,8 +442,8 @@ std::optional<wire::Stats> ViewClient::request_stats(std::chrono::milliseconds t
   r.mutable_stats_request();
   try {
     send(r);
-  } catch (const ConnectionLost&) {
-    poll(std::chrono::milliseconds(1));  // reconnects
+  } catch (const ConnectionLost& lost) {
+    connection_lost(lost);
     return std::nullopt;
   }
   const auto deadline = Clock::now() + timeout;

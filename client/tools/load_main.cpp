@@ -81,14 +81,15 @@ int run(const Options& o) {
   const bool tty = isatty(fileno(stderr)) != 0;
   auto progress = [&](const LoadProgress& p) {
     if (o.quiet) return;
-    char line[256];
+    char line[320];
     std::snprintf(line, sizeof line,
                   "[load] %5.1f/%.0f s  users %d/%d connected, %d scene, %d full, %d failed  "
-                  "tiles %llu  rx %.1f MB  p99 %.1f ms  errors %llu",
+                  "tiles %llu  rx %.1f MB  p99 %.1f ms  errors %llu  reconnects %llu",
                   p.elapsed_s, o.duration, p.connected, p.users, p.scene_loaded, p.full_image,
                   p.failed, static_cast<unsigned long long>(p.tiles_applied),
                   static_cast<double>(p.bytes_received) / 1e6, p.latency_p99_ms,
-                  static_cast<unsigned long long>(p.errors));
+                  static_cast<unsigned long long>(p.errors),
+                  static_cast<unsigned long long>(p.reconnects));
     // A live line on a terminal; a line every 5 s in a log.
     if (tty)
       std::fprintf(stderr, "\r%s\x1b[K", line);
@@ -116,7 +117,8 @@ int main(int argc, char** argv) {
       "scene, subscribes, sends camera updates along its path and applies every tile (and "
       "composes frames in render mode). Prints a live progress line and a report: users "
       "connected/failed, time to scene and to the first full image, tile latency, bandwidth, "
-      "frame rate and errors by kind. Exits 3 when a user failed.",
+      "frame rate, reconnects and errors by kind. A user whose connection drops reconnects with "
+      "back-off until the end of the run and resumes. Exits 3 when a user failed.",
       "irradcast-load"};
   app.option_defaults()->always_capture_default();
   app.add_option("--connect", o.connect, "server address HOST:PORT")->required();

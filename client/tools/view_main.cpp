@@ -151,6 +151,8 @@ int run(const Options& o) {
   const auto start = Clock::now();
   const auto deadline =
       start + std::chrono::milliseconds(static_cast<long long>(o.timeout_s * 1e3));
+  // Connecting and every reconnection keep trying (with back-off) until --timeout.
+  vo.deadline = deadline;
   ViewClient client(vo);
   client.connect();
   const double t_scene = std::chrono::duration<double>(Clock::now() - start).count();
@@ -242,6 +244,8 @@ int run(const Options& o) {
                         {"scene_from_cache", c.scene_from_cache},
                         {"tiles_applied", c.tiles_applied},
                         {"connections", c.connections},
+                        {"connections_lost", c.connections_lost},
+                        {"connect_attempts", c.connect_attempts},
                         {"seconds_to_scene", t_scene},
                         {"converged", converged},
                         {"seconds_to_converged", t_converged},
@@ -283,7 +287,9 @@ int main(int argc, char** argv) {
   app.add_option("--converge-at", o.converge_at,
                  "convergence target: the server's mean relative standard error")
       ->check(CLI::PositiveNumber);
-  app.add_option("--timeout", o.timeout_s, "give up after this many seconds")
+  app.add_option("--timeout", o.timeout_s,
+                 "give up after this many seconds (connecting and reconnecting included: a "
+                 "server that is away is retried with back-off until then)")
       ->check(CLI::PositiveNumber);
   app.add_option("--cache-dir", o.cache_dir,
                  "scene cache (auto = $XDG_CACHE_HOME/irradcast or ~/.cache/irradcast; none)");
@@ -294,7 +300,7 @@ int main(int argc, char** argv) {
   app.add_option("--exposure", o.exposure, "auto (key 0.18) or exposure in stops");
   app.add_option("--json", o.json, "also write a JSON report here");
   app.add_flag("--no-reconnect", o.no_reconnect,
-               "fail instead of reconnecting when the connection drops");
+               "fail instead of reconnecting when the connection drops after the first session");
   app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
   // Client passes (seed 002; docs/CLIENT_PASSES.md).
   app.add_flag("--ssao", o.ssao,

@@ -2,7 +2,10 @@
 // TCP connection each, all on one Asio io_context. Each user connects, says Hello, downloads
 // and checks the scene package, subscribes to every tile, sends CameraUpdates along its camera
 // path, and decodes every TileUpdate into its own lightmaps; in render mode it also composes
-// frames of its view. The report has the numbers a service owner asks about: who connected,
+// frames of its view. A user whose connection drops (reset, EOF, a server Error SERVER_SHUTDOWN,
+// a timed-out handshake or download) reconnects with the viewer's back-off policy (backoff.h)
+// until the end of the run and resumes as the viewer does (Hello with its scene hash and tile
+// versions). The report has the numbers a service owner asks about: who connected,
 // how long the scene and the first full image took, tile latency (from the version's time stamp
 // on the server to the user's apply), bandwidth, frame rate and errors by kind.
 //
@@ -20,6 +23,7 @@
 #include <vector>
 
 #include "irradcast.pb.h"
+#include "irradcast/backoff.h"
 #include "irradcast/camera_path.h"
 
 namespace irradcast {
@@ -38,9 +42,11 @@ struct LoadOptions {
   int threads = 0;                    // I/O threads (0 = the machine's cores)
   std::string name = "irradcast-load";
   wire::TileEncoding encoding = wire::TILE_RGB9E5_ZSTD;
-  std::chrono::milliseconds connect_timeout{10000};  // retrying a refused connection
-  std::chrono::milliseconds reply_timeout{10000};    // for Welcome and the scene download
-  std::uint64_t seed = 1;                            // random-walk paths
+  // Delays between connection attempts: connecting and reconnecting are retried until the end
+  // of the run.
+  BackoffPolicy backoff;
+  std::chrono::milliseconds reply_timeout{10000};  // for Welcome and each scene chunk
+  std::uint64_t seed = 1;                          // random-walk paths and back-off jitter
 };
 
 // Distribution of a quantity over users or events.
@@ -64,6 +70,8 @@ struct LoadUserResult {
   std::uint64_t frames = 0;
   double frame_ms_mean = 0.0;
   std::uint64_t camera_updates = 0;
+  std::uint64_t connections_lost = 0;  // connections that dropped before the end of the run
+  std::uint64_t reconnects = 0;        // sessions set up again after a lost connection
   // The tile versions held at the end: how many tiles, and an FNV-1a digest of the version
   // vector in layout order (equal digests = the same versions of every tile).
   std::uint64_t tiles_held = 0;
@@ -74,7 +82,7 @@ struct LoadUserResult {
 struct LoadProgress {
   double elapsed_s = 0.0;
   int users = 0, connected = 0, scene_loaded = 0, full_image = 0, failed = 0;
-  std::uint64_t tiles_applied = 0, bytes_received = 0, frames = 0, errors = 0;
+  std::uint64_t tiles_applied = 0, bytes_received = 0, frames = 0, errors = 0, reconnects = 0;
   double latency_p99_ms = 0.0;  // of the live tiles applied since the previous progress report
 };
 
@@ -94,7 +102,8 @@ struct LoadReport {
   Percentiles frame_ms;      // render mode: compose time per frame, per user mean
   std::uint64_t tiles_applied = 0, tiles_live = 0, bytes_received = 0, frames = 0;
   std::uint64_t camera_updates = 0;
-  std::map<std::string, std::uint64_t> errors;  // by kind
+  std::uint64_t connections_lost = 0, reconnects = 0;  // summed over the users
+  std::map<std::string, std::uint64_t> errors;         // by kind
   std::vector<LoadUserResult> per_user;
 
   std::string text() const;

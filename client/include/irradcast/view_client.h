@@ -2,7 +2,10 @@
 // its hash matches, else downloaded and cached), a subscription, and a tile cache kept current
 // as TileUpdates arrive. Composes frames of its own viewpoint with the compositor. Reconnects
 // after a lost connection and resumes: the tiles it holds are only sent again when their version
-// changed. Single-threaded: call poll() to make progress.
+// changed. A connection lost in any phase (connect, handshake, scene download, streaming) is
+// retried with capped, jittered exponential back-off (backoff.h) until the deadline; protocol
+// errors (a bad frame from the server, another protocol version) are not retried.
+// Single-threaded: call poll() to make progress.
 #pragma once
 
 #include <chrono>
@@ -14,6 +17,7 @@
 
 #include "irradcast.pb.h"
 #include "irradcast/atlas.h"
+#include "irradcast/backoff.h"
 #include "irradcast/client_passes.h"
 #include "irradcast/image.h"
 #include "irradcast/lightmap.h"
@@ -29,11 +33,18 @@ struct ViewClientOptions {
   std::string name = "irradcast-view";
   std::string cache_dir;  // scene packages by hash; empty = no cache
   wire::TileEncoding encoding = wire::TILE_RGB9E5_ZSTD;
-  std::uint64_t max_bytes_per_s = 0;                 // 0 = no cap
-  std::chrono::milliseconds connect_timeout{10000};  // keep retrying a refused connection this long
-  std::chrono::milliseconds reply_timeout{10000};    // for Welcome and each scene chunk
-  std::chrono::milliseconds ping_interval{5000};     // keeps the server's idle timer happy
+  std::uint64_t max_bytes_per_s = 0;  // 0 = no cap
+  // How long connect() and each reconnection keep trying (from their start) when `deadline` is
+  // not set.
+  std::chrono::milliseconds connect_timeout{10000};
+  // When set: connect() and every reconnection keep trying until this time instead (a viewer's
+  // --timeout), however long the server is away.
+  std::chrono::steady_clock::time_point deadline{};
+  std::chrono::milliseconds reply_timeout{10000};  // for Welcome and each scene chunk
+  std::chrono::milliseconds ping_interval{5000};   // keeps the server's idle timer happy
   bool reconnect = true;
+  BackoffPolicy backoff;           // delays between connection attempts
+  std::uint64_t backoff_seed = 0;  // jitter; 0 = a random seed per client
 };
 
 struct ViewClientCounters {
@@ -41,7 +52,9 @@ struct ViewClientCounters {
   std::uint64_t frames_received = 0;
   std::uint64_t tiles_applied = 0;
   std::uint64_t scene_bytes_downloaded = 0;
-  std::uint32_t connections = 0;  // 1 + reconnects
+  std::uint32_t connections = 0;  // sessions set up (Welcome, scene, Subscribe): 1 + reconnects
+  std::uint32_t connections_lost = 0;  // connections that dropped after a session was set up
+  std::uint32_t connect_attempts = 0;  // connection attempts, failed ones included
   bool scene_from_cache = false;
   std::uint64_t errors_received = 0;
   std::uint64_t edits_applied = 0;  // scene edits applied to the viewer's copy of the scene
@@ -54,11 +67,13 @@ class ViewClient {
   ViewClient(const ViewClient&) = delete;
   ViewClient& operator=(const ViewClient&) = delete;
 
-  // Connects, says Hello, loads the scene and subscribes to every tile. Throws irradcast::Error
-  // when the server cannot be reached within connect_timeout or refuses the session.
+  // Connects, says Hello, loads the scene and subscribes to every tile, retrying a lost or
+  // refused connection with back-off. Throws irradcast::Error when no session is set up before
+  // the deadline (or connect_timeout), or on a protocol error.
   void connect();
   // Receives and applies frames for `budget`, pinging as needed; reconnects (if enabled) when the
-  // connection drops. Returns the number of tiles applied.
+  // connection drops, which can take until the deadline (then irradcast::Error). Returns the
+  // number of tiles applied.
   std::size_t poll(std::chrono::milliseconds budget);
   // Asks for the server's stats and polls until they arrive (or timeout: nullopt).
   std::optional<wire::Stats> request_stats(std::chrono::milliseconds timeout);
@@ -93,7 +108,13 @@ class ViewClient {
  private:
   struct Net;
   struct Loaded;
-  void open_connection();
+  // Attempts connections (open_connection + handshake) until one sets up a session, sleeping a
+  // back-off delay before each attempt but the first (and before the first too when
+  // `after_loss`); throws irradcast::Error at the deadline or on a protocol error.
+  void establish(bool after_loss);
+  // One TCP connection attempt, bounded by `deadline`; throws ConnectionLost.
+  void open_connection(std::chrono::steady_clock::time_point deadline);
+  void drop_connection();
   void handshake();
   void load_scene(const wire::Welcome& w);
   void subscribe();
@@ -105,9 +126,11 @@ class ViewClient {
   // A SceneEdit from the server: buffered while the scene loads, applied in revision order.
   void on_scene_edit(const wire::SceneEdit& m);
   void apply_scene_edit(const wire::SceneEdit& m);
-  void reconnect();
+  // After ConnectionLost: reconnects (establish) or, without options.reconnect, throws Error.
+  void connection_lost(const std::exception& lost);
 
   ViewClientOptions options_;
+  Backoff backoff_;
   std::unique_ptr<Net> net_;
   std::unique_ptr<Loaded> loaded_;
   std::string scene_hash_;
