@@ -106,6 +106,7 @@ struct Run {
   const LoadOptions& options;
   asio::io_context io;
   tcp::resolver::results_type endpoints;
+  std::shared_ptr<asio::ssl::context> tls;  // null: plain TCP
   Clock::time_point start = Clock::now();
   Clock::time_point end = Clock::time_point::max();  // users retry connections until then
   SceneCache scenes;
@@ -128,9 +129,9 @@ struct Run {
 // holds the connection it was started for, so a handler of a dropped connection finds its
 // buffers alive and sees that it is no longer the user's connection.
 struct Connection {
-  explicit Connection(const asio::strand<asio::io_context::executor_type>& strand)
-      : socket(strand), decoder(64u << 20) {}
-  tcp::socket socket;
+  Connection(const asio::strand<asio::io_context::executor_type>& strand, asio::ssl::context* tls)
+      : socket(strand, tls), decoder(64u << 20) {}
+  wire::Stream socket;  // TCP, or TLS over it
   wire::FrameDecoder decoder;
   std::array<char, 64 * 1024> buffer{};
   std::deque<std::string> out;  // frames to write, the front one in flight while `writing`
@@ -194,9 +195,10 @@ class User : public std::enable_shared_from_this<User> {
   // drop_connection().
   void open_connection() {
     state_ = State::Connecting;
-    conn_ = std::make_shared<Connection>(strand_);
+    conn_ = std::make_shared<Connection>(strand_, run_.tls.get());
+    conn_->socket.expect_server_name(run_.options.host);
     asio::async_connect(
-        conn_->socket, run_.endpoints,
+        conn_->socket.socket(), run_.endpoints,
         [self = shared_from_this(), c = conn_](std::error_code ec, const tcp::endpoint&) {
           if (c == self->conn_) self->on_connect(ec);
         });
@@ -212,7 +214,28 @@ class User : public std::enable_shared_from_this<User> {
       return;
     }
     std::error_code ignored;
-    conn_->socket.set_option(tcp::no_delay(true), ignored);
+    conn_->socket.socket().set_option(tcp::no_delay(true), ignored);
+    conn_->socket.async_handshake(
+        asio::ssl::stream_base::client,
+        asio::bind_executor(strand_, [self = shared_from_this(), c = conn_](std::error_code hec) {
+          if (c == self->conn_) self->on_secured(hec);
+        }));
+  }
+
+  // After the TLS handshake (at once without TLS): Hello.
+  void on_secured(std::error_code ec) {
+    if (finishing_ || closed_) return;
+    if (ec) {
+      // An untrusted certificate or a server without TLS stays so: fail. A cut: retry.
+      if (ec.category() == asio::error::get_ssl_category()) {
+        fail("tls", wire::describe_tls_error(ec));
+        return;
+      }
+      last_error_ = wire::describe_tls_error(ec);
+      drop_connection();
+      retry_later();
+      return;
+    }
     if (!result_.connected) {
       result_.connected = true;
       ++run_.connected;
@@ -286,8 +309,8 @@ class User : public std::enable_shared_from_this<User> {
       else if (!c->server_error.empty())
         fail("", c->server_error);  // the server refused us (counted as its Error): no retry
       else
-        lost("disconnected",
-             ec == asio::error::eof ? "the server closed the connection" : ec.message());
+        lost("disconnected", ec == asio::error::eof ? "the server closed the connection"
+                                                    : wire::describe_tls_error(ec));
       return;
     }
     result_.bytes_received += n;
@@ -592,9 +615,7 @@ class User : public std::enable_shared_from_this<User> {
     for (asio::steady_timer* t : {&reply_timer_, &camera_timer_, &ping_timer_, &frame_timer_})
       t->cancel();
     if (!conn_) return;
-    std::error_code ec;
-    conn_->socket.shutdown(tcp::socket::shutdown_both, ec);
-    conn_->socket.close(ec);
+    conn_->socket.close();
     conn_.reset();
   }
 
@@ -688,6 +709,7 @@ LoadReport run_load(const LoadOptions& options,
     run.endpoints = resolver.resolve(options.host, std::to_string(options.port), ec);
     if (ec) throw Error("cannot resolve '" + options.host + "': " + ec.message());
   }
+  run.tls = make_tls_context(options.tls);
 
   std::vector<std::shared_ptr<User>> users;
   users.reserve(static_cast<std::size_t>(options.users));

@@ -12,6 +12,7 @@
 #include <thread>
 
 #include "irradcast/camera_message.h"
+#include "irradcast/client_tls.h"
 #include "irradcast/compositor.h"
 #include "irradcast/edit_message.h"
 #include "irradcast/error.h"
@@ -44,8 +45,9 @@ std::uint64_t now_us() {
 }  // namespace
 
 struct ViewClient::Net {
+  explicit Net(asio::ssl::context* tls) : socket(io.get_executor(), tls) {}
   asio::io_context io;
-  tcp::socket socket{io};
+  wire::Stream socket;  // TCP, or TLS over it (--tls)
   wire::FrameDecoder decoder;
   std::array<char, 64 * 1024> buffer{};
 };
@@ -60,6 +62,7 @@ struct ViewClient::Loaded {
 
 ViewClient::ViewClient(ViewClientOptions options)
     : options_(std::move(options)),
+      tls_(make_tls_context(options_.tls)),
       backoff_(options_.backoff,
                options_.backoff_seed != 0 ? options_.backoff_seed : std::random_device{}()) {}
 
@@ -115,33 +118,25 @@ void ViewClient::establish(bool after_loss) {
 // otherwise block for minutes) and by the reply timeout.
 void ViewClient::open_connection(Clock::time_point deadline) {
   ++counters_.connect_attempts;
-  net_ = std::make_unique<Net>();
+  net_ = std::make_unique<Net>(tls_.get());
+  const auto limit = std::chrono::duration_cast<std::chrono::milliseconds>(
+      std::max(std::min<Clock::duration>(deadline - Clock::now(), options_.reply_timeout),
+               Clock::duration(std::chrono::milliseconds(100))));
   std::error_code ec;
-  tcp::resolver resolver(net_->io);
-  const auto endpoints = resolver.resolve(options_.host, std::to_string(options_.port), ec);
-  if (ec) throw ConnectionLost("resolve '" + options_.host + "': " + ec.message());
-  std::error_code result = asio::error::would_block;
-  asio::async_connect(net_->socket, endpoints,
-                      [&](std::error_code e, const tcp::endpoint&) { result = e; });
-  const auto now = Clock::now();
-  net_->io.restart();
-  net_->io.run_for(std::max(std::min<Clock::duration>(deadline - now, options_.reply_timeout),
-                            Clock::duration(std::chrono::milliseconds(100))));
-  if (result == asio::error::would_block) {
-    std::error_code ignored;
-    net_->socket.close(ignored);  // ends the connect; let its handler run
-    net_->io.restart();
-    net_->io.run();
-    throw ConnectionLost("connect: timed out");
-  }
-  if (result) throw ConnectionLost(result.message());
-  net_->socket.set_option(tcp::no_delay(true), ec);
+  std::string what;
+  connect_stream(net_->io, net_->socket, options_.host, options_.port, limit, ec, what);
+  if (!ec) return;
+  // A certificate the client does not trust, or a server that does not speak TLS, will not
+  // change by trying again: a clear error. A connection cut during the handshake is retried.
+  if (ec.category() == asio::error::get_ssl_category())
+    throw Error("cannot connect to " + options_.host + ":" + std::to_string(options_.port) + ": " +
+                what);
+  throw ConnectionLost(what);
 }
 
 void ViewClient::drop_connection() {
   if (!net_) return;
-  std::error_code ec;
-  net_->socket.close(ec);
+  net_->socket.close();
   net_.reset();
 }
 
@@ -149,7 +144,7 @@ void ViewClient::send(const wire::Envelope& e) {
   std::string frame = wire::encode_frame(e);
   std::error_code ec;
   asio::write(net_->socket, asio::buffer(frame), ec);
-  if (ec) throw ConnectionLost("write: " + ec.message());
+  if (ec) throw ConnectionLost("write: " + wire::describe_tls_error(ec));
 }
 
 bool ViewClient::read_frame(wire::Envelope& out, Clock::time_point deadline) {
@@ -178,7 +173,7 @@ bool ViewClient::read_frame(wire::Envelope& out, Clock::time_point deadline) {
     if (result == asio::error::would_block) {
       // Timed out: cancel the read and let its handler run before the buffer goes out of use.
       std::error_code ignored;
-      net_->socket.cancel(ignored);
+      net_->socket.socket().cancel(ignored);
       net_->io.restart();
       net_->io.run();
       if (result == asio::error::would_block || result == asio::error::operation_aborted) {
@@ -191,7 +186,7 @@ bool ViewClient::read_frame(wire::Envelope& out, Clock::time_point deadline) {
     }
     if (result && result != asio::error::operation_aborted)
       throw ConnectionLost(result == asio::error::eof ? "the server closed the connection"
-                                                      : result.message());
+                                                      : wire::describe_tls_error(result));
     counters_.bytes_received += got;
     net_->decoder.feed(net_->buffer.data(), got);
   }
@@ -463,14 +458,12 @@ void ViewClient::send_camera(const CameraPose& c) {
 
 void ViewClient::close() {
   if (!net_) return;
-  if (net_->socket.is_open()) {
+  if (net_->socket.socket().is_open()) {
     try {
       send(wire::make_bye("viewer done"));
     } catch (const ConnectionLost&) {
     }
-    std::error_code ec;
-    net_->socket.shutdown(tcp::socket::shutdown_both, ec);
-    net_->socket.close(ec);
+    net_->socket.close();
   }
   net_.reset();
 }

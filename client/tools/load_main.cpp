@@ -15,11 +15,13 @@
 #include "irradcast/host_port.h"
 #include "irradcast/load_generator.h"
 #include "irradcast/log.h"
+#include "tls_flags.h"
 
 namespace {
 
 struct Options {
   std::string connect;
+  irradcast::ClientTls tls;
   int users = 8;
   double duration = 10.0;
   std::string mode = "thin";
@@ -57,6 +59,7 @@ int run(const Options& o) {
   LoadOptions lo;
   lo.host = hp.host;
   lo.port = hp.port;
+  lo.tls = irradcast::tools::tls_of(o.tls);
   lo.users = o.users;
   lo.duration_s = o.duration;
   if (o.mode != "thin" && o.mode != "render")
@@ -122,6 +125,7 @@ int main(int argc, char** argv) {
       "irradcast-load"};
   app.option_defaults()->always_capture_default();
   app.add_option("--connect", o.connect, "server address HOST:PORT")->required();
+  irradcast::tools::add_tls_flags(app, o.tls);
   app.add_option("--users", o.users, "simulated users")->check(CLI::Range(1, 100000));
   app.add_option("--duration", o.duration, "seconds from start to the users' Bye")
       ->check(CLI::PositiveNumber);

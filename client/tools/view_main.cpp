@@ -23,6 +23,7 @@
 #include "irradcast/log.h"
 #include "irradcast/tonemap.h"
 #include "irradcast/view_client.h"
+#include "tls_flags.h"
 
 namespace {
 
@@ -31,6 +32,7 @@ namespace fs = std::filesystem;
 
 struct Options {
   std::string connect;
+  irradcast::ClientTls tls;
   std::string camera;
   int width = 512;
   int height = 512;
@@ -128,6 +130,7 @@ int run(const Options& o) {
     throw Error("--encoding must be rgb9e5 or half, not '" + o.encoding + "'");
   vo.max_bytes_per_s = o.max_rate;
   vo.reconnect = !o.no_reconnect;
+  vo.tls = tools::tls_of(o.tls);
   const std::string ext = fs::path(o.out).extension().string();
   if (ext != ".png" && ext != ".exr") throw Error("--out must end in .png or .exr: " + o.out);
   ToneMapOptions tm;
@@ -272,6 +275,7 @@ int main(int argc, char** argv) {
       "irradcast-view"};
   app.option_defaults()->always_capture_default();
   app.add_option("--connect", o.connect, "server address HOST:PORT")->required();
+  irradcast::tools::add_tls_flags(app, o.tls);
   app.add_option("--camera", o.camera,
                  "eye=x,y,z:target=x,y,z:fov=deg[:up=x,y,z] (default: the scene's camera)");
   app.add_option("--width", o.width, "image width")->check(CLI::Range(1, 16384));

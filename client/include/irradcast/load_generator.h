@@ -25,6 +25,7 @@
 #include "irradcast.pb.h"
 #include "irradcast/backoff.h"
 #include "irradcast/camera_path.h"
+#include "irradcast/client_tls.h"
 
 namespace irradcast {
 
@@ -47,6 +48,7 @@ struct LoadOptions {
   BackoffPolicy backoff;
   std::chrono::milliseconds reply_timeout{10000};  // for Welcome and each scene chunk
   std::uint64_t seed = 1;                          // random-walk paths and back-off jitter
+  ClientTls tls;                                   // plain TCP unless enabled
 };
 
 // Distribution of a quantity over users or events.

@@ -19,6 +19,7 @@
 #include "irradcast/atlas.h"
 #include "irradcast/backoff.h"
 #include "irradcast/client_passes.h"
+#include "irradcast/client_tls.h"
 #include "irradcast/image.h"
 #include "irradcast/lightmap.h"
 #include "irradcast/scene.h"
@@ -45,6 +46,7 @@ struct ViewClientOptions {
   bool reconnect = true;
   BackoffPolicy backoff;           // delays between connection attempts
   std::uint64_t backoff_seed = 0;  // jitter; 0 = a random seed per client
+  ClientTls tls;                   // plain TCP unless enabled
 };
 
 struct ViewClientCounters {
@@ -130,6 +132,7 @@ class ViewClient {
   void connection_lost(const std::exception& lost);
 
   ViewClientOptions options_;
+  std::shared_ptr<asio::ssl::context> tls_;  // null: plain TCP
   Backoff backoff_;
   std::unique_ptr<Net> net_;
   std::unique_ptr<Loaded> loaded_;
