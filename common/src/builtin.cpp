@@ -7,7 +7,7 @@
 
 namespace irradcast {
 
-Scene load_scene(const std::string& spec, float detail) {
+Scene load_scene(const std::string& spec, float detail, const std::string& scene_root) {
   if (spec.empty()) throw Error("empty scene spec (expected cornell, rooms:N or a glTF file)");
   if (spec == "cornell") return make_cornell_box();
   if (spec.rfind("rooms:", 0) == 0) {
@@ -29,7 +29,7 @@ Scene load_scene(const std::string& spec, float detail) {
     o.detail = detail;
     return make_rooms(o);
   }
-  return load_gltf(spec);
+  return load_gltf(spec, nullptr, scene_root);
 }
 
 }  // namespace irradcast

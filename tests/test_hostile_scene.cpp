@@ -1,0 +1,265 @@
+// Hostile scenes and edits (issue 16, items 1-4, in the order they were fixed): glTF URIs that
+// read files outside the scene's folder (or block on a FIFO), node hierarchies 200 000 deep,
+// scenes whose triangles are all degenerate or non-finite, and edits whose ops compose to
+// infinity. Every glTF is written here, in a temporary directory.
+#include <gtest/gtest.h>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "cli.h"
+#include "irradcast/builtin.h"
+#include "irradcast/engine_host.h"
+#include "irradcast/error.h"
+#include "irradcast/gltf.h"
+#include "irradcast/image.h"
+#include "irradcast/log.h"
+#include "irradcast/progress.h"
+#include "irradcast/scene_edit.h"
+#include "irradcast/world.h"
+#include "scene_builders.h"
+
+using namespace irradcast;
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+namespace {
+
+class Hostile : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() /
+           ("irradcast_hostile_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  fs::path dir_;
+};
+
+void write_bytes(const fs::path& path, const std::string& bytes) {
+  fs::create_directories(path.parent_path());
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  ASSERT_TRUE(f.good()) << path;
+}
+
+// One triangle (0,0,0) (1,0,0) (0,1,0), non-indexed: the buffer is its 36 position bytes.
+std::string triangle_bin() {
+  const float pos[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  return std::string(reinterpret_cast<const char*>(pos), sizeof pos);
+}
+
+json triangle_gltf(const std::string& buffer_uri) {
+  return {{"asset", {{"version", "2.0"}}},
+          {"buffers", {{{"byteLength", 36}, {"uri", buffer_uri}}}},
+          {"bufferViews", {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 36}}}},
+          {"accessors",
+           {{{"bufferView", 0},
+             {"componentType", 5126},
+             {"count", 3},
+             {"type", "VEC3"},
+             {"min", {0, 0, 0}},
+             {"max", {1, 1, 0}}}}},
+          {"meshes", {{{"name", "tri"}, {"primitives", {{{"attributes", {{"POSITION", 0}}}}}}}}},
+          {"nodes", {{{"mesh", 0}}}},
+          {"scenes", {{{"nodes", {0}}}}},
+          {"scene", 0}};
+}
+
+std::string data_uri(const std::string& bytes) {
+  static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out = "data:application/octet-stream;base64,";
+  for (std::size_t i = 0; i < bytes.size(); i += 3) {
+    std::uint32_t v = static_cast<unsigned char>(bytes[i]) << 16;
+    if (i + 1 < bytes.size()) v |= static_cast<unsigned char>(bytes[i + 1]) << 8;
+    if (i + 2 < bytes.size()) v |= static_cast<unsigned char>(bytes[i + 2]);
+    out += table[(v >> 18) & 63];
+    out += table[(v >> 12) & 63];
+    out += i + 1 < bytes.size() ? table[(v >> 6) & 63] : '=';
+    out += i + 2 < bytes.size() ? table[v & 63] : '=';
+  }
+  return out;
+}
+
+// The message of the irradcast::Error that loading `path` throws ("" if it loads).
+std::string load_error(const std::string& path) {
+  try {
+    load_scene(path);
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+bool contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+// Runs `work` on its own thread and waits at most `limit` for it: a liveness guard (a hung or
+// quadratic load fails the test instead of hanging it), not a timing assertion. Returns false on
+// a timeout (the thread is left to finish on its own: it owns everything it uses).
+bool finishes_within(std::chrono::seconds limit, std::function<void()> work) {
+  struct State {
+    std::mutex m;
+    std::condition_variable cv;
+    bool done = false;
+  };
+  auto state = std::make_shared<State>();
+  std::thread([state, work = std::move(work)] {
+    work();
+    std::lock_guard lock(state->m);
+    state->done = true;
+    state->cv.notify_all();
+  }).detach();
+  std::unique_lock lock(state->m);
+  return state->cv.wait_for(lock, limit, [&] { return state->done; });
+}
+
+test::CliResult run_tool(const char* exe, const std::string& args) {
+  // `timeout`: a tool that does not exit (a server that should have refused its scene) fails the
+  // test instead of hanging it.
+  return test::run_cli(std::string("timeout 30 ") + exe, args);
+}
+
+// ---------------------------------------------------------------------------------------------
+// 1. URIs confined to the scene's folder
+
+TEST_F(Hostile, GltfBufferUriOutsideTheFolderIsRefusedByName) {
+  // The "secret" has exactly the bytes a buffer needs, so that today's loader reads it happily.
+  write_bytes(dir_ / "token.bin", triangle_bin());
+  const fs::path scene = dir_ / "scenes" / "a" / "scene.gltf";
+  write_bytes(scene, triangle_gltf("../../token.bin").dump());
+  std::string m = load_error(scene.string());
+  EXPECT_TRUE(contains(m, "buffer 0 URI '../../token.bin' is refused")) << m;
+  EXPECT_TRUE(contains(m, "outside")) << m;
+  EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+
+  // Percent-encoded dots and slashes are decoded (as tinygltf does) before the check.
+  write_bytes(scene, triangle_gltf("%2e%2e/%2E%2E%2ftoken.bin").dump());
+  m = load_error(scene.string());
+  EXPECT_TRUE(contains(m, "buffer 0 URI '%2e%2e/%2E%2E%2ftoken.bin' is refused")) << m;
+
+  // An absolute path never worked; it is now refused by name too.
+  write_bytes(scene, triangle_gltf((dir_ / "token.bin").string()).dump());
+  m = load_error(scene.string());
+  EXPECT_TRUE(contains(m, "is refused: it is an absolute path")) << m;
+
+  // Inside the folder (a subfolder too, and a "../" that stays inside) it loads.
+  write_bytes(dir_ / "scenes" / "a" / "bin" / "tri.bin", triangle_bin());
+  write_bytes(scene, triangle_gltf("bin/../bin/tri.bin").dump());
+  EXPECT_EQ(load_error(scene.string()), "");
+  // data: URIs need no file.
+  write_bytes(scene, triangle_gltf(data_uri(triangle_bin())).dump());
+  EXPECT_EQ(load_error(scene.string()), "");
+}
+
+TEST_F(Hostile, GltfSymlinkPointingOutsideIsRefused) {
+  write_bytes(dir_ / "outside" / "tri.bin", triangle_bin());
+  const fs::path folder = dir_ / "scene";
+  fs::create_directories(folder);
+  fs::create_symlink(dir_ / "outside" / "tri.bin", folder / "link.bin");
+  write_bytes(folder / "scene.gltf", triangle_gltf("link.bin").dump());
+  std::string m = load_error((folder / "scene.gltf").string());
+  EXPECT_TRUE(contains(m, "buffer 0 URI 'link.bin' is refused: it resolves to")) << m;
+  // A symlinked folder inside is no way out either.
+  fs::create_directory_symlink(dir_ / "outside", folder / "sub");
+  write_bytes(folder / "scene.gltf", triangle_gltf("sub/tri.bin").dump());
+  m = load_error((folder / "scene.gltf").string());
+  EXPECT_TRUE(contains(m, "buffer 0 URI 'sub/tri.bin' is refused")) << m;
+  // A symlink that stays inside the folder is fine.
+  write_bytes(folder / "real" / "tri.bin", triangle_bin());
+  fs::create_symlink(folder / "real" / "tri.bin", folder / "inside.bin");
+  write_bytes(folder / "scene.gltf", triangle_gltf("inside.bin").dump());
+  EXPECT_EQ(load_error((folder / "scene.gltf").string()), "");
+}
+
+TEST_F(Hostile, GltfImageUriOutsideTheFolderIsRefused) {
+  write_png((dir_ / "secret.png").string(), 2, 2, std::vector<std::uint8_t>(12, 200));
+  json g = triangle_gltf(data_uri(triangle_bin()));
+  g["images"] = {{{"uri", "../secret.png"}}};
+  g["textures"] = {{{"source", 0}}};
+  g["materials"] = {{{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
+  g["meshes"][0]["primitives"][0]["material"] = 0;
+  const fs::path scene = dir_ / "scene" / "scene.gltf";
+  write_bytes(scene, g.dump());
+  const std::string m = load_error(scene.string());
+  EXPECT_TRUE(contains(m, "image 0 URI '../secret.png' is refused")) << m;
+}
+
+TEST_F(Hostile, GltfFifoAsBufferIsRefusedInsteadOfBlocking) {
+  const fs::path folder = dir_ / "scene";
+  fs::create_directories(folder);
+  const fs::path fifo = folder / "fifo.bin";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0) << std::strerror(errno);
+  write_bytes(folder / "scene.gltf", triangle_gltf("fifo.bin").dump());
+  auto message = std::make_shared<std::string>();
+  const std::string path = (folder / "scene.gltf").string();
+  const bool done =
+      finishes_within(std::chrono::seconds(20), [path, message] { *message = load_error(path); });
+  if (!done) {
+    // Unblock the reader (a writer that opens and closes: it reads end-of-file), then wait.
+    const int fd = ::open(fifo.c_str(), O_WRONLY | O_NONBLOCK);
+    if (fd >= 0) ::close(fd);
+    std::this_thread::sleep_for(std::chrono::seconds(1));
+    FAIL() << "loading a glTF whose buffer is a FIFO blocked for 20 s";
+  }
+  EXPECT_TRUE(contains(*message, "buffer 0 URI 'fifo.bin' is refused: it is not a regular file"))
+      << *message;
+}
+
+TEST_F(Hostile, SceneRootWidensTheFolderForBakeAndLoadScene) {
+  write_bytes(dir_ / "shared" / "tri.bin", triangle_bin());
+  const fs::path scene = dir_ / "scenes" / "a" / "scene.gltf";
+  write_bytes(scene, triangle_gltf("../../shared/tri.bin").dump());
+  const std::string out = (dir_ / "out.glb").string();
+  // Refused by default...
+  test::CliResult r = run_tool(IRRADCAST_BAKE_EXE,
+                               "--scene " + scene.string() + " --export-gltf " + out + " --quiet");
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, "irradcast-bake: error: ")) << r.output;
+  EXPECT_TRUE(contains(r.output, "buffer 0 URI '../../shared/tri.bin' is refused")) << r.output;
+  // ... read with --scene-root naming a folder that holds both.
+  r = run_tool(IRRADCAST_BAKE_EXE, "--scene " + scene.string() + " --scene-root " + dir_.string() +
+                                       " --export-gltf " + out + " --quiet");
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(fs::exists(out)) << r.output;
+  // A root that is not a folder is an error.
+  r = run_tool(IRRADCAST_BAKE_EXE, "--scene " + scene.string() + " --scene-root " +
+                                       (dir_ / "nope").string() + " --export-gltf " + out);
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, "not a directory")) << r.output;
+}
+
+TEST_F(Hostile, ServerRefusesASceneThatReadsOutsideItsFolder) {
+  write_bytes(dir_ / "token.bin", triangle_bin());
+  const fs::path scene = dir_ / "scene" / "scene.gltf";
+  write_bytes(scene, triangle_gltf("../token.bin").dump());
+  const test::CliResult r =
+      run_tool(IRRADCAST_SERVER_EXE,
+               "--scene " + scene.string() + " --port 0 --bind 127.0.0.1 --status-every 0");
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, "irradcast-server: error: ")) << r.output;
+  EXPECT_TRUE(contains(r.output, "buffer 0 URI '../token.bin' is refused")) << r.output;
+}
+
+}  // namespace
