@@ -262,4 +262,67 @@ TEST_F(Hostile, ServerRefusesASceneThatReadsOutsideItsFolder) {
   EXPECT_TRUE(contains(r.output, "buffer 0 URI '../token.bin' is refused")) << r.output;
 }
 
+// ---------------------------------------------------------------------------------------------
+// 4. Deep hierarchies
+
+// `chain` nodes, each the only child of the one before (node 0 the root, the last one carries a
+// triangle, every node moves 1 mm along x), then `ring` nodes that form one cycle.
+std::string hierarchy_gltf(int chain, int ring) {
+  json g = triangle_gltf(data_uri(triangle_bin()));
+  json nodes = json::array();
+  for (int i = 0; i < chain; ++i) {
+    json n = {{"translation", {0.001, 0, 0}}};
+    if (i + 1 < chain) n["children"] = {i + 1};
+    if (i + 1 == chain) n["mesh"] = 0;
+    nodes.push_back(std::move(n));
+  }
+  for (int i = 0; i < ring; ++i) nodes.push_back({{"children", {chain + (i + 1) % ring}}});
+  g["nodes"] = std::move(nodes);
+  if (ring > 0) g.erase("scenes"), g.erase("scene");
+  return g.dump();
+}
+
+TEST_F(Hostile, GltfChainOf200kNodesLoadsExportsAndBuilds) {
+  constexpr int kNodes = 200000;
+  const fs::path path = dir_ / "chain.gltf";
+  write_bytes(path, hierarchy_gltf(kNodes, 0));
+  struct Result {
+    std::string error;
+    std::size_t nodes = 0, objects = 0, reloaded = 0;
+    glm::vec3 corner{0.0f};
+  };
+  auto result = std::make_shared<Result>();
+  const std::string file = path.string(), glb = (dir_ / "chain.glb").string();
+  const bool done = finishes_within(std::chrono::seconds(60), [file, glb, result] {
+    try {
+      const Scene s = load_scene(file);
+      result->nodes = s.nodes.size();
+      result->objects = s.objects().size();
+      const World w = World::build(s);
+      if (!w.objects.empty()) result->corner = w.objects[0].positions[0];
+      save_gltf(s, glb);
+      result->reloaded = load_gltf(glb).nodes.size();
+    } catch (const std::exception& e) {
+      result->error = e.what();
+    }
+  });
+  ASSERT_TRUE(done) << "loading a " << kNodes << "-deep chain did not finish within 60 s";
+  EXPECT_EQ(result->error, "");
+  EXPECT_EQ(result->nodes, static_cast<std::size_t>(kNodes));
+  EXPECT_EQ(result->objects, 1u);
+  EXPECT_NEAR(result->corner.x, 0.001f * kNodes, 2.0f);
+  EXPECT_EQ(result->reloaded, static_cast<std::size_t>(kNodes));
+}
+
+TEST_F(Hostile, GltfCycleBesideALongChainIsReported) {
+  const fs::path path = dir_ / "cycle.gltf";
+  write_bytes(path, hierarchy_gltf(200000, 1000));
+  auto message = std::make_shared<std::string>();
+  const std::string file = path.string();
+  const bool done =
+      finishes_within(std::chrono::seconds(60), [file, message] { *message = load_error(file); });
+  ASSERT_TRUE(done) << "checking 201 000 nodes for cycles did not finish within 60 s";
+  EXPECT_TRUE(contains(*message, "is part of a cycle in the hierarchy")) << *message;
+}
+
 }  // namespace

@@ -814,14 +814,25 @@ void Loader::convert_nodes(Scene& scene) {
       node.children.push_back(c);
     }
   }
-  // With one parent per node, a cycle is a parent chain longer than the node count.
-  for (std::size_t i = 0; i < count; ++i) {
-    int n = static_cast<int>(i);
-    std::size_t steps = 0;
-    while (n >= 0) {
-      if (++steps > count)
-        fail("node " + std::to_string(i) + " is part of a cycle in the hierarchy");
-      n = scene.nodes[n].parent;
+  // With one parent per node, a cycle is a parent chain that comes back to itself. Each node is
+  // walked up once: a walk stops at a node known to reach a root (linear in the node count;
+  // iterative, so a chain of any depth needs no stack).
+  {
+    enum : std::uint8_t { kUnknown, kOnWalk, kReachesRoot };
+    std::vector<std::uint8_t> state(count, kUnknown);
+    std::vector<int> walk;
+    for (std::size_t i = 0; i < count; ++i) {
+      walk.clear();
+      int n = static_cast<int>(i);
+      while (n >= 0 && state[static_cast<std::size_t>(n)] == kUnknown) {
+        state[static_cast<std::size_t>(n)] = kOnWalk;
+        walk.push_back(n);
+        n = scene.nodes[static_cast<std::size_t>(n)].parent;
+      }
+      // Earlier walks all end in kReachesRoot: a kOnWalk node is on this walk, i.e. a cycle.
+      if (n >= 0 && state[static_cast<std::size_t>(n)] == kOnWalk)
+        fail("node " + std::to_string(n) + " is part of a cycle in the hierarchy");
+      for (int w : walk) state[static_cast<std::size_t>(w)] = kReachesRoot;
     }
   }
 
@@ -835,6 +846,7 @@ void Loader::convert_nodes(Scene& scene) {
     fail("the default scene " + std::to_string(s) + " does not exist");
   const tinygltf::Scene& gs = m_.scenes[s];
   scene.name = gs.name;
+  std::vector<bool> listed(count, false);
   for (int r : gs.nodes) {
     if (r < 0 || static_cast<std::size_t>(r) >= count)
       fail("scene " + std::to_string(s) + " refers to node " + std::to_string(r) +
@@ -842,8 +854,8 @@ void Loader::convert_nodes(Scene& scene) {
     if (scene.nodes[r].parent >= 0)
       fail("scene " + std::to_string(s) + " lists node " + std::to_string(r) +
            " as a root, but it has a parent");
-    if (std::find(scene.roots.begin(), scene.roots.end(), r) == scene.roots.end())
-      scene.roots.push_back(r);
+    if (!listed[static_cast<std::size_t>(r)]) scene.roots.push_back(r);
+    listed[static_cast<std::size_t>(r)] = true;
   }
 }
 
@@ -1103,7 +1115,14 @@ Scene load_gltf(const std::string& path, LoadReport* report, const std::string& 
   {
     const char* text = reinterpret_cast<const char*>(binary ? &bytes[20] : bytes.data());
     const std::size_t text_length = binary ? read_u32(&bytes[12]) : length;
-    const nlohmann::json j = nlohmann::json::parse(text, text + text_length, nullptr, false);
+    // Only the top-level arrays the checks read are kept (a scene's nodes and meshes can be
+    // hundreds of thousands of objects that tinygltf parses anyway).
+    const auto wanted = [](int depth, nlohmann::json::parse_event_t event, nlohmann::json& parsed) {
+      if (depth != 1 || event != nlohmann::json::parse_event_t::key) return true;
+      const std::string& key = parsed.get_ref<const std::string&>();
+      return key == "buffers" || key == "bufferViews" || key == "images";
+    };
+    const nlohmann::json j = nlohmann::json::parse(text, text + text_length, wanted, false);
     if (!j.is_discarded() && j.is_object()) {  // tinygltf reports broken JSON itself
       check_uris(path, j, guard);
       check_image_views(path, j);
