@@ -325,4 +325,125 @@ TEST_F(Hostile, GltfCycleBesideALongChainIsReported) {
   EXPECT_TRUE(contains(*message, "is part of a cycle in the hierarchy")) << *message;
 }
 
+// ---------------------------------------------------------------------------------------------
+// 3. Degenerate and non-finite triangles
+
+EngineHostOptions small_host() {
+  log::set_level(log::Level::Warn);
+  Progress::set_enabled(false);
+  EngineHostOptions o;
+  o.atlas.texels_per_scene = 32.0f;
+  o.max_updates = 1;
+  o.engine_nice = 0;
+  o.backend.kind = BackendKind::Embree;
+  return o;
+}
+
+TEST_F(Hostile, EngineHostRefusesASceneWithOnlyDegenerateTriangles) {
+  Scene s;
+  const std::uint32_t mat = test::add_material(s, glm::vec3(0.5f), glm::vec3(1.0f));
+  test::add_quad_object(s, "line", {0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {3, 0, 0}, mat);
+  test::add_quad_object(s, "point", {1, 1, 1}, {1, 1, 1}, {1, 1, 1}, {1, 1, 1}, mat);
+  try {
+    EngineHost host(s, "degenerate", small_host());
+    FAIL() << "a scene of degenerate triangles was accepted";
+  } catch (const Error& e) {
+    EXPECT_TRUE(contains(e.what(),
+                         "degenerate: the scene has no triangles with area after "
+                         "dropping 4 degenerate or non-finite ones"))
+        << e.what();
+  }
+}
+
+TEST_F(Hostile, EngineHostDropsDegenerateTrianglesAndKeepsTheRest) {
+  Scene s;
+  const std::uint32_t white = test::add_material(s, glm::vec3(0.8f));
+  const std::uint32_t light = test::add_material(s, glm::vec3(0.8f), glm::vec3(5.0f));
+  test::add_quad_object(s, "floor", {-1, 0, -1}, {-1, 0, 1}, {1, 0, 1}, {1, 0, -1}, white);
+  test::add_quad_object(s, "lamp", {-0.2f, 1, -0.2f}, {0.2f, 1, -0.2f}, {0.2f, 1, 0.2f},
+                        {-0.2f, 1, 0.2f}, light);
+  const int line = test::add_quad_object(s, "line", {0, 0.5f, 0}, {1, 0.5f, 0}, {2, 0.5f, 0},
+                                         {3, 0.5f, 0}, white);
+  // One good triangle and one with a repeated corner.
+  const int mixed = test::add_quad_object(s, "mixed", {0, 0, 0}, {0, 0.5f, 0}, {0, 0.5f, 0.5f},
+                                          {0, 0.5f, 0.5f}, white);
+  EngineHost host(s, "mostly fine", small_host());
+  const Scene& kept = host.scene();
+  EXPECT_EQ(kept.nodes[static_cast<std::size_t>(line)].mesh, -1);
+  const int m = kept.nodes[static_cast<std::size_t>(mixed)].mesh;
+  ASSERT_GE(m, 0);
+  EXPECT_EQ(kept.meshes[static_cast<std::size_t>(m)].triangles.size(), 1u);
+  EXPECT_EQ(kept.meshes[static_cast<std::size_t>(m)].positions.size(), 3u);
+  EXPECT_EQ(kept.objects().size(), 3u);
+  host.step();
+  EXPECT_EQ(host.stats().updates, 1u);
+}
+
+// A glTF whose mesh 0 is degenerate (collinear) and whose mesh 1 is placed by a node scaled so
+// far that its corners overflow to infinity in the world; with `good`, also a fine triangle lit
+// by a point light.
+json broken_gltf(bool good) {
+  const float pos[] = {0,     0, 0, 1,     0, 0, 2,     0, 0,   // collinear
+                       1e15f, 0, 0, 1e15f, 1, 0, 1e15f, 0, 1,   // x 1e30 = infinity
+                       0,     0, 0, 1,     0, 0, 0,     0, 1};  // fine (facing -y)
+  const std::string bin(reinterpret_cast<const char*>(pos), sizeof pos);
+  auto accessor = [](int offset, float max) {
+    return json{{"bufferView", 0}, {"byteOffset", offset}, {"componentType", 5126}, {"count", 3},
+                {"type", "VEC3"},  {"min", {0, 0, 0}},     {"max", {max, max, max}}};
+  };
+  json g = {{"asset", {{"version", "2.0"}}},
+            {"buffers", {{{"byteLength", bin.size()}, {"uri", data_uri(bin)}}}},
+            {"bufferViews", {{{"buffer", 0}, {"byteLength", bin.size()}}}},
+            {"accessors", {accessor(0, 2), accessor(36, 1e15f), accessor(72, 1)}},
+            {"meshes",
+             {{{"primitives", {{{"attributes", {{"POSITION", 0}}}}}}},
+              {{"primitives", {{{"attributes", {{"POSITION", 1}}}}}}},
+              {{"primitives", {{{"attributes", {{"POSITION", 2}}}}}}}}},
+            {"nodes", {{{"mesh", 0}}, {{"mesh", 1}, {"scale", {1e30, 1e30, 1e30}}}}},
+            {"scenes", {{{"nodes", {0, 1}}}}},
+            {"scene", 0}};
+  if (good) {
+    g["nodes"].push_back({{"mesh", 2}});
+    g["nodes"].push_back({{"translation", {0.3, 1, 0.3}},
+                          {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}});
+    g["scenes"][0]["nodes"] = {0, 1, 2, 3};
+    g["extensionsUsed"] = {"KHR_lights_punctual"};
+    g["extensions"] = {
+        {"KHR_lights_punctual", {{"lights", {{{"type", "point"}, {"intensity", 5}}}}}}};
+  }
+  return g;
+}
+
+TEST_F(Hostile, ServerAndBakeExitCleanlyOnASceneWithNoUsableTriangle) {
+  const fs::path scene = dir_ / "broken.gltf";
+  write_bytes(scene, broken_gltf(false).dump());
+  const std::string expected =
+      "the scene has no triangles with area after dropping 2 degenerate or non-finite ones";
+  test::CliResult r =
+      run_tool(IRRADCAST_SERVER_EXE,
+               "--scene " + scene.string() + " --port 0 --bind 127.0.0.1 --status-every 0");
+  EXPECT_EQ(r.status, 1) << r.output;  // today: Embree aborts (ray.valid())
+  EXPECT_TRUE(contains(r.output, "irradcast-server: error: ")) << r.output;
+  EXPECT_TRUE(contains(r.output, expected)) << r.output;
+  r = run_tool(IRRADCAST_BAKE_EXE,
+               "--scene " + scene.string() + " --out " + (dir_ / "out").string() + " --quiet");
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, expected)) << r.output;
+}
+
+TEST_F(Hostile, BakeDropsNonFiniteTrianglesWithOneWarning) {
+  const fs::path scene = dir_ / "mostly.gltf";
+  write_bytes(scene, broken_gltf(true).dump());
+  const test::CliResult r =
+      run_tool(IRRADCAST_BAKE_EXE, "--scene " + scene.string() + " --out " +
+                                       (dir_ / "out").string() + " --updates 1 --quiet");
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "dropped 2 of 3 triangles with zero area")) << r.output;
+  std::size_t warnings = 0;
+  for (std::size_t at = r.output.find("WARN"); at != std::string::npos;
+       at = r.output.find("WARN", at + 1))
+    ++warnings;
+  EXPECT_EQ(warnings, 1u) << r.output;
+}
+
 }  // namespace
