@@ -446,4 +446,106 @@ TEST_F(Hostile, BakeDropsNonFiniteTrianglesWithOneWarning) {
   EXPECT_EQ(warnings, 1u) << r.output;
 }
 
+// ---------------------------------------------------------------------------------------------
+// 2. Edits: the resulting transforms are checked, not each op alone
+
+SceneEdit scales(const std::string& node, int times, float factor) {
+  SceneEdit e;
+  for (int i = 0; i < times; ++i) {
+    EditOp op;
+    op.kind = EditOp::Kind::Scale;
+    op.target = node;
+    op.vector = glm::vec3(factor);
+    e.ops.push_back(op);
+  }
+  return e;
+}
+
+std::string read_bytes(const fs::path& path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+}
+
+// The scene as save_gltf writes it: equal bytes, equal scene.
+std::string saved(const Scene& s, const fs::path& path) {
+  save_gltf(s, path.string());
+  return read_bytes(path);
+}
+
+TEST_F(Hostile, EditThirteenScalesOfOneNodeIsRefusedAndChangesNothing) {
+  Scene scene = make_cornell_box();
+  const std::string before = saved(scene, dir_ / "before.gltf");
+  const SceneEdit edit = scales("tall_block", 13, 1000.0f);  // 1000^13: far beyond float
+  try {
+    apply_edit(scene, edit);
+    FAIL() << "13 x scale 1000 accepted";
+  } catch (const Error& e) {
+    EXPECT_TRUE(contains(e.what(), "(scale): the node's transform would leave +-1e9")) << e.what();
+  }
+  EXPECT_EQ(saved(scene, dir_ / "after.gltf"), before);
+
+  // The server refuses it when it is submitted; nothing is queued, nothing changes.
+  EngineHost host(make_cornell_box(), "cornell", small_host());
+  host.step();
+  const std::string hash = host.package()->hash;
+  ASSERT_THROW(host.submit_edit(edit), Error);  // (today: accepted, and Embree aborts on step)
+  host.step();
+  EXPECT_EQ(host.revision(), 0u);
+  EXPECT_EQ(host.package()->hash, hash);
+  EXPECT_EQ(saved(host.scene(), dir_ / "host.gltf"), before);
+  // A sane edit of the same node still goes through.
+  host.submit_edit(scales("tall_block", 2, 1.1f));
+  host.step();
+  EXPECT_EQ(host.revision(), 1u);
+}
+
+TEST_F(Hostile, EditParentScaleTimesChildScaleMustStayFinite) {
+  // A chain of five nodes, the last with a quad; each within the +-1e9 bound on its own.
+  Scene s;
+  const std::uint32_t mat = test::add_material(s, glm::vec3(0.5f));
+  int parent = -1;
+  for (int i = 0; i < 5; ++i) {
+    Node n;
+    n.name = "n" + std::to_string(i);
+    n.parent = parent;
+    parent = s.add_node(n);
+  }
+  const int quad =
+      test::add_quad_object(s, "quad", {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, mat);
+  s.nodes[static_cast<std::size_t>(quad)].parent = parent;
+  s.roots.pop_back();
+  s.nodes[static_cast<std::size_t>(parent)].children.push_back(quad);
+  const std::string before = saved(s, dir_ / "before.gltf");
+
+  SceneEdit edit;
+  for (int i = 0; i < 5; ++i) {
+    for (float f : {9e5f, 1e3f}) {  // 9e8 per node: (9e8)^5 overflows float
+      EditOp op;
+      op.kind = EditOp::Kind::Scale;
+      op.target = "n" + std::to_string(i);
+      op.vector = glm::vec3(f);
+      edit.ops.push_back(op);
+    }
+  }
+  try {
+    apply_edit(s, edit);
+    FAIL() << "an edit whose world transforms overflow was accepted";
+  } catch (const Error& e) {
+    EXPECT_TRUE(contains(e.what(), "world transform that is not finite")) << e.what();
+  }
+  EXPECT_EQ(saved(s, dir_ / "after.gltf"), before);
+
+  // Three of them: finite transforms, but the quad's corners beyond Embree's range (~1e26).
+  edit.ops.resize(6);
+  try {
+    validate_edit(s, edit);
+    FAIL() << "an edit that puts vertices at 7e26 was accepted";
+  } catch (const Error& e) {
+    EXPECT_TRUE(contains(e.what(), "node 5 'quad' would place a vertex beyond +-1e18")) << e.what();
+  }
+  // One is fine (9e8).
+  edit.ops.resize(2);
+  EXPECT_NO_THROW(apply_edit(s, edit));
+}
+
 }  // namespace
