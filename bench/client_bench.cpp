@@ -50,6 +50,7 @@ namespace {
 
 struct Options {
   std::string scene = "cornell";
+  std::string scene_root;
   int width = 512, height = 512;
   int frames = 120;
   int repeat = 3;
@@ -98,7 +99,7 @@ int run(const Options& o) {
   const int threads =
       o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency());
 
-  Scene scene = load_scene(o.scene);
+  Scene scene = load_scene(o.scene, 1.0f, o.scene_root);
   World world = World::build(scene);
   RayScene rays(world);
   LightSampler lights(world);
@@ -288,6 +289,9 @@ int main(int argc, char** argv) {
       "irradcast-bench-client"};
   app.option_defaults()->always_capture_default();
   app.add_option("--scene", o.scene, "cornell | rooms:N | FILE.gltf");
+  app.add_option(
+      "--scene-root", o.scene_root,
+      "folder a glTF scene may read buffers and images from (default: the scene file's folder)");
   app.add_option("--width", o.width)->check(CLI::Range(8, 8192));
   app.add_option("--height", o.height)->check(CLI::Range(8, 8192));
   app.add_option("--frames", o.frames, "frames along the path")->check(CLI::Range(2, 100000));

@@ -7,7 +7,9 @@
 
 namespace irradcast {
 
-Scene load_scene(const std::string& spec, float detail) {
+namespace {
+
+Scene build_or_load(const std::string& spec, float detail, const std::string& scene_root) {
   if (spec.empty()) throw Error("empty scene spec (expected cornell, rooms:N or a glTF file)");
   if (spec == "cornell") return make_cornell_box();
   if (spec.rfind("rooms:", 0) == 0) {
@@ -29,7 +31,15 @@ Scene load_scene(const std::string& spec, float detail) {
     o.detail = detail;
     return make_rooms(o);
   }
-  return load_gltf(spec);
+  return load_gltf(spec, nullptr, scene_root);
+}
+
+}  // namespace
+
+Scene load_scene(const std::string& spec, float detail, const std::string& scene_root) {
+  Scene scene = build_or_load(spec, detail, scene_root);
+  drop_degenerate_triangles(scene, spec);
+  return scene;
 }
 
 }  // namespace irradcast

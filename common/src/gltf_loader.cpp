@@ -2,7 +2,12 @@
 // index, range and value is validated here before any memory is read.
 #include <tiny_gltf.h>
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -809,14 +814,25 @@ void Loader::convert_nodes(Scene& scene) {
       node.children.push_back(c);
     }
   }
-  // With one parent per node, a cycle is a parent chain longer than the node count.
-  for (std::size_t i = 0; i < count; ++i) {
-    int n = static_cast<int>(i);
-    std::size_t steps = 0;
-    while (n >= 0) {
-      if (++steps > count)
-        fail("node " + std::to_string(i) + " is part of a cycle in the hierarchy");
-      n = scene.nodes[n].parent;
+  // With one parent per node, a cycle is a parent chain that comes back to itself. Each node is
+  // walked up once: a walk stops at a node known to reach a root (linear in the node count;
+  // iterative, so a chain of any depth needs no stack).
+  {
+    enum : std::uint8_t { kUnknown, kOnWalk, kReachesRoot };
+    std::vector<std::uint8_t> state(count, kUnknown);
+    std::vector<int> walk;
+    for (std::size_t i = 0; i < count; ++i) {
+      walk.clear();
+      int n = static_cast<int>(i);
+      while (n >= 0 && state[static_cast<std::size_t>(n)] == kUnknown) {
+        state[static_cast<std::size_t>(n)] = kOnWalk;
+        walk.push_back(n);
+        n = scene.nodes[static_cast<std::size_t>(n)].parent;
+      }
+      // Earlier walks all end in kReachesRoot: a kOnWalk node is on this walk, i.e. a cycle.
+      if (n >= 0 && state[static_cast<std::size_t>(n)] == kOnWalk)
+        fail("node " + std::to_string(n) + " is part of a cycle in the hierarchy");
+      for (int w : walk) state[static_cast<std::size_t>(w)] = kReachesRoot;
     }
   }
 
@@ -830,6 +846,7 @@ void Loader::convert_nodes(Scene& scene) {
     fail("the default scene " + std::to_string(s) + " does not exist");
   const tinygltf::Scene& gs = m_.scenes[s];
   scene.name = gs.name;
+  std::vector<bool> listed(count, false);
   for (int r : gs.nodes) {
     if (r < 0 || static_cast<std::size_t>(r) >= count)
       fail("scene " + std::to_string(s) + " refers to node " + std::to_string(r) +
@@ -837,8 +854,8 @@ void Loader::convert_nodes(Scene& scene) {
     if (scene.nodes[r].parent >= 0)
       fail("scene " + std::to_string(s) + " lists node " + std::to_string(r) +
            " as a root, but it has a parent");
-    if (std::find(scene.roots.begin(), scene.roots.end(), r) == scene.roots.end())
-      scene.roots.push_back(r);
+    if (!listed[static_cast<std::size_t>(r)]) scene.roots.push_back(r);
+    listed[static_cast<std::size_t>(r)] = true;
   }
 }
 
@@ -861,10 +878,8 @@ std::uint32_t read_u32(const unsigned char* p) {
 
 // tinygltf decodes images stored in bufferViews without checking that the view lies inside its
 // buffer: check that on the raw JSON first. (Buffers end up exactly byteLength bytes long.)
-void check_image_views(const std::string& path, const char* text, std::size_t length) {
-  nlohmann::json j = nlohmann::json::parse(text, text + length, nullptr, false);
-  if (j.is_discarded() || !j.is_object() || !j.contains("images") || !j["images"].is_array())
-    return;  // tinygltf reports broken JSON itself
+void check_image_views(const std::string& path, const nlohmann::json& j) {
+  if (!j.contains("images") || !j["images"].is_array()) return;
   auto fail = [&](const std::string& problem) { throw Error(path + ": " + problem); };
   auto uint_field = [&](const nlohmann::json& o, const char* key, std::uint64_t fallback,
                         const std::string& what) -> std::uint64_t {
@@ -900,9 +915,149 @@ void check_image_views(const std::string& path, const char* text, std::size_t le
   }
 }
 
+// ---------------------------------------------------------------------------------------------
+// External files. Every buffer and image URI must name a regular file inside the scene file's
+// folder (or the root the caller gives), after following symlinks: a scene must not make the
+// server read (and send to every client) a file elsewhere, nor block on a FIFO or a device.
+// check_uris() refuses such a URI by name before tinygltf runs; tinygltf then reads files only
+// through the callbacks below, which apply the same rule (and never look in the working
+// directory, which tinygltf tries after the base folder).
+
+namespace fs = std::filesystem;
+
+struct FileGuard {
+  std::string base;     // the folder tinygltf joins URIs to (absolute)
+  fs::path root;        // every file read must resolve to a path under this (canonical)
+  std::string refused;  // the first file a callback refused, and why
+};
+
+// What tinygltf (dlib::urldecode) makes of a URI before it joins it to the folder: %XX decoded,
+// '+' read as a space.
+std::string decode_uri(const std::string& uri) {
+  auto hex = [](char c) -> int {
+    if (c >= '0' && c <= '9') return c - '0';
+    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+    if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+    return 0;  // as tinygltf does
+  };
+  std::string out;
+  for (std::size_t i = 0; i < uri.size(); ++i) {
+    if (uri[i] == '+') {
+      out += ' ';
+    } else if (uri[i] == '%' && uri.size() > i + 2) {
+      out += static_cast<char>((hex(uri[i + 1]) << 4) | hex(uri[i + 2]));
+      i += 2;
+    } else {
+      out += uri[i];
+    }
+  }
+  return out;
+}
+
+// Why `file` may not be read ("" if it may): it must resolve, symlinks followed, to a path under
+// `root` that is a regular file. A file that does not exist is left to tinygltf ("not found").
+std::string refusal(const fs::path& file, const fs::path& root) {
+  std::error_code ec;
+  const fs::path resolved = fs::weakly_canonical(file, ec);
+  if (ec) return "it cannot be resolved (" + ec.message() + ")";
+  const fs::path rel = resolved.lexically_relative(root);
+  if (rel.empty() || *rel.begin() == "..")
+    return "it resolves to " + clean(resolved.string()) + ", outside " + clean(root.string());
+  const fs::file_status st = fs::status(resolved, ec);
+  if (!fs::exists(st)) return "";
+  if (!fs::is_regular_file(st)) return "it is not a regular file";
+  return "";
+}
+
+bool guarded_file_exists(const std::string& file, void* user) {
+  auto* g = static_cast<FileGuard*>(user);
+  const std::string prefix = g->base.back() == '/' ? g->base : g->base + "/";
+  if (file.compare(0, prefix.size(), prefix) != 0) return false;  // e.g. "./uri": never the cwd
+  const std::string why = refusal(file, g->root);
+  if (!why.empty()) {
+    if (g->refused.empty()) g->refused = "'" + clean(file.substr(prefix.size())) + "': " + why;
+    return false;
+  }
+  std::error_code ec;
+  return fs::is_regular_file(file, ec);
+}
+
+std::string no_expansion(const std::string& file, void*) {
+  return file;
+}
+
+bool guarded_read(std::vector<unsigned char>* out, std::string* err, const std::string& file,
+                  void* user) {
+  auto fail = [&](const std::string& why) {
+    if (err) *err = why;
+    return false;
+  };
+  if (!guarded_file_exists(file, user)) return fail("refused or not found");
+  std::error_code ec;
+  const fs::path resolved = fs::canonical(file, ec);
+  if (ec) return fail(ec.message());
+  // O_NONBLOCK: should the file have become a FIFO since the check, opening it does not block.
+  const int fd =
+      ::open(resolved.c_str(), O_RDONLY | O_NONBLOCK | O_NOFOLLOW | O_NOCTTY | O_CLOEXEC);
+  if (fd < 0) return fail(std::strerror(errno));
+  struct stat st {};
+  std::string why;
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode))
+    why = "not a regular file";
+  else if (st.st_size > 0x7fffffff)
+    why = "file too large";
+  if (why.empty()) {
+    out->resize(static_cast<std::size_t>(st.st_size));
+    std::size_t got = 0;
+    while (got < out->size()) {
+      const ssize_t n = ::read(fd, out->data() + got, out->size() - got);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) break;
+      got += static_cast<std::size_t>(n);
+    }
+    if (got != out->size()) why = "read error";
+  }
+  ::close(fd);
+  if (!why.empty()) {
+    auto* g = static_cast<FileGuard*>(user);
+    if (g->refused.empty()) g->refused = "'" + clean(file) + "': " + why;
+    return fail(why);
+  }
+  return true;
+}
+
+bool no_write(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+  if (err) *err = "writing files is disabled";
+  return false;
+}
+
+// Refuses, by name, a buffer or image URI that would read a file outside the root or one that
+// is not a regular file.
+void check_uris(const std::string& path, const nlohmann::json& j, const FileGuard& g) {
+  for (const char* kind : {"buffers", "images"}) {
+    if (!j.contains(kind) || !j[kind].is_array()) continue;
+    const nlohmann::json& items = j[kind];
+    for (std::size_t i = 0; i < items.size(); ++i) {
+      if (!items[i].is_object() || !items[i].contains("uri") || !items[i]["uri"].is_string())
+        continue;
+      const std::string uri = items[i]["uri"].get<std::string>();
+      if (tinygltf::IsDataURI(uri)) continue;
+      const std::string file = decode_uri(uri);
+      if (file.empty()) continue;
+      const std::string why = fs::path(file).is_absolute()
+                                  ? "it is an absolute path"
+                                  : refusal(fs::path(g.base) / file, g.root);
+      if (!why.empty())
+        throw Error(path + ": " + (kind[0] == 'b' ? "buffer " : "image ") + std::to_string(i) +
+                    " URI '" + clean(uri) + "' is refused: " + why +
+                    " (a scene may only read regular files under its folder)");
+    }
+  }
+}
+
 }  // namespace
 
-Scene load_gltf(const std::string& path, LoadReport* report) {
+Scene load_gltf(const std::string& path, LoadReport* report, const std::string& root) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec))
     throw Error(path + ": " +
@@ -946,30 +1101,56 @@ Scene load_gltf(const std::string& path, LoadReport* report) {
     throw Error(path + ": not a binary glTF file (no 'glTF' magic)");
   }
 
-  if (binary) {
-    const std::uint32_t json_len = read_u32(&bytes[12]);
-    check_image_views(path, reinterpret_cast<const char*>(&bytes[20]), json_len);
+  FileGuard guard;
+  guard.base = fs::absolute(path, ec).parent_path().string();
+  if (ec || guard.base.empty()) throw Error(path + ": cannot resolve the file's folder");
+  if (root.empty()) {
+    guard.root = fs::canonical(guard.base, ec);
+    if (ec) throw Error(path + ": cannot resolve the file's folder: " + ec.message());
   } else {
-    check_image_views(path, reinterpret_cast<const char*>(bytes.data()), length);
+    guard.root = fs::canonical(root, ec);
+    if (ec || !fs::is_directory(guard.root, ec))
+      throw Error("scene root '" + clean(root) + "': not a directory");
+  }
+  {
+    const char* text = reinterpret_cast<const char*>(binary ? &bytes[20] : bytes.data());
+    const std::size_t text_length = binary ? read_u32(&bytes[12]) : length;
+    // Only the top-level arrays the checks read are kept (a scene's nodes and meshes can be
+    // hundreds of thousands of objects that tinygltf parses anyway).
+    const auto wanted = [](int depth, nlohmann::json::parse_event_t event, nlohmann::json& parsed) {
+      if (depth != 1 || event != nlohmann::json::parse_event_t::key) return true;
+      const std::string& key = parsed.get_ref<const std::string&>();
+      return key == "buffers" || key == "bufferViews" || key == "images";
+    };
+    const nlohmann::json j = nlohmann::json::parse(text, text + text_length, wanted, false);
+    if (!j.is_discarded() && j.is_object()) {  // tinygltf reports broken JSON itself
+      check_uris(path, j, guard);
+      check_image_views(path, j);
+    }
   }
 
   tinygltf::Model model;
   tinygltf::TinyGLTF gltf;
+  gltf.SetFsCallbacks(
+      tinygltf::FsCallbacks{&guarded_file_exists, &no_expansion, &guarded_read, &no_write, &guard});
   std::string err, warn;
-  std::filesystem::path base = std::filesystem::absolute(path, ec).parent_path();
+  const std::string& base = guard.base;
   bool ok = false;
   try {
     if (binary)
       ok = gltf.LoadBinaryFromMemory(&model, &err, &warn, bytes.data(),
-                                     static_cast<unsigned int>(length), base.string());
+                                     static_cast<unsigned int>(length), base);
     else
       ok =
           gltf.LoadASCIIFromString(&model, &err, &warn, reinterpret_cast<const char*>(bytes.data()),
-                                   static_cast<unsigned int>(length), base.string());
+                                   static_cast<unsigned int>(length), base);
   } catch (const std::exception& e) {
     throw Error(path + ": invalid glTF: " + one_line(e.what()));
   }
   bytes = {};
+  if (!guard.refused.empty())
+    throw Error(path + ": the file " + guard.refused +
+                " (a scene may only read regular files under its folder)");
   if (!ok || !err.empty()) {
     std::string msg = one_line(err);
     if (msg.empty()) msg = one_line(warn);

@@ -1,7 +1,13 @@
 #include "irradcast/scene.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
+#include <string>
+#include <type_traits>
+
+#include "irradcast/error.h"
+#include "irradcast/log.h"
 
 namespace irradcast {
 namespace {
@@ -18,7 +24,33 @@ const std::array<float, 256>& srgb_table() {
   return table;
 }
 
+bool usable_point(glm::vec3 p) {
+  return std::abs(p.x) <= kMaxCoordinate && std::abs(p.y) <= kMaxCoordinate &&
+         std::abs(p.z) <= kMaxCoordinate;  // false for NaN too
+}
+
+// A name from the scene for a one-line message: control characters replaced, length capped.
+std::string printable(const std::string& name) {
+  std::string out = name.substr(0, 40);
+  for (char& c : out)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = '?';
+  return out;
+}
+
+bool finite_matrix(const glm::mat4& m) {
+  for (int c = 0; c < 4; ++c)
+    for (int r = 0; r < 4; ++r)
+      if (!std::isfinite(m[c][r])) return false;
+  return usable_point(glm::vec3(m[3]));
+}
+
 }  // namespace
+
+bool usable_triangle(glm::vec3 a, glm::vec3 b, glm::vec3 c) {
+  if (!usable_point(a) || !usable_point(b) || !usable_point(c)) return false;
+  const float area = 0.5f * glm::length(glm::cross(b - a, c - a));
+  return area > 0.0f && std::isfinite(area);
+}
 
 glm::vec4 Texture::sample_srgb(glm::vec2 uv) const {
   if (width <= 0 || height <= 0) return glm::vec4(1.0f);
@@ -115,6 +147,107 @@ std::size_t Scene::triangle_count() const {
   std::size_t n = 0;
   for (const Object& o : objects()) n += meshes[o.mesh].triangle_count();
   return n;
+}
+
+std::size_t drop_degenerate_triangles(Scene& scene, const std::string& label) {
+  const std::vector<glm::mat4> world = scene.world_matrices();
+  const std::vector<Object> objects = scene.objects();
+  std::vector<std::vector<int>> placed(scene.meshes.size());  // nodes placing each mesh
+  for (const Object& o : objects) placed[static_cast<std::size_t>(o.mesh)].push_back(o.node);
+
+  std::size_t dropped = 0, total = 0, meshes_hit = 0;
+  std::string which;
+  for (std::size_t m = 0; m < scene.meshes.size(); ++m) {
+    Mesh& mesh = scene.meshes[m];
+    if (placed[m].empty()) continue;  // not in the world
+    const std::size_t nv = mesh.positions.size(), nt = mesh.triangles.size();
+    total += nt;
+    std::vector<bool> keep(nt, true);
+    bool bad_vertex = false;
+    auto check = [&](const std::vector<glm::vec3>& p) {
+      for (const glm::vec3& v : p) bad_vertex = bad_vertex || !usable_point(v);
+      for (std::size_t t = 0; t < nt; ++t) {
+        const glm::uvec3& i = mesh.triangles[t];
+        if (keep[t] &&
+            !(i.x < nv && i.y < nv && i.z < nv && usable_triangle(p[i.x], p[i.y], p[i.z])))
+          keep[t] = false;
+      }
+    };
+    check(mesh.positions);
+    std::vector<glm::vec3> wp(nv);
+    const glm::mat4* last = nullptr;
+    for (int node : placed[m]) {
+      const glm::mat4& mat = world[static_cast<std::size_t>(node)];
+      if (last && *last == mat) continue;
+      last = &mat;
+      for (std::size_t v = 0; v < nv; ++v)
+        wp[v] = glm::vec3(mat * glm::vec4(mesh.positions[v], 1.0f));
+      check(wp);
+    }
+    const std::size_t kept = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), true));
+    if (kept == nt && !bad_vertex) continue;
+    // Keep the triangles that are usable everywhere and the vertices they use.
+    std::vector<std::uint32_t> remap(nv, ~0u);
+    std::vector<glm::uvec3> triangles;
+    std::vector<std::uint32_t> materials;
+    std::uint32_t next = 0;
+    for (std::size_t t = 0; t < nt; ++t) {
+      if (!keep[t]) continue;
+      glm::uvec3 tri = mesh.triangles[t];
+      for (int k = 0; k < 3; ++k) {
+        if (remap[tri[k]] == ~0u) remap[tri[k]] = next++;
+        tri[k] = remap[tri[k]];
+      }
+      triangles.push_back(tri);
+      if (t < mesh.triangle_material.size()) materials.push_back(mesh.triangle_material[t]);
+    }
+    auto compact = [&](auto& values) {
+      if (values.size() != nv) return;
+      std::remove_reference_t<decltype(values)> out(next);
+      for (std::size_t v = 0; v < nv; ++v)
+        if (remap[v] != ~0u) out[remap[v]] = values[v];
+      values = std::move(out);
+    };
+    compact(mesh.normals);
+    compact(mesh.uv0);
+    compact(mesh.uv1);
+    compact(mesh.positions);
+    mesh.triangles = std::move(triangles);
+    mesh.triangle_material = std::move(materials);
+    if (mesh.triangles.empty())
+      for (int node : placed[m]) scene.nodes[static_cast<std::size_t>(node)].mesh = -1;
+    if (kept == nt) continue;  // only unused vertices went
+    dropped += nt - kept;
+    if (++meshes_hit <= 4)
+      which += std::string(which.empty() ? "" : ", ") + "mesh " + std::to_string(m) +
+               (mesh.name.empty() ? "" : " \"" + printable(mesh.name) + "\"") + " " +
+               std::to_string(nt - kept) + " of " + std::to_string(nt);
+  }
+
+  std::size_t lights = 0, cameras = 0;
+  for (std::size_t n = 0; n < scene.nodes.size(); ++n) {
+    Node& node = scene.nodes[n];
+    if ((node.light < 0 && node.camera < 0) || finite_matrix(world[n])) continue;
+    lights += node.light >= 0;
+    cameras += node.camera >= 0;
+    node.light = -1;
+    node.camera = -1;
+  }
+  if (lights + cameras > 0)
+    log::warn("scene", label + ": dropped " + std::to_string(lights) + " lights and " +
+                           std::to_string(cameras) +
+                           " cameras on nodes whose world transform is not finite");
+  if (dropped == 0) return 0;
+  log::warn("scene", label + ": dropped " + std::to_string(dropped) + " of " +
+                         std::to_string(total) +
+                         " triangles with zero area or corners that are not finite (in the "
+                         "mesh or where a node places it), from " +
+                         std::to_string(meshes_hit) + (meshes_hit == 1 ? " mesh (" : " meshes (") +
+                         which + (meshes_hit > 4 ? ", ...)" : ")"));
+  if (scene.objects().empty())
+    throw Error(label + ": the scene has no triangles with area after dropping " +
+                std::to_string(dropped) + " degenerate or non-finite ones");
+  return dropped;
 }
 
 }  // namespace irradcast

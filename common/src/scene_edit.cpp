@@ -2,7 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
+#include <limits>
+#include <map>
+#include <utility>
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
@@ -97,17 +101,6 @@ void check_op(const Scene& scene, const EditOp& op, const std::string& where) {
     throw Error(where + ": a number is beyond +-1e6");
   if (op.kind == Kind::Scale && glm::any(glm::lessThan(glm::abs(op.vector), glm::vec3(1e-3f))))
     throw Error(where + ": a scale factor below 1e-3 in magnitude; use hide instead");
-  if (op.kind == Kind::Move || op.kind == Kind::Scale) {
-    // The node's transform after this op must stay well inside float range.
-    const glm::mat4& local = scene.nodes[static_cast<std::size_t>(resolve(scene, op, where))].local;
-    const glm::mat4 next = op.kind == Kind::Move
-                               ? glm::translate(glm::mat4(1.0f), op.vector) * local
-                               : local * glm::scale(glm::mat4(1.0f), op.vector);
-    for (int c = 0; c < 4; ++c)
-      for (int r = 0; r < 4; ++r)
-        if (!(std::abs(next[c][r]) < 1e9f))
-          throw Error(where + ": the node's transform would leave +-1e9");
-  }
   switch (op.kind) {
     case Kind::Rotate:
       if (!(glm::length(op.vector) > 0.0f))
@@ -146,6 +139,94 @@ void check_op(const Scene& scene, const EditOp& op, const std::string& where) {
   }
 }
 
+bool changes_transform(Kind k) {
+  return k == Kind::Move || k == Kind::Rotate || k == Kind::Scale || k == Kind::SetTransform;
+}
+
+// A node's local transform after a Move, Rotate, Scale or SetTransform op (validated).
+glm::mat4 transformed(const glm::mat4& local, const EditOp& op) {
+  switch (op.kind) {
+    case Kind::Move:
+      return glm::translate(glm::mat4(1.0f), op.vector) * local;
+    case Kind::Rotate: {
+      const glm::vec3 origin(local[3]);
+      const glm::mat4 r =
+          glm::rotate(glm::mat4(1.0f), glm::radians(op.value), glm::normalize(op.vector));
+      return glm::translate(glm::mat4(1.0f), origin) * r *
+             glm::translate(glm::mat4(1.0f), -origin) * local;
+    }
+    case Kind::Scale:
+      return local * glm::scale(glm::mat4(1.0f), op.vector);
+    case Kind::SetTransform:
+      return op.matrix;
+    default:
+      return local;
+  }
+}
+
+// Bounds that keep every coordinate finite however many edits follow one another.
+constexpr float kMaxTransformEntry = 1e9f;
+
+bool within(const glm::mat4& m, float limit) {
+  for (int c = 0; c < 4; ++c)
+    for (int r = 0; r < 4; ++r)
+      if (!(std::abs(m[c][r]) < limit)) return false;  // NaN fails too
+  return true;
+}
+
+// The world-space result of the new local transforms: every node under a moved one keeps a
+// finite world transform, and every triangle of the objects there keeps corners within
+// +-kMaxCoordinate and a finite area (a parent's scale multiplies its children's).
+void check_world(const Scene& scene, const std::map<int, glm::mat4>& locals) {
+  const std::size_t count = scene.nodes.size();
+  auto local = [&](std::size_t n) -> const glm::mat4& {
+    auto it = locals.find(static_cast<int>(n));
+    return it == locals.end() ? scene.nodes[n].local : it->second;
+  };
+  // World transforms from the roots (iteratively, as Scene::world_matrices); `moved`: the node
+  // or one of its ancestors has a new local transform.
+  std::vector<glm::mat4> world(count, glm::mat4(1.0f));
+  std::vector<std::uint8_t> moved(count, 0), done(count, 0);
+  std::vector<std::pair<int, int>> stack;  // (node, parent or -1)
+  for (int r : scene.roots) stack.emplace_back(r, -1);
+  while (!stack.empty()) {
+    const auto [n, parent] = stack.back();
+    stack.pop_back();
+    const std::size_t i = static_cast<std::size_t>(n);
+    if (i >= count || done[i]) continue;
+    done[i] = 1;
+    const std::size_t p = static_cast<std::size_t>(parent);
+    world[i] = parent < 0 ? local(i) : world[p] * local(i);
+    moved[i] = (parent >= 0 && moved[p]) || locals.count(n) > 0;
+    for (int c : scene.nodes[i].children) stack.emplace_back(c, n);
+  }
+  for (std::size_t n = 0; n < count; ++n) {
+    if (!moved[n]) continue;
+    std::string name = scene.nodes[n].name.substr(0, 60);
+    for (char& c : name)
+      if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = '?';
+    const std::string what = "node " + std::to_string(n) + (name.empty() ? "" : " '" + name + "'");
+    if (!within(world[n], std::numeric_limits<float>::infinity()))
+      throw Error("scene edit: " + what + " would get a world transform that is not finite");
+    const int m = scene.nodes[n].mesh;
+    if (m < 0 || static_cast<std::size_t>(m) >= scene.meshes.size()) continue;
+    const Mesh& mesh = scene.meshes[static_cast<std::size_t>(m)];
+    std::vector<glm::vec3> p(mesh.positions.size());
+    for (std::size_t v = 0; v < p.size(); ++v) {
+      p[v] = glm::vec3(world[n] * glm::vec4(mesh.positions[v], 1.0f));
+      if (!(glm::all(glm::lessThanEqual(glm::abs(p[v]), glm::vec3(kMaxCoordinate)))))
+        throw Error("scene edit: " + what +
+                    " would place a vertex beyond +-1e18 or at infinity in world space");
+    }
+    for (const glm::uvec3& t : mesh.triangles) {
+      if (t.x >= p.size() || t.y >= p.size() || t.z >= p.size()) continue;
+      const float area = 0.5f * glm::length(glm::cross(p[t.y] - p[t.x], p[t.z] - p[t.x]));
+      if (!std::isfinite(area))
+        throw Error("scene edit: " + what + " would give a triangle an infinite area");
+    }
+  }
+}
+
 void add_unique(std::vector<int>& v, int i) {
   if (std::find(v.begin(), v.end(), i) == v.end()) v.push_back(i);
 }
@@ -168,9 +249,25 @@ EditOp::Kind parse_edit_kind(std::string_view name) {
 
 void validate_edit(const Scene& scene, const SceneEdit& edit) {
   if (edit.ops.empty()) throw Error("scene edit: no operations");
-  for (std::size_t i = 0; i < edit.ops.size(); ++i)
-    check_op(scene, edit.ops[i],
-             "edit op " + std::to_string(i + 1) + " (" + edit_kind_name(edit.ops[i].kind) + ")");
+  // Each op on its own, then the transforms it leads to: the ops of an edit compose (13 scales
+  // by 1000 of one node, each fine alone, reach infinity together), so each node's transform is
+  // followed through the edit and checked after every op, then the world-space result.
+  std::map<int, glm::mat4> locals;  // nodes whose local transform the edit changes: the result
+  for (std::size_t i = 0; i < edit.ops.size(); ++i) {
+    const EditOp& op = edit.ops[i];
+    const std::string where =
+        "edit op " + std::to_string(i + 1) + " (" + edit_kind_name(op.kind) + ")";
+    check_op(scene, op, where);
+    if (!changes_transform(op.kind)) continue;
+    const int n = resolve(scene, op, where);
+    auto it = locals.find(n);
+    const glm::mat4 next = transformed(
+        it == locals.end() ? scene.nodes[static_cast<std::size_t>(n)].local : it->second, op);
+    if (!within(next, kMaxTransformEntry))
+      throw Error(where + ": the node's transform would leave +-1e9");
+    locals[n] = next;
+  }
+  if (!locals.empty()) check_world(scene, locals);
 }
 
 EditEffect apply_edit(Scene& scene, const SceneEdit& edit) {
@@ -179,32 +276,15 @@ EditEffect apply_edit(Scene& scene, const SceneEdit& edit) {
   for (const EditOp& op : edit.ops) {
     const int i = resolve(scene, op, "");
     switch (op.kind) {
-      case Kind::Move: {
+      case Kind::Move:
+      case Kind::Rotate:
+      case Kind::Scale:
+      case Kind::SetTransform: {
         Node& n = scene.nodes[i];
-        n.local = glm::translate(glm::mat4(1.0f), op.vector) * n.local;
+        n.local = transformed(n.local, op);
         add_unique(effect.nodes, i);
         break;
       }
-      case Kind::Rotate: {
-        Node& n = scene.nodes[i];
-        const glm::vec3 origin(n.local[3]);
-        const glm::mat4 r =
-            glm::rotate(glm::mat4(1.0f), glm::radians(op.value), glm::normalize(op.vector));
-        n.local = glm::translate(glm::mat4(1.0f), origin) * r *
-                  glm::translate(glm::mat4(1.0f), -origin) * n.local;
-        add_unique(effect.nodes, i);
-        break;
-      }
-      case Kind::Scale: {
-        Node& n = scene.nodes[i];
-        n.local = n.local * glm::scale(glm::mat4(1.0f), op.vector);
-        add_unique(effect.nodes, i);
-        break;
-      }
-      case Kind::SetTransform:
-        scene.nodes[i].local = op.matrix;
-        add_unique(effect.nodes, i);
-        break;
       case Kind::Show:
       case Kind::Hide:
         scene.nodes[i].visible = op.kind == Kind::Show;

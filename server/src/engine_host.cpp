@@ -56,6 +56,9 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
       options_(options),
       impl_(std::make_unique<Impl>()) {
   options_.engine.validate();
+  // Zero-area and non-finite triangles break the BVH builders and rays (the tools drop them at
+  // load already; a scene built in code may still have them).
+  drop_degenerate_triangles(scene_, scene_id_);
   world_ = World::build(scene_);
   if (world_.objects.empty()) throw Error(scene_id_ + ": the scene has no triangles to light");
   // Editable: the two-level BVH that an edit updates incrementally.

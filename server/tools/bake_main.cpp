@@ -42,6 +42,7 @@ namespace {
 
 struct Options {
   std::string scene = "cornell";
+  std::string scene_root;
   std::string out;
   float detail = 1.0f;
   int reference_spp = 0;
@@ -123,7 +124,7 @@ int run(const Options& o) {
   json timings;
   Stopwatch total, sw;
 
-  Scene scene = load_scene(o.scene, o.detail);
+  Scene scene = load_scene(o.scene, o.detail, o.scene_root);
   timings["load"] = sw.lap();
   const std::vector<Object> objects = scene.objects();
   log::info("bake", "scene '" + o.scene + "': " + std::to_string(objects.size()) + " objects, " +
@@ -358,6 +359,9 @@ int main(int argc, char** argv) {
       "irradcast-bake"};
   app.option_defaults()->always_capture_default();
   app.add_option("--scene", o.scene, "cornell | rooms:N | FILE.gltf | FILE.glb");
+  app.add_option(
+      "--scene-root", o.scene_root,
+      "folder a glTF scene may read buffers and images from (default: the scene file's folder)");
   app.add_option("--out", o.out, "output directory");
   app.add_option("--detail", o.detail, "tessellation of rooms:N (triangles grow ~detail^2)")
       ->check(CLI::PositiveNumber);

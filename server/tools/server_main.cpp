@@ -28,6 +28,7 @@ namespace {
 
 struct Options {
   std::string scene = "cornell";
+  std::string scene_root;
   float detail = 1.0f;
   std::string bind = "0.0.0.0";
   int port = 7450;
@@ -99,7 +100,7 @@ int run(const Options& o, sigset_t signals) {
                 " characters; it needs at least " + std::to_string(kMinTokenLength) +
                 " (e.g. head -c 18 /dev/urandom | base64)");
   log::info("server", "loading " + o.scene);
-  EngineHost host(load_scene(o.scene, o.detail), o.scene, ho);
+  EngineHost host(load_scene(o.scene, o.detail, o.scene_root), o.scene, ho);
 
   ServerOptions so;
   so.bind = o.bind;
@@ -213,6 +214,9 @@ int main(int argc, char** argv) {
   app.option_defaults()->always_capture_default();
   app.add_option("--scene", o.scene, "cornell | rooms:N | FILE.gltf | FILE.glb");
   app.add_option("--detail", o.detail, "tessellation of rooms:N")->check(CLI::PositiveNumber);
+  app.add_option(
+      "--scene-root", o.scene_root,
+      "folder a glTF scene may read buffers and images from (default: the scene file's folder)");
   app.add_option("--bind", o.bind, "address to listen on");
   app.add_option("--port", o.port, "TCP port (0 = any free port)")->check(CLI::Range(0, 65535));
   app.add_option("--io-threads", o.io_threads, "network threads")->check(CLI::Range(1, 64));

@@ -25,7 +25,9 @@ struct RoomsOptions {
 Scene make_rooms(const RoomsOptions& options);
 
 // Parses a scene spec (see above) and loads or builds the scene; `detail` applies to rooms:N.
+// A glTF file may read external files under `scene_root` only (default: its own folder; see
+// load_gltf). Degenerate and non-finite triangles are dropped (drop_degenerate_triangles).
 // Throws irradcast::Error on a bad spec or file.
-Scene load_scene(const std::string& spec, float detail = 1.0f);
+Scene load_scene(const std::string& spec, float detail = 1.0f, const std::string& scene_root = "");
 
 }  // namespace irradcast

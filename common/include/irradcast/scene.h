@@ -98,6 +98,13 @@ struct Object {
   int mesh = -1;
 };
 
+// The largest coordinate magnitude the ray tracer takes (Embree treats larger ones as invalid).
+constexpr float kMaxCoordinate = 1e18f;
+
+// A triangle rays can hit and texels can cover: corners finite and within +-kMaxCoordinate, and
+// an area (computed as WorldObject::area does) that is finite and not zero.
+bool usable_triangle(glm::vec3 a, glm::vec3 b, glm::vec3 c);
+
 struct Scene {
   std::string name;
   std::vector<Node> nodes;
@@ -123,5 +130,14 @@ struct Scene {
 
   std::size_t triangle_count() const;  // over all objects (instanced meshes count each time)
 };
+
+// Drops what would break the ray tracer: every triangle that is not usable_triangle() in object
+// space or in the world space of any node that places its mesh, and the lights and cameras of
+// nodes whose world transform is not finite. A mesh that loses triangles also loses the vertices
+// no triangle uses any more; a node whose mesh is left with no triangle drops it (it is then no
+// object, as with the glTF loader's empty meshes). Logs one warning line (counts, and the first
+// meshes concerned) naming `label`. Throws irradcast::Error if triangles were dropped and the
+// scene has no object left. Returns the number of triangles dropped.
+std::size_t drop_degenerate_triangles(Scene& scene, const std::string& label);
 
 }  // namespace irradcast

@@ -57,6 +57,10 @@ EditOp::Kind parse_edit_kind(std::string_view name);
 // Throws irradcast::Error with a message that names the operation (by position and kind) and
 // what is wrong: an empty edit, an unknown target, a non-finite number, a zero rotation axis or
 // scale factor, a matrix that is not affine or not invertible, a negative intensity or colour.
+// The transforms the edit leads to are checked too, ops composed in order: each node's local
+// transform within +-1e9 after every op, and (a parent's scale multiplying its children's) the
+// world transforms below a moved node finite, their objects' vertices within +-1e18 in world
+// space and their triangle areas finite.
 void validate_edit(const Scene& scene, const SceneEdit& edit);
 // Validates, then applies every operation in order. On an invalid edit it throws and the scene
 // is unchanged.
