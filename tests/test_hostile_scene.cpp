@@ -40,7 +40,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class Hostile : public ::testing::Test {
+class HostileScene : public ::testing::Test {
  protected:
   void SetUp() override {
     const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
@@ -144,7 +144,7 @@ test::CliResult run_tool(const char* exe, const std::string& args) {
 // ---------------------------------------------------------------------------------------------
 // 1. URIs confined to the scene's folder
 
-TEST_F(Hostile, GltfBufferUriOutsideTheFolderIsRefusedByName) {
+TEST_F(HostileScene, GltfBufferUriOutsideTheFolderIsRefusedByName) {
   // The "secret" has exactly the bytes a buffer needs, so that today's loader reads it happily.
   write_bytes(dir_ / "token.bin", triangle_bin());
   const fs::path scene = dir_ / "scenes" / "a" / "scene.gltf";
@@ -173,7 +173,7 @@ TEST_F(Hostile, GltfBufferUriOutsideTheFolderIsRefusedByName) {
   EXPECT_EQ(load_error(scene.string()), "");
 }
 
-TEST_F(Hostile, GltfSymlinkPointingOutsideIsRefused) {
+TEST_F(HostileScene, GltfSymlinkPointingOutsideIsRefused) {
   write_bytes(dir_ / "outside" / "tri.bin", triangle_bin());
   const fs::path folder = dir_ / "scene";
   fs::create_directories(folder);
@@ -193,7 +193,7 @@ TEST_F(Hostile, GltfSymlinkPointingOutsideIsRefused) {
   EXPECT_EQ(load_error((folder / "scene.gltf").string()), "");
 }
 
-TEST_F(Hostile, GltfImageUriOutsideTheFolderIsRefused) {
+TEST_F(HostileScene, GltfImageUriOutsideTheFolderIsRefused) {
   write_png((dir_ / "secret.png").string(), 2, 2, std::vector<std::uint8_t>(12, 200));
   json g = triangle_gltf(data_uri(triangle_bin()));
   g["images"] = {{{"uri", "../secret.png"}}};
@@ -206,7 +206,7 @@ TEST_F(Hostile, GltfImageUriOutsideTheFolderIsRefused) {
   EXPECT_TRUE(contains(m, "image 0 URI '../secret.png' is refused")) << m;
 }
 
-TEST_F(Hostile, GltfFifoAsBufferIsRefusedInsteadOfBlocking) {
+TEST_F(HostileScene, GltfFifoAsBufferIsRefusedInsteadOfBlocking) {
   const fs::path folder = dir_ / "scene";
   fs::create_directories(folder);
   const fs::path fifo = folder / "fifo.bin";
@@ -227,7 +227,7 @@ TEST_F(Hostile, GltfFifoAsBufferIsRefusedInsteadOfBlocking) {
       << *message;
 }
 
-TEST_F(Hostile, SceneRootWidensTheFolderForBakeAndLoadScene) {
+TEST_F(HostileScene, SceneRootWidensTheFolderForBakeAndLoadScene) {
   write_bytes(dir_ / "shared" / "tri.bin", triangle_bin());
   const fs::path scene = dir_ / "scenes" / "a" / "scene.gltf";
   write_bytes(scene, triangle_gltf("../../shared/tri.bin").dump());
@@ -250,7 +250,7 @@ TEST_F(Hostile, SceneRootWidensTheFolderForBakeAndLoadScene) {
   EXPECT_TRUE(contains(r.output, "not a directory")) << r.output;
 }
 
-TEST_F(Hostile, ServerRefusesASceneThatReadsOutsideItsFolder) {
+TEST_F(HostileScene, ServerRefusesASceneThatReadsOutsideItsFolder) {
   write_bytes(dir_ / "token.bin", triangle_bin());
   const fs::path scene = dir_ / "scene" / "scene.gltf";
   write_bytes(scene, triangle_gltf("../token.bin").dump());
@@ -282,7 +282,7 @@ std::string hierarchy_gltf(int chain, int ring) {
   return g.dump();
 }
 
-TEST_F(Hostile, GltfChainOf200kNodesLoadsExportsAndBuilds) {
+TEST_F(HostileScene, GltfChainOf200kNodesLoadsExportsAndBuilds) {
   constexpr int kNodes = 200000;
   const fs::path path = dir_ / "chain.gltf";
   write_bytes(path, hierarchy_gltf(kNodes, 0));
@@ -314,7 +314,7 @@ TEST_F(Hostile, GltfChainOf200kNodesLoadsExportsAndBuilds) {
   EXPECT_EQ(result->reloaded, static_cast<std::size_t>(kNodes));
 }
 
-TEST_F(Hostile, GltfCycleBesideALongChainIsReported) {
+TEST_F(HostileScene, GltfCycleBesideALongChainIsReported) {
   const fs::path path = dir_ / "cycle.gltf";
   write_bytes(path, hierarchy_gltf(200000, 1000));
   auto message = std::make_shared<std::string>();
@@ -339,7 +339,7 @@ EngineHostOptions small_host() {
   return o;
 }
 
-TEST_F(Hostile, EngineHostRefusesASceneWithOnlyDegenerateTriangles) {
+TEST_F(HostileScene, EngineHostRefusesASceneWithOnlyDegenerateTriangles) {
   Scene s;
   const std::uint32_t mat = test::add_material(s, glm::vec3(0.5f), glm::vec3(1.0f));
   test::add_quad_object(s, "line", {0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {3, 0, 0}, mat);
@@ -355,7 +355,7 @@ TEST_F(Hostile, EngineHostRefusesASceneWithOnlyDegenerateTriangles) {
   }
 }
 
-TEST_F(Hostile, EngineHostDropsDegenerateTrianglesAndKeepsTheRest) {
+TEST_F(HostileScene, EngineHostDropsDegenerateTrianglesAndKeepsTheRest) {
   Scene s;
   const std::uint32_t white = test::add_material(s, glm::vec3(0.8f));
   const std::uint32_t light = test::add_material(s, glm::vec3(0.8f), glm::vec3(5.0f));
@@ -414,7 +414,7 @@ json broken_gltf(bool good) {
   return g;
 }
 
-TEST_F(Hostile, ServerAndBakeExitCleanlyOnASceneWithNoUsableTriangle) {
+TEST_F(HostileScene, ServerAndBakeExitCleanlyOnASceneWithNoUsableTriangle) {
   const fs::path scene = dir_ / "broken.gltf";
   write_bytes(scene, broken_gltf(false).dump());
   const std::string expected =
@@ -431,7 +431,7 @@ TEST_F(Hostile, ServerAndBakeExitCleanlyOnASceneWithNoUsableTriangle) {
   EXPECT_TRUE(contains(r.output, expected)) << r.output;
 }
 
-TEST_F(Hostile, BakeDropsNonFiniteTrianglesWithOneWarning) {
+TEST_F(HostileScene, BakeDropsNonFiniteTrianglesWithOneWarning) {
   const fs::path scene = dir_ / "mostly.gltf";
   write_bytes(scene, broken_gltf(true).dump());
   const test::CliResult r =
@@ -472,7 +472,7 @@ std::string saved(const Scene& s, const fs::path& path) {
   return read_bytes(path);
 }
 
-TEST_F(Hostile, EditThirteenScalesOfOneNodeIsRefusedAndChangesNothing) {
+TEST_F(HostileScene, EditThirteenScalesOfOneNodeIsRefusedAndChangesNothing) {
   Scene scene = make_cornell_box();
   const std::string before = saved(scene, dir_ / "before.gltf");
   const SceneEdit edit = scales("tall_block", 13, 1000.0f);  // 1000^13: far beyond float
@@ -499,7 +499,30 @@ TEST_F(Hostile, EditThirteenScalesOfOneNodeIsRefusedAndChangesNothing) {
   EXPECT_EQ(host.revision(), 1u);
 }
 
-TEST_F(Hostile, EditParentScaleTimesChildScaleMustStayFinite) {
+// Thirteen edits of one scale 1000 each, submitted before the engine applies any: each is
+// checked against the transform the ones before it lead to, so the one that would leave the
+// bound is refused (checking each against the scene as loaded let all through).
+TEST_F(HostileScene, EditsSubmittedTogetherAreCheckedInSequence) {
+  EngineHost host(make_cornell_box(), "cornell", small_host());
+  host.step();
+  int accepted = 0;
+  std::string refusal;
+  for (int i = 0; i < 13; ++i) {
+    try {
+      host.submit_edit(scales("tall_block", 1, 1000.0f));
+      ++accepted;
+    } catch (const Error& e) {
+      refusal = e.what();
+      break;
+    }
+  }
+  EXPECT_EQ(accepted, 2) << "1000^3 times the block's extent leaves +-1e9";
+  EXPECT_TRUE(contains(refusal, "(scale): the node's transform would leave +-1e9")) << refusal;
+  host.step();
+  EXPECT_EQ(host.revision(), static_cast<std::uint64_t>(accepted));
+}
+
+TEST_F(HostileScene, EditParentScaleTimesChildScaleMustStayFinite) {
   // A chain of five nodes, the last with a quad; each within the +-1e9 bound on its own.
   Scene s;
   const std::uint32_t mat = test::add_material(s, glm::vec3(0.5f));

@@ -161,7 +161,7 @@ std::uint64_t closed(const Server& s, CloseReason r, std::uint64_t at_least = 1)
 
 // Before Hello a frame may only be a few KiB: a 16 MiB announcement is refused at once instead of
 // being buffered until the idle timeout.
-TEST(Hostile, FramesBeforeHelloAreCapped) {
+TEST(HostileService, FramesBeforeHelloAreCapped) {
   EngineHost host(make_cornell_box(), "cornell", quick_host());
   Server server(host, loopback());
   server.start();
@@ -186,7 +186,7 @@ TEST(Hostile, FramesBeforeHelloAreCapped) {
 }
 
 // A connection that sends nothing, or no Hello, is closed after the hello timeout.
-TEST(Hostile, ConnectionsWithoutHelloAreClosed) {
+TEST(HostileService, ConnectionsWithoutHelloAreClosed) {
   EngineHost host(make_cornell_box(), "cornell", quick_host());
   ServerOptions o = loopback();
   o.hello_timeout = 300ms;
@@ -216,7 +216,7 @@ TEST(Hostile, ConnectionsWithoutHelloAreClosed) {
 
 // Incomplete frames of all sessions together stay under max_partial_bytes (plus 64 KiB a
 // session): the sessions that hold large incomplete frames past it are closed.
-TEST(Hostile, IncompleteFramesAreBoundedTogether) {
+TEST(HostileService, IncompleteFramesAreBoundedTogether) {
   EngineHost host(make_cornell_box(), "cornell", quick_host());
   ServerOptions o = loopback();
   o.max_partial_bytes = 1u << 20;
@@ -248,7 +248,7 @@ TEST(Hostile, IncompleteFramesAreBoundedTogether) {
 // Another client's burst of edits (more than the 256 queued replies that drop a slow client)
 // does not drop the viewers: the broadcasts wait in their own bounded queue, and the editor,
 // whose acknowledgements pile up, is simply read more slowly.
-TEST(Hostile, AnEditBurstDropsNobody) {
+TEST(HostileService, AnEditBurstDropsNobody) {
   EngineHost host(make_cornell_box(), "cornell", quick_host(0));
   ServerOptions o = loopback();
   o.control_token = kToken;
@@ -295,7 +295,7 @@ TEST(Hostile, AnEditBurstDropsNobody) {
 }
 
 // Text from a client cannot forge log lines, and one client cannot flood the log.
-TEST(Hostile, ClientTextIsEscapedAndRateLimitedInTheLog) {
+TEST(HostileService, ClientTextIsEscapedAndRateLimitedInTheLog) {
   EngineHost host(make_cornell_box(), "cornell", quick_host());
   ServerOptions o = loopback();
   Server server(host, o);
@@ -334,7 +334,7 @@ TEST(Hostile, ClientTextIsEscapedAndRateLimitedInTheLog) {
   EXPECT_GT(server.stats().log_lines_suppressed, 0u);
 }
 
-TEST(Hostile, ShortControlTokensAreRefused) {
+TEST(HostileService, ShortControlTokensAreRefused) {
   EngineHost host(make_cornell_box(), "cornell", quick_host());
   ServerOptions o = loopback();
   o.control_token = "x";
@@ -351,7 +351,7 @@ TEST(Hostile, ShortControlTokensAreRefused) {
 
 // Wrong tokens: each answer comes later than the one before, and after max_token_failures the
 // connection is closed and the address refused for the ban duration.
-TEST(Hostile, WrongTokensAreDelayedThenTheAddressIsRefused) {
+TEST(HostileService, WrongTokensAreDelayedThenTheAddressIsRefused) {
   EngineHost host(make_cornell_box(), "cornell", quick_host());
   ServerOptions o = loopback();
   o.control_token = kToken;
@@ -403,7 +403,7 @@ TEST(Hostile, WrongTokensAreDelayedThenTheAddressIsRefused) {
   server.stop();
 }
 
-TEST(Hostile, SessionsPerAddressAreLimited) {
+TEST(HostileService, SessionsPerAddressAreLimited) {
   EngineHost host(make_cornell_box(), "cornell", quick_host());
   ServerOptions o = loopback();
   o.max_clients_per_peer = 3;
@@ -432,7 +432,7 @@ TEST(Hostile, SessionsPerAddressAreLimited) {
 
 // A client that subscribes and never reads is closed as slow once its writes make no progress
 // for the stall timeout, long before the idle timeout.
-TEST(Hostile, ClientsThatNeverReadAreClosed) {
+TEST(HostileService, ClientsThatNeverReadAreClosed) {
   EngineHost host(make_cornell_box(), "cornell", quick_host(0));
   ServerOptions o = loopback();
   o.write_stall_timeout = 800ms;
@@ -464,7 +464,7 @@ TEST(Hostile, ClientsThatNeverReadAreClosed) {
 
 // Out of file descriptors the accept loop pauses (one warning, not a spin), and accepts again
 // once descriptors are free. The server runs as its own process with a limit of 64 files.
-TEST(Hostile, AcceptPausesWhenOutOfDescriptors) {
+TEST(HostileService, AcceptPausesWhenOutOfDescriptors) {
   const std::string dir = testing::TempDir() + "/hostile_fd";
   std::filesystem::create_directories(dir);
   const std::string log = dir + "/server.log";
@@ -517,7 +517,7 @@ TEST(Hostile, AcceptPausesWhenOutOfDescriptors) {
 
 // The protocol over TLS: a client that trusts the CA gets its Welcome; one that trusts another
 // CA, or speaks plain TCP, gets nowhere.
-TEST(Hostile, TlsOnTheProtocolPort) {
+TEST(HostileService, TlsOnTheProtocolPort) {
   const std::string dir = testing::TempDir() + "/hostile_tls";
   std::filesystem::create_directories(dir);
   const test::TlsFiles files = test::make_tls_files(dir);

@@ -158,8 +158,18 @@ void EngineHost::set_camera(std::uint64_t viewer, std::optional<CameraPose> pose
 }
 
 std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
-  // Names and counts never change, so the copy taken at load validates every edit.
-  validate_edit(validation_scene_, edit);
+  // The validation scene is the scene as every accepted edit will leave it: an edit is checked
+  // against the transforms the edits before it lead to (13 edits of scale 1000 each are refused
+  // like one edit of 13). Under its own lock, so validation order is revision order and the
+  // engine thread is not held up.
+  std::lock_guard validation(validation_mutex_);
+  {
+    std::lock_guard lock(mutex_);
+    if (pending_edits_.size() >= kMaxPendingEdits)
+      throw Error("the engine has " + std::to_string(pending_edits_.size()) +
+                  " edits waiting; send this one again later");
+  }
+  apply_edit(validation_scene_, edit);  // validates first: unchanged when it throws
   std::lock_guard lock(mutex_);
   const std::uint64_t revision = ++submitted_revision_;
   pending_edits_.emplace_back(revision, edit);

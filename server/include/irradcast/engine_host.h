@@ -168,7 +168,10 @@ class EngineHost {
   Atlas atlas_;
   std::shared_ptr<const wire::ScenePackage> package_;  // guarded by mutex_
   std::uint64_t tile_epoch_ = 0;                       // guarded by mutex_
-  Scene validation_scene_;  // names and counts for submit_edit (never edited)
+  // submit_edit: the scene as the accepted edits will leave it (validation_mutex_).
+  std::mutex validation_mutex_;
+  Scene validation_scene_;
+  static constexpr std::size_t kMaxPendingEdits = 4096;            // accepted, not yet applied
   std::deque<std::pair<std::uint64_t, SceneEdit>> pending_edits_;  // guarded by mutex_
   std::uint64_t revision_ = 0;                                     // applied; guarded by mutex_
   std::uint64_t submitted_revision_ = 0;                           // guarded by mutex_
