@@ -12,8 +12,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "irradcast/gltf.h"
-#include "irradcast/log.h"
+#include "irradcast/common/gltf.h"
+#include "irradcast/common/log.h"
 
 namespace {
 

@@ -27,16 +27,16 @@
 #include <thread>
 #include <vector>
 
-#include "irradcast/builtin.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/error.h"
-#include "irradcast/log.h"
-#include "irradcast/net_server.h"
-#include "irradcast/progress.h"
-#include "irradcast/ray_scene.h"
-#include "irradcast/sampling.h"
-#include "irradcast/scene_edit.h"
-#include "irradcast/view_client.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/sampling.h"
+#include "irradcast/common/scene_edit.h"
+#include "irradcast/client/view_client.h"
 #include "plot.h"
 
 namespace fs = std::filesystem;

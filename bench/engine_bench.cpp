@@ -37,19 +37,19 @@
 #include <thread>
 #include <vector>
 
-#include "irradcast/atlas.h"
-#include "irradcast/builtin.h"
-#include "irradcast/embree_backend.h"
-#include "irradcast/engine.h"
-#include "irradcast/error.h"
-#include "irradcast/gbuffer.h"
-#include "irradcast/lights.h"
-#include "irradcast/log.h"
-#include "irradcast/progress.h"
-#include "irradcast/ray_scene.h"
-#include "irradcast/sampling.h"
-#include "irradcast/texel_validity.h"
-#include "irradcast/world.h"
+#include "irradcast/common/atlas.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/engine/embree_backend.h"
+#include "irradcast/engine/engine.h"
+#include "irradcast/common/error.h"
+#include "irradcast/engine/gbuffer.h"
+#include "irradcast/common/lights.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/sampling.h"
+#include "irradcast/engine/texel_validity.h"
+#include "irradcast/common/world.h"
 #include "plot.h"
 
 namespace fs = std::filesystem;
@@ -103,7 +103,7 @@ struct Capture {
   std::vector<std::uint32_t> owner;
 };
 
-// Copies of the backend's private helpers (server/src/embree_backend.cpp): stream ids, the
+// Copies of the backend's private helpers (server/engine/src/embree_backend.cpp): stream ids, the
 // per-texel RNG, and the shading of a hit and of a probe lookup.
 enum Stream : std::uint64_t { kDirect = 1, kProbe = 2, kScatter = 3, kProbePick = 4 };
 

@@ -31,10 +31,10 @@
 #include <thread>
 #include <vector>
 
-#include "irradcast/error.h"
-#include "irradcast/load_generator.h"
-#include "irradcast/log.h"
-#include "irradcast/view_client.h"
+#include "irradcast/common/error.h"
+#include "irradcast/client/load_generator.h"
+#include "irradcast/common/log.h"
+#include "irradcast/client/view_client.h"
 #include "plot.h"
 
 namespace fs = std::filesystem;

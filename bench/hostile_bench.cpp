@@ -29,13 +29,13 @@
 #include <vector>
 
 #include "../tests/tls_cert.h"
-#include "irradcast/builtin.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/error.h"
-#include "irradcast/load_generator.h"
-#include "irradcast/log.h"
-#include "irradcast/net_server.h"
-#include "irradcast/progress.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/common/error.h"
+#include "irradcast/client/load_generator.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/common/progress.h"
 
 namespace fs = std::filesystem;
 using namespace irradcast;

@@ -21,19 +21,19 @@
 #include <string>
 #include <vector>
 
-#include "irradcast/builtin.h"
-#include "irradcast/camera.h"
-#include "irradcast/compositor.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/error.h"
-#include "irradcast/gbuffer.h"
-#include "irradcast/lights.h"
-#include "irradcast/log.h"
-#include "irradcast/path_tracer.h"
-#include "irradcast/progress.h"
-#include "irradcast/reference_lightmaps.h"
-#include "irradcast/texel_validity.h"
-#include "irradcast/tonemap.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/camera.h"
+#include "irradcast/common/compositor.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/common/error.h"
+#include "irradcast/engine/gbuffer.h"
+#include "irradcast/common/lights.h"
+#include "irradcast/common/log.h"
+#include "irradcast/engine/path_tracer.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/engine/reference_lightmaps.h"
+#include "irradcast/engine/texel_validity.h"
+#include "irradcast/common/tonemap.h"
 #include "plot.h"
 
 using namespace irradcast;

@@ -23,9 +23,9 @@
 #include <thread>
 #include <vector>
 
-#include "irradcast/log.h"
-#include "irradcast/metrics_endpoint.h"
-#include "irradcast/metrics_text.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/metrics_endpoint.h"
+#include "irradcast/service/metrics_text.h"
 
 using namespace irradcast;
 using asio::ip::tcp;

@@ -1,7 +1,7 @@
 // Shared by the engine's compute passes (direct.comp, gather.comp, scatter.comp): the buffers
 // the Vulkan backend binds, random numbers, sampling warps, BVH traversal and the surface
-// lookups (albedo, emission, previous-bounce radiance). Mirrors server/src/embree_backend.cpp
-// and common/src/lights.cpp; the data layouts are written by server/src/vulkan_backend.cpp.
+// lookups (albedo, emission, previous-bounce radiance). Mirrors server/engine/src/embree_backend.cpp
+// and common/src/lights.cpp; the data layouts are written by server/engine/src/vulkan_backend.cpp.
 
 layout(local_size_x = 64) in;
 
@@ -92,7 +92,7 @@ vec2 next_2d(inout uint s) {
   return vec2(a, next_float(s));
 }
 
-// ---- sampling warps (common/include/irradcast/sampling.h)
+// ---- sampling warps (common/include/irradcast/common/sampling.h)
 
 vec3 frame_to_world(vec3 n, vec3 v) {
   float sgn = n.z >= 0.0 ? 1.0 : -1.0;

@@ -6,11 +6,11 @@
 #include <memory>
 #include <vector>
 
-#include "irradcast/atlas.h"
-#include "irradcast/image.h"
-#include "irradcast/lightmap.h"
-#include "irradcast/ray_scene.h"
-#include "irradcast/world.h"
+#include "irradcast/common/atlas.h"
+#include "irradcast/common/image.h"
+#include "irradcast/common/lightmap.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/world.h"
 #include "scene_builders.h"
 
 namespace irradcast::test {

@@ -6,15 +6,15 @@
 #include <memory>
 #include <vector>
 
-#include "irradcast/atlas.h"
-#include "irradcast/embree_backend.h"
-#include "irradcast/engine.h"
-#include "irradcast/gbuffer.h"
-#include "irradcast/lights.h"
-#include "irradcast/progress.h"
-#include "irradcast/ray_scene.h"
-#include "irradcast/texel_validity.h"
-#include "irradcast/world.h"
+#include "irradcast/common/atlas.h"
+#include "irradcast/engine/embree_backend.h"
+#include "irradcast/engine/engine.h"
+#include "irradcast/engine/gbuffer.h"
+#include "irradcast/common/lights.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/engine/texel_validity.h"
+#include "irradcast/common/world.h"
 
 namespace irradcast::test {
 

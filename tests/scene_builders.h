@@ -4,7 +4,7 @@
 #include <array>
 #include <string>
 
-#include "irradcast/scene.h"
+#include "irradcast/common/scene.h"
 
 namespace irradcast::test {
 

@@ -12,10 +12,10 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 
-#include "irradcast/atlas.h"
-#include "irradcast/gbuffer.h"
-#include "irradcast/scene.h"
-#include "irradcast/world.h"
+#include "irradcast/common/atlas.h"
+#include "irradcast/engine/gbuffer.h"
+#include "irradcast/common/scene.h"
+#include "irradcast/common/world.h"
 
 using namespace irradcast;
 

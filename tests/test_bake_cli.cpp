@@ -8,7 +8,7 @@
 #include <string>
 
 #include "cli.h"
-#include "irradcast/image.h"
+#include "irradcast/common/image.h"
 
 namespace fs = std::filesystem;
 

@@ -1,8 +1,8 @@
 #include <gtest/gtest.h>
 
-#include "irradcast/camera.h"
-#include "irradcast/compositor.h"
-#include "irradcast/error.h"
+#include "irradcast/common/camera.h"
+#include "irradcast/common/compositor.h"
+#include "irradcast/common/error.h"
 #include "scene_builders.h"
 
 using namespace irradcast;

@@ -12,16 +12,16 @@
 #include <string>
 
 #include "cli.h"
-#include "irradcast/builtin.h"
-#include "irradcast/camera_message.h"
-#include "irradcast/edit_message.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/frame.h"
-#include "irradcast/log.h"
-#include "irradcast/net_server.h"
-#include "irradcast/progress.h"
-#include "irradcast/scene_package.h"
-#include "irradcast/view_client.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/client/camera_message.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/wire/scene_package.h"
+#include "irradcast/client/view_client.h"
 
 using namespace irradcast;
 using asio::ip::tcp;

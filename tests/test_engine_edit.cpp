@@ -6,13 +6,13 @@
 #include <algorithm>
 #include <cmath>
 
-#include "irradcast/builtin.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/error.h"
-#include "irradcast/log.h"
-#include "irradcast/progress.h"
-#include "irradcast/sampling.h"
-#include "irradcast/scene_edit.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/common/sampling.h"
+#include "irradcast/common/scene_edit.h"
 
 using namespace irradcast;
 

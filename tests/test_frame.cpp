@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "irradcast/error.h"
-#include "irradcast/frame.h"
+#include "irradcast/common/error.h"
+#include "irradcast/wire/frame.h"
 
 using namespace irradcast::wire;
 using google::protobuf::util::MessageDifferencer;

@@ -17,10 +17,10 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
 
-#include "irradcast/builtin.h"
-#include "irradcast/error.h"
-#include "irradcast/gltf.h"
-#include "irradcast/scene.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/gltf.h"
+#include "irradcast/common/scene.h"
 
 using namespace irradcast;
 using nlohmann::json;

@@ -4,11 +4,11 @@
 
 #include <cmath>
 
-#include "irradcast/builtin.h"
-#include "irradcast/gpu_bvh.h"
-#include "irradcast/ray_scene.h"
-#include "irradcast/sampling.h"
-#include "irradcast/world.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/engine/gpu_bvh.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/sampling.h"
+#include "irradcast/common/world.h"
 #include "scene_builders.h"
 
 using namespace irradcast;

@@ -23,15 +23,15 @@
 #include <nlohmann/json.hpp>
 
 #include "cli.h"
-#include "irradcast/builtin.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/error.h"
-#include "irradcast/gltf.h"
-#include "irradcast/image.h"
-#include "irradcast/log.h"
-#include "irradcast/progress.h"
-#include "irradcast/scene_edit.h"
-#include "irradcast/world.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/gltf.h"
+#include "irradcast/common/image.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/common/scene_edit.h"
+#include "irradcast/common/world.h"
 #include "scene_builders.h"
 
 using namespace irradcast;

@@ -17,16 +17,16 @@
 #include <thread>
 
 #include "cli.h"
-#include "irradcast/builtin.h"
-#include "irradcast/edit_message.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/error.h"
-#include "irradcast/frame.h"
-#include "irradcast/log.h"
-#include "irradcast/net_server.h"
-#include "irradcast/progress.h"
-#include "irradcast/scene_edit.h"
-#include "irradcast/transport.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/common/error.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/common/scene_edit.h"
+#include "irradcast/wire/transport.h"
 #include "tls_cert.h"
 
 using namespace irradcast;

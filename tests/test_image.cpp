@@ -2,10 +2,10 @@
 
 #include <filesystem>
 
-#include "irradcast/camera.h"
-#include "irradcast/error.h"
-#include "irradcast/image.h"
-#include "irradcast/tonemap.h"
+#include "irradcast/common/camera.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/image.h"
+#include "irradcast/common/tonemap.h"
 
 using namespace irradcast;
 namespace fs = std::filesystem;

@@ -6,15 +6,15 @@
 #include <string>
 
 #include "engine_setup.h"
-#include "irradcast/builtin.h"
-#include "irradcast/camera.h"
-#include "irradcast/compositor.h"
-#include "irradcast/engine.h"
-#include "irradcast/error.h"
-#include "irradcast/halton.h"
-#include "irradcast/irradiance_cache.h"
-#include "irradcast/path_tracer.h"
-#include "irradcast/vpl_method.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/camera.h"
+#include "irradcast/common/compositor.h"
+#include "irradcast/engine/engine.h"
+#include "irradcast/common/error.h"
+#include "irradcast/engine/halton.h"
+#include "irradcast/engine/irradiance_cache.h"
+#include "irradcast/engine/path_tracer.h"
+#include "irradcast/engine/vpl_method.h"
 #include "scene_builders.h"
 
 using namespace irradcast;

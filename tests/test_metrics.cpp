@@ -13,16 +13,16 @@
 #include <stdexcept>
 #include <thread>
 
-#include "irradcast/builtin.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/error.h"
-#include "irradcast/frame.h"
-#include "irradcast/log.h"
-#include "irradcast/metrics_endpoint.h"
-#include "irradcast/metrics_text.h"
-#include "irradcast/net_server.h"
-#include "irradcast/progress.h"
-#include "irradcast/view_client.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/common/error.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/metrics_endpoint.h"
+#include "irradcast/service/metrics_text.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/client/view_client.h"
 
 using namespace irradcast;
 using asio::ip::tcp;

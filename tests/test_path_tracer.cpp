@@ -2,13 +2,13 @@
 
 #include <cmath>
 
-#include "irradcast/builtin.h"
-#include "irradcast/camera.h"
-#include "irradcast/lights.h"
-#include "irradcast/path_tracer.h"
-#include "irradcast/progress.h"
-#include "irradcast/ray_scene.h"
-#include "irradcast/sampling.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/camera.h"
+#include "irradcast/common/lights.h"
+#include "irradcast/engine/path_tracer.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/sampling.h"
 #include "scene_builders.h"
 
 using namespace irradcast;

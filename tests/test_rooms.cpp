@@ -15,10 +15,10 @@
 
 #include <glm/glm.hpp>
 
-#include "irradcast/builtin.h"
-#include "irradcast/error.h"
-#include "irradcast/scene.h"
-#include "irradcast/world.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/scene.h"
+#include "irradcast/common/world.h"
 
 using namespace irradcast;
 

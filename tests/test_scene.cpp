@@ -2,8 +2,8 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 
-#include "irradcast/scene.h"
-#include "irradcast/world.h"
+#include "irradcast/common/scene.h"
+#include "irradcast/common/world.h"
 
 using namespace irradcast;
 

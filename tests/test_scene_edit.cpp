@@ -7,13 +7,13 @@
 #include <limits>
 #include <string>
 
-#include "irradcast/atlas.h"
-#include "irradcast/builtin.h"
-#include "irradcast/edit_message.h"
-#include "irradcast/error.h"
-#include "irradcast/scene_edit.h"
-#include "irradcast/scene_package.h"
-#include "irradcast/world.h"
+#include "irradcast/common/atlas.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/scene_edit.h"
+#include "irradcast/wire/scene_package.h"
+#include "irradcast/common/world.h"
 
 using namespace irradcast;
 

@@ -8,13 +8,13 @@
 #include <string>
 #include <vector>
 
-#include "irradcast/atlas.h"
-#include "irradcast/builtin.h"
-#include "irradcast/compositor.h"
-#include "irradcast/error.h"
-#include "irradcast/ray_scene.h"
-#include "irradcast/scene_package.h"
-#include "irradcast/world.h"
+#include "irradcast/common/atlas.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/compositor.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/wire/scene_package.h"
+#include "irradcast/common/world.h"
 
 using namespace irradcast;
 

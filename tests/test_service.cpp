@@ -8,16 +8,16 @@
 #include <future>
 #include <thread>
 
-#include "irradcast/builtin.h"
-#include "irradcast/camera.h"
-#include "irradcast/compositor.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/frame.h"
-#include "irradcast/log.h"
-#include "irradcast/net_server.h"
-#include "irradcast/progress.h"
-#include "irradcast/ray_scene.h"
-#include "irradcast/view_client.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/camera.h"
+#include "irradcast/common/compositor.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/client/view_client.h"
 
 using namespace irradcast;
 using asio::ip::tcp;

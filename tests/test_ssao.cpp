@@ -3,11 +3,11 @@
 #include <cstdio>
 
 #include "client_pass_scenes.h"
-#include "irradcast/client_passes.h"
-#include "irradcast/compositor.h"
-#include "irradcast/error.h"
-#include "irradcast/frame_gbuffer.h"
-#include "irradcast/ssao.h"
+#include "irradcast/client/client_passes.h"
+#include "irradcast/common/compositor.h"
+#include "irradcast/common/error.h"
+#include "irradcast/client/frame_gbuffer.h"
+#include "irradcast/client/ssao.h"
 
 using namespace irradcast;
 using test::BlockOnFloor;

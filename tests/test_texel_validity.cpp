@@ -1,12 +1,12 @@
 #include <gtest/gtest.h>
 
-#include "irradcast/atlas.h"
-#include "irradcast/error.h"
-#include "irradcast/gbuffer.h"
-#include "irradcast/progress.h"
-#include "irradcast/ray_scene.h"
-#include "irradcast/texel_validity.h"
-#include "irradcast/world.h"
+#include "irradcast/common/atlas.h"
+#include "irradcast/common/error.h"
+#include "irradcast/engine/gbuffer.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/engine/texel_validity.h"
+#include "irradcast/common/world.h"
 #include "scene_builders.h"
 
 using namespace irradcast;

@@ -10,11 +10,11 @@
 #include <thread>
 #include <vector>
 
-#include "irradcast/builtin.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/log.h"
-#include "irradcast/progress.h"
-#include "irradcast/thread_priority.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/service/thread_priority.h"
 
 using namespace irradcast;
 namespace fs = std::filesystem;

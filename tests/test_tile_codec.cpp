@@ -10,17 +10,17 @@
 #include <string>
 #include <vector>
 
-#include "irradcast/atlas.h"
-#include "irradcast/builtin.h"
-#include "irradcast/embree_backend.h"
-#include "irradcast/engine.h"
-#include "irradcast/error.h"
-#include "irradcast/frame.h"
-#include "irradcast/gbuffer.h"
-#include "irradcast/lights.h"
-#include "irradcast/progress.h"
-#include "irradcast/texel_validity.h"
-#include "irradcast/tile_codec.h"
+#include "irradcast/common/atlas.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/engine/embree_backend.h"
+#include "irradcast/engine/engine.h"
+#include "irradcast/common/error.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/engine/gbuffer.h"
+#include "irradcast/common/lights.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/engine/texel_validity.h"
+#include "irradcast/wire/tile_codec.h"
 
 using namespace irradcast;
 using wire::TileRect;

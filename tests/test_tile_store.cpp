@@ -1,8 +1,8 @@
 #include <gtest/gtest.h>
 
-#include "irradcast/error.h"
-#include "irradcast/send_queue.h"
-#include "irradcast/tile_store.h"
+#include "irradcast/common/error.h"
+#include "irradcast/service/send_queue.h"
+#include "irradcast/service/tile_store.h"
 
 using namespace irradcast;
 

@@ -10,15 +10,15 @@
 #include <thread>
 
 #include "cli.h"
-#include "irradcast/builtin.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/image.h"
-#include "irradcast/log.h"
-#include "irradcast/metrics_endpoint.h"
-#include "irradcast/metrics_text.h"
-#include "irradcast/net_server.h"
-#include "irradcast/progress.h"
-#include "irradcast/transport.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/common/image.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/metrics_endpoint.h"
+#include "irradcast/service/metrics_text.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/wire/transport.h"
 #include "tls_cert.h"
 
 using namespace irradcast;

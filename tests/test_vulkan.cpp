@@ -4,8 +4,8 @@
 #include <gtest/gtest.h>
 
 #include "cli.h"
-#include "irradcast/error.h"
-#include "irradcast/vulkan_device.h"
+#include "irradcast/common/error.h"
+#include "irradcast/engine/vulkan_device.h"
 
 using namespace irradcast;
 

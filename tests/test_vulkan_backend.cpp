@@ -9,14 +9,14 @@
 
 #include "cli.h"
 #include "engine_setup.h"
-#include "irradcast/backend_select.h"
-#include "irradcast/builtin.h"
-#include "irradcast/camera.h"
-#include "irradcast/error.h"
-#include "irradcast/path_tracer.h"
-#include "irradcast/reference_lightmaps.h"
-#include "irradcast/sampling.h"
-#include "irradcast/vulkan_backend.h"
+#include "irradcast/engine/backend_select.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/camera.h"
+#include "irradcast/common/error.h"
+#include "irradcast/engine/path_tracer.h"
+#include "irradcast/engine/reference_lightmaps.h"
+#include "irradcast/common/sampling.h"
+#include "irradcast/engine/vulkan_backend.h"
 #include "scene_builders.h"
 
 using namespace irradcast;

@@ -1,10 +1,10 @@
-#include "irradcast/backoff.h"
+#include "irradcast/client/backoff.h"
 
 #include <algorithm>
 #include <cmath>
 #include <string>
 
-#include "irradcast/error.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast {
 

@@ -1,4 +1,4 @@
-#include "irradcast/camera_message.h"
+#include "irradcast/client/camera_message.h"
 
 namespace irradcast {
 

@@ -1,11 +1,11 @@
-#include "irradcast/camera_path.h"
+#include "irradcast/client/camera_path.h"
 
 #include <cmath>
 #include <fstream>
 #include <sstream>
 
-#include "irradcast/error.h"
-#include "irradcast/sampling.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/sampling.h"
 
 namespace irradcast {
 

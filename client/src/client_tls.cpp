@@ -1,4 +1,4 @@
-#include "irradcast/client_tls.h"
+#include "irradcast/client/client_tls.h"
 
 namespace irradcast {
 

@@ -1,8 +1,8 @@
-#include "irradcast/host_port.h"
+#include "irradcast/client/host_port.h"
 
 #include <stdexcept>
 
-#include "irradcast/error.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast {
 

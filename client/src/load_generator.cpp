@@ -1,4 +1,4 @@
-#include "irradcast/load_generator.h"
+#include "irradcast/client/load_generator.h"
 
 #include <asio.hpp>
 
@@ -12,14 +12,14 @@
 #include <mutex>
 #include <thread>
 
-#include "irradcast/camera_message.h"
-#include "irradcast/compositor.h"
-#include "irradcast/error.h"
-#include "irradcast/frame.h"
-#include "irradcast/ray_scene.h"
-#include "irradcast/sampling.h"
-#include "irradcast/scene_package.h"
-#include "irradcast/tile_cache.h"
+#include "irradcast/client/camera_message.h"
+#include "irradcast/common/compositor.h"
+#include "irradcast/common/error.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/sampling.h"
+#include "irradcast/wire/scene_package.h"
+#include "irradcast/client/tile_cache.h"
 
 namespace irradcast {
 

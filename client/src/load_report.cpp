@@ -4,7 +4,7 @@
 #include <cstdio>
 #include <sstream>
 
-#include "irradcast/load_generator.h"
+#include "irradcast/client/load_generator.h"
 
 namespace irradcast {
 

@@ -1,10 +1,10 @@
-#include "irradcast/tile_cache.h"
+#include "irradcast/client/tile_cache.h"
 
 #include <algorithm>
 #include <string>
 
-#include "irradcast/error.h"
-#include "irradcast/tile_codec.h"
+#include "irradcast/common/error.h"
+#include "irradcast/wire/tile_codec.h"
 
 namespace irradcast {
 

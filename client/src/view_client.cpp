@@ -1,4 +1,4 @@
-#include "irradcast/view_client.h"
+#include "irradcast/client/view_client.h"
 
 #include <asio.hpp>
 
@@ -11,17 +11,17 @@
 #include <sstream>
 #include <thread>
 
-#include "irradcast/camera_message.h"
-#include "irradcast/client_tls.h"
-#include "irradcast/compositor.h"
-#include "irradcast/edit_message.h"
-#include "irradcast/error.h"
-#include "irradcast/frame.h"
-#include "irradcast/log.h"
-#include "irradcast/ray_scene.h"
-#include "irradcast/scene_edit.h"
-#include "irradcast/scene_package.h"
-#include "irradcast/tile_codec.h"
+#include "irradcast/client/camera_message.h"
+#include "irradcast/client/client_tls.h"
+#include "irradcast/common/compositor.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast/common/error.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/scene_edit.h"
+#include "irradcast/wire/scene_package.h"
+#include "irradcast/wire/tile_codec.h"
 
 namespace irradcast {
 

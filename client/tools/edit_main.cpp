@@ -18,13 +18,13 @@
 #include <thread>
 #include <vector>
 
-#include "irradcast/client_tls.h"
-#include "irradcast/edit_message.h"
-#include "irradcast/error.h"
-#include "irradcast/frame.h"
-#include "irradcast/host_port.h"
-#include "irradcast/log.h"
-#include "irradcast/scene_edit.h"
+#include "irradcast/client/client_tls.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast/common/error.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/client/host_port.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/scene_edit.h"
 #include "tls_flags.h"
 
 namespace {

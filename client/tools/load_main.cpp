@@ -11,10 +11,10 @@
 #include <fstream>
 #include <string>
 
-#include "irradcast/error.h"
-#include "irradcast/host_port.h"
-#include "irradcast/load_generator.h"
-#include "irradcast/log.h"
+#include "irradcast/common/error.h"
+#include "irradcast/client/host_port.h"
+#include "irradcast/client/load_generator.h"
+#include "irradcast/common/log.h"
 #include "tls_flags.h"
 
 namespace {

@@ -3,7 +3,7 @@
 
 #include <CLI/CLI.hpp>
 
-#include "irradcast/client_tls.h"
+#include "irradcast/client/client_tls.h"
 
 namespace irradcast::tools {
 

@@ -14,15 +14,15 @@
 #include <sstream>
 #include <string>
 
-#include "irradcast/camera.h"
-#include "irradcast/camera_path.h"
-#include "irradcast/client_passes.h"
-#include "irradcast/error.h"
-#include "irradcast/host_port.h"
-#include "irradcast/image.h"
-#include "irradcast/log.h"
-#include "irradcast/tonemap.h"
-#include "irradcast/view_client.h"
+#include "irradcast/common/camera.h"
+#include "irradcast/client/camera_path.h"
+#include "irradcast/client/client_passes.h"
+#include "irradcast/common/error.h"
+#include "irradcast/client/host_port.h"
+#include "irradcast/common/image.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/tonemap.h"
+#include "irradcast/client/view_client.h"
 #include "tls_flags.h"
 
 namespace {

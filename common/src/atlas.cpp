@@ -1,6 +1,6 @@
 // Lightmap atlas: per-object lightmap coordinates from TEXCOORD_1 (validated) or from generated
 // charts (weld, grow by normal over shared edges, project, split folds, shelf-pack with gutters).
-#include "irradcast/atlas.h"
+#include "irradcast/common/atlas.h"
 
 #include <algorithm>
 #include <array>
@@ -15,7 +15,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
-#include "irradcast/log.h"
+#include "irradcast/common/log.h"
 
 namespace irradcast {
 namespace {

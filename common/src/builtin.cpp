@@ -1,9 +1,9 @@
 #include <cmath>
 #include <string>
 
-#include "irradcast/builtin.h"
-#include "irradcast/error.h"
-#include "irradcast/gltf.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/gltf.h"
 
 namespace irradcast {
 

@@ -8,7 +8,7 @@
 #include <cmath>
 #include <initializer_list>
 
-#include "irradcast/builtin.h"
+#include "irradcast/common/builtin.h"
 
 namespace irradcast {
 namespace {

@@ -34,8 +34,8 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 
-#include "irradcast/builtin.h"
-#include "irradcast/error.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast {
 namespace {

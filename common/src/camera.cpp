@@ -1,10 +1,10 @@
-#include "irradcast/camera.h"
+#include "irradcast/common/camera.h"
 
 #include <cmath>
 #include <sstream>
 #include <vector>
 
-#include "irradcast/error.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast {
 namespace {

@@ -1,12 +1,12 @@
-#include "irradcast/compositor.h"
+#include "irradcast/common/compositor.h"
 
 #include <atomic>
 #include <chrono>
 
-#include "irradcast/camera.h"
-#include "irradcast/error.h"
-#include "irradcast/primary_hits.h"
-#include "irradcast/sampling.h"
+#include "irradcast/common/camera.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/primary_hits.h"
+#include "irradcast/common/sampling.h"
 
 namespace irradcast {
 

@@ -14,8 +14,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "irradcast/error.h"
-#include "irradcast/gltf.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/gltf.h"
 
 namespace irradcast {
 namespace {

@@ -24,9 +24,9 @@
 #include <glm/gtc/type_ptr.hpp>
 #include <nlohmann/json.hpp>
 
-#include "irradcast/error.h"
-#include "irradcast/gltf.h"
-#include "irradcast/log.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/gltf.h"
+#include "irradcast/common/log.h"
 
 namespace irradcast {
 namespace {

@@ -1,4 +1,4 @@
-#include "irradcast/image.h"
+#include "irradcast/common/image.h"
 
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
@@ -10,7 +10,7 @@
 #include <cmath>
 #include <exception>
 
-#include "irradcast/error.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast {
 

@@ -1,9 +1,9 @@
-#include "irradcast/lights.h"
+#include "irradcast/common/lights.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "irradcast/sampling.h"
+#include "irradcast/common/sampling.h"
 
 namespace irradcast {
 

@@ -1,4 +1,4 @@
-#include "irradcast/log.h"
+#include "irradcast/common/log.h"
 
 #include <algorithm>
 #include <atomic>
@@ -8,7 +8,7 @@
 #include <mutex>
 #include <string>
 
-#include "irradcast/error.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast::log {
 namespace {

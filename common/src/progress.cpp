@@ -1,4 +1,4 @@
-#include "irradcast/progress.h"
+#include "irradcast/common/progress.h"
 
 #include <unistd.h>
 

@@ -1,12 +1,12 @@
-#include "irradcast/ray_scene.h"
+#include "irradcast/common/ray_scene.h"
 
 #include <embree3/rtcore.h>
 
 #include <cstring>
 #include <string>
 
-#include "irradcast/error.h"
-#include "irradcast/log.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
 
 namespace irradcast {
 namespace {

@@ -1,4 +1,4 @@
-#include "irradcast/scene.h"
+#include "irradcast/common/scene.h"
 
 #include <algorithm>
 #include <array>
@@ -6,8 +6,8 @@
 #include <string>
 #include <type_traits>
 
-#include "irradcast/error.h"
-#include "irradcast/log.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
 
 namespace irradcast {
 namespace {

@@ -1,4 +1,4 @@
-#include "irradcast/scene_edit.h"
+#include "irradcast/common/scene_edit.h"
 
 #include <algorithm>
 #include <cmath>
@@ -11,7 +11,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
 
-#include "irradcast/error.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast {
 namespace {

@@ -1,10 +1,10 @@
-#include "irradcast/tonemap.h"
+#include "irradcast/common/tonemap.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "irradcast/error.h"
-#include "irradcast/sampling.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/sampling.h"
 
 namespace irradcast {
 namespace {

@@ -1,4 +1,4 @@
-#include "irradcast/world.h"
+#include "irradcast/common/world.h"
 
 #include <cmath>
 

@@ -6,9 +6,9 @@
 
 #include <string>
 
-#include "irradcast/atlas.h"
-#include "irradcast/backend_select.h"
-#include "irradcast/engine_params.h"
+#include "irradcast/common/atlas.h"
+#include "irradcast/engine/backend_select.h"
+#include "irradcast/engine/engine_params.h"
 
 namespace irradcast::tools {
 

@@ -14,15 +14,15 @@
 #include <pthread.h>
 
 #include "engine_options.h"
-#include "irradcast/builtin.h"
-#include "irradcast/engine_host.h"
-#include "irradcast/error.h"
-#include "irradcast/log.h"
-#include "irradcast/metrics_endpoint.h"
-#include "irradcast/metrics_text.h"
-#include "irradcast/net_server.h"
-#include "irradcast/progress.h"
-#include "irradcast/vulkan_device.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/metrics_endpoint.h"
+#include "irradcast/service/metrics_text.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/engine/vulkan_device.h"
 
 namespace {
 

@@ -13,7 +13,7 @@
 
 #include <google/protobuf/stubs/logging.h>
 
-#include "irradcast/frame.h"
+#include "irradcast/wire/frame.h"
 
 using namespace irradcast::wire;
 

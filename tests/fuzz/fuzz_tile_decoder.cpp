@@ -12,8 +12,8 @@
 #include <string>
 #include <utility>
 
-#include "irradcast/error.h"
-#include "irradcast/tile_codec.h"
+#include "irradcast/common/error.h"
+#include "irradcast/wire/tile_codec.h"
 
 using namespace irradcast;
 

@@ -1,8 +1,8 @@
-#include "irradcast/edit_message.h"
+#include "irradcast/wire/edit_message.h"
 
 #include <string>
 
-#include "irradcast/error.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast::wire {
 namespace {

@@ -1,9 +1,9 @@
-#include "irradcast/frame.h"
+#include "irradcast/wire/frame.h"
 
 #include <algorithm>
 #include <limits>
 
-#include "irradcast/error.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast::wire {
 namespace {

@@ -1,4 +1,4 @@
-#include "irradcast/scene_package.h"
+#include "irradcast/wire/scene_package.h"
 
 #include <google/protobuf/io/coded_stream.h>
 #include <google/protobuf/io/zero_copy_stream_impl_lite.h>
@@ -10,7 +10,7 @@
 #include <limits>
 #include <utility>
 
-#include "irradcast/error.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast::wire {
 namespace {

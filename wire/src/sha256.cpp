@@ -5,7 +5,7 @@
 #include <cstring>
 #include <string>
 
-#include "irradcast/scene_package.h"
+#include "irradcast/wire/scene_package.h"
 
 namespace irradcast::wire {
 namespace {

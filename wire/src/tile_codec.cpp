@@ -1,4 +1,4 @@
-#include "irradcast/tile_codec.h"
+#include "irradcast/wire/tile_codec.h"
 
 #include <zstd.h>
 
@@ -10,7 +10,7 @@
 
 #include <glm/gtc/packing.hpp>
 
-#include "irradcast/error.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast::wire {
 namespace {

@@ -1,11 +1,11 @@
-#include "irradcast/transport.h"
+#include "irradcast/wire/transport.h"
 
 #include <openssl/err.h>
 #include <openssl/ssl.h>
 
 #include <fstream>
 
-#include "irradcast/error.h"
+#include "irradcast/common/error.h"
 
 namespace irradcast::wire {
 

@@ -1,0 +1,62 @@
+// The client's optional frame passes (seed 002), in order: the frame's G-buffer and lightmap
+// lookup (trace_frame), screen-space ambient occlusion (ssao.h) on the lightmap term, and the
+// reverse-reprojection cache (reprojection.h) that reuses converged SSAO while the camera moves.
+// Stateful across frames (the history); with every pass off, compose() gives exactly
+// irradcast::compose()'s image.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "irradcast/common/atlas.h"
+#include "irradcast/common/image.h"
+#include "irradcast/common/lightmap.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/client/reprojection.h"
+#include "irradcast/client/ssao.h"
+#include "irradcast/common/world.h"
+
+namespace irradcast {
+
+struct ClientPassOptions {
+  bool ssao = false;
+  SsaoParams ssao_params;
+  bool reproject = false;  // needs ssao: the history holds the SSAO result
+  ReprojectionParams reprojection;
+
+  // Throws irradcast::Error naming the bad value (or --reproject without --ssao).
+  void validate() const;
+};
+
+struct ClientFrameStats {
+  double trace_s = 0.0;      // primary rays + lightmap lookup
+  double reproject_s = 0.0;  // history lookups and blending
+  double ssao_s = 0.0;
+  double resolve_s = 0.0;
+  double total_s = 0.0;
+  std::size_t ssao_pixels = 0;  // pixels whose SSAO was estimated this frame
+  ReprojectionStats reprojection;
+};
+
+class ClientPasses {
+ public:
+  explicit ClientPasses(ClientPassOptions options = {});
+  // The next frame. Linear radiance like irradcast::compose().
+  ImageRGB compose(const World& world, const RayScene& rays, const Atlas& atlas,
+                   const std::vector<Lightmap>& lightmaps, const CameraPose& camera, int width,
+                   int height, ClientFrameStats* stats = nullptr);
+  // Forget the history (a camera cut, a scene edit).
+  void reset();
+  const ClientPassOptions& options() const { return options_; }
+  // The SSAO visibility of the last frame (empty without --ssao).
+  const std::vector<float>& visibility() const { return visibility_; }
+
+ private:
+  ClientPassOptions options_;
+  ReprojectionCache cache_;
+  std::vector<float> visibility_;
+  std::vector<std::uint8_t> compute_;
+  std::uint32_t frame_ = 0;
+};
+
+}  // namespace irradcast

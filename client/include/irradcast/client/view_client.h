@@ -1,0 +1,153 @@
+// A viewer's connection to irradcast-server: handshake, the scene package (from the cache when
+// its hash matches, else downloaded and cached), a subscription, and a tile cache kept current
+// as TileUpdates arrive. Composes frames of its own viewpoint with the compositor. Reconnects
+// after a lost connection and resumes: the tiles it holds are only sent again when their version
+// changed. A connection lost in any phase (connect, handshake, scene download, streaming) is
+// retried with capped, jittered exponential back-off (backoff.h) until the deadline; protocol
+// errors (a bad frame from the server, another protocol version) are not retried.
+// Single-threaded: call poll() to make progress.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "irradcast.pb.h"
+#include "irradcast/common/atlas.h"
+#include "irradcast/client/backoff.h"
+#include "irradcast/client/client_passes.h"
+#include "irradcast/client/client_tls.h"
+#include "irradcast/common/image.h"
+#include "irradcast/common/lightmap.h"
+#include "irradcast/common/scene.h"
+#include "irradcast/client/tile_cache.h"
+#include "irradcast/common/world.h"
+
+namespace irradcast {
+
+struct ViewClientOptions {
+  std::string host = "127.0.0.1";
+  std::uint16_t port = 7450;
+  std::string name = "irradcast-view";
+  std::string cache_dir;  // scene packages by hash; empty = no cache
+  wire::TileEncoding encoding = wire::TILE_RGB9E5_ZSTD;
+  std::uint64_t max_bytes_per_s = 0;  // 0 = no cap
+  // How long connect() and each reconnection keep trying (from their start) when `deadline` is
+  // not set.
+  std::chrono::milliseconds connect_timeout{10000};
+  // When set: connect() and every reconnection keep trying until this time instead (a viewer's
+  // --timeout), however long the server is away.
+  std::chrono::steady_clock::time_point deadline{};
+  std::chrono::milliseconds reply_timeout{10000};  // for Welcome and each scene chunk
+  std::chrono::milliseconds ping_interval{5000};   // keeps the server's idle timer happy
+  bool reconnect = true;
+  BackoffPolicy backoff;           // delays between connection attempts
+  std::uint64_t backoff_seed = 0;  // jitter; 0 = a random seed per client
+  ClientTls tls;                   // plain TCP unless enabled
+};
+
+struct ViewClientCounters {
+  std::uint64_t bytes_received = 0;
+  std::uint64_t frames_received = 0;
+  std::uint64_t tiles_applied = 0;
+  std::uint64_t scene_bytes_downloaded = 0;
+  std::uint32_t connections = 0;  // sessions set up (Welcome, scene, Subscribe): 1 + reconnects
+  std::uint32_t connections_lost = 0;  // connections that dropped after a session was set up
+  std::uint32_t connect_attempts = 0;  // connection attempts, failed ones included
+  bool scene_from_cache = false;
+  std::uint64_t errors_received = 0;
+  std::uint64_t edits_applied = 0;  // scene edits applied to the viewer's copy of the scene
+};
+
+class ViewClient {
+ public:
+  explicit ViewClient(ViewClientOptions options);
+  ~ViewClient();
+  ViewClient(const ViewClient&) = delete;
+  ViewClient& operator=(const ViewClient&) = delete;
+
+  // Connects, says Hello, loads the scene and subscribes to every tile, retrying a lost or
+  // refused connection with back-off. Throws irradcast::Error when no session is set up before
+  // the deadline (or connect_timeout), or on a protocol error.
+  void connect();
+  // Receives and applies frames for `budget`, pinging as needed; reconnects (if enabled) when the
+  // connection drops, which can take until the deadline (then irradcast::Error). Returns the
+  // number of tiles applied.
+  std::size_t poll(std::chrono::milliseconds budget);
+  // Asks for the server's stats and polls until they arrive (or timeout: nullopt).
+  std::optional<wire::Stats> request_stats(std::chrono::milliseconds timeout);
+  void send_camera(const CameraPose& camera);
+  // Says Bye and closes. Idempotent.
+  void close();
+
+  ImageRGB compose(const CameraPose& camera, int width, int height) const;
+  // The same frame through the client passes (SSAO, reprojection; client_passes.h). Reset
+  // `passes` when scene_revision() changes: its history belongs to the old scene.
+  ImageRGB compose(const CameraPose& camera, int width, int height, ClientPasses& passes,
+                   ClientFrameStats* stats = nullptr) const;
+  const Scene& scene() const;
+  const World& world() const;
+  const Atlas& atlas() const;
+  const std::vector<Lightmap>& lightmaps() const { return tiles_.lightmaps(); }
+  std::uint64_t tile_version(std::uint32_t lightmap, std::uint32_t tx, std::uint32_t ty) const {
+    return tiles_.version(lightmap, tx, ty);
+  }
+  // True when every tile has arrived at least once.
+  bool all_tiles_received() const { return tiles_.all_received(); }
+  std::size_t tile_count() const { return tiles_.tile_count(); }
+  const ViewClientCounters& counters() const { return counters_; }
+  // The hash of the scene package downloaded (or taken from the cache) at the last connection;
+  // edits applied since then do not change it.
+  const std::string& scene_hash() const { return scene_hash_; }
+  // The revision of the viewer's scene: the package's, plus the edits applied since (every
+  // applied SceneEdit the server broadcasts, in order; docs/EDITS.md).
+  std::uint64_t scene_revision() const { return revision_; }
+  std::uint64_t session() const { return session_; }
+
+ private:
+  struct Net;
+  struct Loaded;
+  // Attempts connections (open_connection + handshake) until one sets up a session, sleeping a
+  // back-off delay before each attempt but the first (and before the first too when
+  // `after_loss`); throws irradcast::Error at the deadline or on a protocol error.
+  void establish(bool after_loss);
+  // One TCP connection attempt, bounded by `deadline`; throws ConnectionLost.
+  void open_connection(std::chrono::steady_clock::time_point deadline);
+  void drop_connection();
+  void handshake();
+  void load_scene(const wire::Welcome& w);
+  void subscribe();
+  void send(const wire::Envelope& e);
+  // Next frame within the deadline; false on timeout. Throws ConnectionLost.
+  bool read_frame(wire::Envelope& out, std::chrono::steady_clock::time_point deadline);
+  void apply(const wire::Envelope& e);
+  void apply_tile(const wire::TileUpdate& t);
+  // A SceneEdit from the server: buffered while the scene loads, applied in revision order.
+  void on_scene_edit(const wire::SceneEdit& m);
+  void apply_scene_edit(const wire::SceneEdit& m);
+  // After ConnectionLost: reconnects (establish) or, without options.reconnect, throws Error.
+  void connection_lost(const std::exception& lost);
+
+  ViewClientOptions options_;
+  std::shared_ptr<asio::ssl::context> tls_;  // null: plain TCP
+  Backoff backoff_;
+  std::unique_ptr<Net> net_;
+  std::unique_ptr<Loaded> loaded_;
+  std::string scene_hash_;
+  std::uint64_t session_ = 0;
+  std::uint64_t tile_epoch_ = 0;
+  TileCache tiles_;
+  std::optional<wire::Stats> last_stats_;
+  std::uint64_t revision_ = 0;
+  bool loading_ = false;                        // a scene download is in progress
+  std::vector<wire::SceneEdit> pending_edits_;  // arrived while loading_
+  bool reload_ = false;  // missed an edit: reconnect to get the current scene
+  ViewClientCounters counters_;
+  std::chrono::steady_clock::time_point last_ping_{};
+  std::chrono::milliseconds ping_interval_{5000};
+};
+
+}  // namespace irradcast

@@ -1,0 +1,56 @@
+// Direct lighting: emissive triangles (area lights, picked in proportion to their power) and
+// KHR_lights_punctual lights, with shadow rays. Shared by the reference path tracer and the
+// engine's direct pass so both see exactly the same lights.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/world.h"
+
+namespace irradcast {
+
+struct EmissiveTriangle {
+  int object = -1;
+  std::uint32_t triangle = 0;
+  glm::vec3 p0{0.0f}, e1{0.0f}, e2{0.0f};  // p = p0 + b1 e1 + b2 e2
+  glm::vec3 normal{0.0f, 0.0f, 1.0f};      // unit geometric normal (front side emits)
+  float area = 0.0f;
+  bool double_sided = false;
+};
+
+class LightSampler {
+ public:
+  explicit LightSampler(const World& world);
+
+  bool empty() const { return triangles_.empty() && world_->lights.empty(); }
+  const std::vector<EmissiveTriangle>& emissive_triangles() const { return triangles_; }
+  float total_area_power() const { return total_power_; }
+  // Per emissive triangle: cumulative pick probability (the last is 1) and pick probability.
+  const std::vector<float>& pick_cdf() const { return cdf_; }
+  const std::vector<float>& pick_pdf() const { return pick_pdf_; }
+
+  // One-sample estimate of the direct irradiance at p (unit normal n, geometric normal ng for
+  // the ray offset) from the area lights: picks a triangle by power and a uniform point on it
+  // (u.x picks, (u.y, u.z) place), traces a shadow ray. Unbiased; 0 when there are none.
+  glm::vec3 area_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n, glm::vec3 ng,
+                            glm::vec3 u) const;
+  // Same, with the triangle fixed (stratified samples per light, as the engine's direct pass
+  // does): divides by the triangle's own area pdf only.
+  glm::vec3 triangle_irradiance(const RayScene& rays, std::size_t index, glm::vec3 p, glm::vec3 n,
+                                glm::vec3 ng, glm::vec2 u) const;
+  // Exact direct irradiance at p from every punctual light (each with one shadow ray).
+  glm::vec3 punctual_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n, glm::vec3 ng) const;
+
+ private:
+  const World* world_;
+  std::vector<EmissiveTriangle> triangles_;
+  std::vector<float> cdf_;  // cumulative power, normalised to 1
+  std::vector<float> pick_pdf_;
+  float total_power_ = 0.0f;
+};
+
+}  // namespace irradcast

@@ -1,0 +1,82 @@
+// Live scene edits (docs/EDITS.md): a list of operations applied to a Scene together. The
+// server validates an edit against its scene, applies it between engine updates and sends it to
+// every viewer, which applies the same edit to its own copy (so its primary rays see the moved
+// geometry). An edit that names an unknown target or carries a non-finite number is refused as a
+// whole: the scene does not change.
+#pragma once
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "irradcast/common/scene.h"
+
+namespace irradcast {
+
+struct EditOp {
+  enum class Kind {
+    Move,              // node: translate by `vector` (in the parent's frame)
+    Rotate,            // node: rotate by `value` degrees about axis `vector` through its origin
+    Scale,             // node: scale by `vector` about its origin (in its own frame)
+    SetTransform,      // node: local transform = `matrix`
+    Show,              // node (and its subtree): visible
+    Hide,              // node (and its subtree): hidden
+    LightColor,        // punctual light: colour = `vector` (linear RGB)
+    LightIntensity,    // punctual light: intensity = `value`
+    MaterialAlbedo,    // material: base colour factor = `vector`
+    MaterialEmission,  // material: emissive factor = `vector`, emissive strength = `value`
+  };
+  Kind kind = Kind::Move;
+  // A node, light or material, by name, or by index as "#3".
+  std::string target;
+  glm::vec3 vector{0.0f};
+  float value = 0.0f;
+  glm::mat4 matrix{1.0f};
+};
+
+struct SceneEdit {
+  std::vector<EditOp> ops;
+};
+
+// What an applied edit changed, for the engine's invalidation.
+struct EditEffect {
+  std::vector<int> nodes;      // nodes whose local transform or visibility changed
+  std::vector<int> lights;     // punctual lights whose colour or intensity changed
+  std::vector<int> materials;  // materials whose albedo or emission changed
+  bool empty() const { return nodes.empty() && lights.empty() && materials.empty(); }
+};
+
+// The lowercase names used on the command line and in JSON ("move", "rotate", "scale",
+// "transform", "show", "hide", "light_color", "light_intensity", "albedo", "emission").
+const char* edit_kind_name(EditOp::Kind kind);
+// Throws irradcast::Error naming the valid kinds.
+EditOp::Kind parse_edit_kind(std::string_view name);
+
+// Throws irradcast::Error with a message that names the operation (by position and kind) and
+// what is wrong: an empty edit, an unknown target, a non-finite number, a zero rotation axis or
+// scale factor, a matrix that is not affine or not invertible, a negative intensity or colour.
+// The transforms the edit leads to are checked too, ops composed in order: each node's local
+// transform within +-1e9 after every op, and (a parent's scale multiplying its children's) the
+// world transforms below a moved node finite, their objects' vertices within +-1e18 in world
+// space and their triangle areas finite.
+void validate_edit(const Scene& scene, const SceneEdit& edit);
+// Validates, then applies every operation in order. On an invalid edit it throws and the scene
+// is unchanged.
+EditEffect apply_edit(Scene& scene, const SceneEdit& edit);
+
+// The JSON form (docs/EDITS.md): an object {"ops": [op, ...]} or a single op object, where an op
+// is {"op": "move", "node": "tall_block", "by": [x, y, z]} and so on. Throws irradcast::Error
+// on bad JSON or a bad op (with the op's position).
+SceneEdit parse_edit_json(std::string_view text);
+std::string edit_to_json(const SceneEdit& edit);
+// A script: a JSON array of steps, each an edit with an optional "after_ms" delay before it is
+// sent, or one edit. Used by irradcast-edit --script and the edit benchmark.
+struct EditStep {
+  double after_ms = 0.0;
+  SceneEdit edit;
+};
+std::vector<EditStep> parse_edit_script(std::string_view text);
+
+}  // namespace irradcast

@@ -1,0 +1,151 @@
+// The GI engine (seed 001, chapter 3): the scene's irradiance in scene space, computed into the
+// per-object lightmaps by a direct pass and K indirect bounces, each bounce a probe gather and a
+// radiance-cell scatter with a tracing range. Progressive: every update() adds one more estimate
+// to running per-texel means, so quality improves for as long as it runs.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "irradcast/common/atlas.h"
+#include "irradcast/engine/engine_params.h"
+#include "irradcast/engine/gbuffer.h"
+#include "irradcast/engine/indirect_method.h"
+#include "irradcast/common/lightmap.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/engine/trace_backend.h"
+#include "irradcast/common/world.h"
+
+namespace irradcast {
+
+struct PassTiming {
+  double seconds = 0.0;
+  std::uint64_t rays = 0;
+};
+
+struct UpdateStats {
+  PassTiming direct;
+  PassTiming prepare;               // VPL / irradiance cache: shooting VPLs, placing records
+  std::vector<PassTiming> probes;   // per bounce (empty entries in unbiased mode)
+  std::vector<PassTiming> scatter;  // per bounce
+  double total_seconds = 0.0;
+  std::uint64_t total_rays() const;
+};
+
+struct ProbeStats {
+  std::size_t probes = 0;
+  std::size_t relocated = 0;  // moved out of or away from geometry
+  std::size_t unusable = 0;   // inside geometry with no free spot in their cell
+};
+
+// What a scene edit changed, for Engine::scene_changed.
+struct SceneChange {
+  bool geometry = false;  // objects moved, shown or hidden: texels, probes and visibility change
+  bool surfaces = false;  // albedo changed somewhere: texel albedo is read from the G-buffers
+  // World-space boxes where it happened: moved objects before and after, changed lights and
+  // emitters. Texels near one (within the tracing range or a cell) are affected.
+  std::vector<Bounds> regions;
+  // Light positions whose direct light changed (a light moved, recoloured or dimmed, an emitter
+  // changed): texels that see one are affected.
+  std::vector<glm::vec3> light_points;
+  // Emitters that did not change (centres): texels whose path to one crosses a region are in a
+  // shadow that moved, so they are affected too.
+  std::vector<glm::vec3> other_lights;
+};
+
+class Engine {
+ public:
+  // The world, atlas, G-buffers and ray scene must outlive the engine. `rays` serves the
+  // host-side set-up (probe placement and probe visibility); the passes run on `backend`.
+  // Methods other than radiance cells (EngineParams::method) run their bounces on the CPU with
+  // `rays` and need the scene's `lights` (which must outlive the engine too).
+  Engine(const World& world, const Atlas& atlas, const std::vector<TexelGBuffer>& gbuffers,
+         const RayScene& rays, std::unique_ptr<TraceBackend> backend, EngineParams params,
+         const LightSampler* lights = nullptr);
+  ~Engine();
+
+  // One progressive update: direct pass, then per bounce probe gather (biased mode) + scatter.
+  // While texels wait for their first estimate since an edit, an update covers the next batch
+  // of them (EngineParams::edit_batch, in priority order) instead of every texel.
+  UpdateStats update();
+
+  // After a scene edit: the host changed the world, ray scene, lights and G-buffers in place
+  // (the same objects and lightmaps) and told the backend. Rebuilds the texels (validity and
+  // positions may change), re-places the probes in affected cells and the probe weights, and
+  // restarts every texel's estimate: affected texels first, then the rest; within each, texels
+  // a camera sees first (seed 001 section 4.7.1 and 4.7.3). What a texel shows blends from its
+  // value before the edit to the new estimate (EngineParams::edit_blend).
+  void scene_changed(const SceneChange& change, const std::vector<CameraPose>& cameras);
+  // Texels that have no estimate since the last edit (0: caught up).
+  std::size_t stale_texels() const { return queue_.size() - queue_pos_; }
+  // Where the last scene_changed() spent its time ("texels 3 ms, probes (4) 120 ms, ...").
+  const std::string& change_timings() const { return change_timings_; }
+  // The smallest number of samples of any texel since its last restart.
+  std::uint32_t min_samples() const;
+
+  std::uint32_t updates() const { return updates_; }
+  const EngineParams& params() const { return params_; }
+  const ProbeGrid& probes() const { return probes_; }
+  const ProbeStats& probe_stats() const { return probe_stats_; }
+  std::size_t texel_count() const { return texels_.size(); }
+  const TraceBackend& backend() const { return *backend_; }
+  // The indirect method's state in one line ("" for radiance cells).
+  std::string method_summary() const { return method_ ? method_->summary() : std::string(); }
+  const IndirectMethod* method() const { return method_.get(); }
+
+  // Total irradiance E = E_direct + sum of the bounces, per object, dilated into the gutters.
+  std::vector<Lightmap> lightmaps() const;
+  // Irradiance of one component: 0 = direct, k = k-th indirect bounce.
+  std::vector<Lightmap> component(int bounce) const;
+  // Per texel: samples (updates) so far, and the relative standard error of its total estimate.
+  double mean_relative_error() const;
+  // Per texel, the standard error of the mean of its total estimate (luminance, in every
+  // channel), as lightmaps like lightmaps(); empty before the second update. The tile store
+  // uses it to tell a real change of a tile from Monte Carlo noise.
+  std::vector<Lightmap> standard_error() const;
+
+ private:
+  void build_texels(const std::vector<TexelGBuffer>& gbuffers);
+  void build_probes();
+  void build_dispatch();
+  std::vector<Lightmap> to_lightmaps(const std::vector<glm::vec3>& values) const;
+  void place_probes(const std::vector<std::size_t>& probes);
+  void build_probe_weights();
+  // Per texel: the total it shows (the blend of the new estimate and its value before an edit).
+  std::vector<glm::vec3> shown() const;
+
+  const World* world_;
+  const Atlas* atlas_;
+  const std::vector<TexelGBuffer>* gbuffers_;
+  const RayScene* rays_;
+  std::unique_ptr<TraceBackend> backend_;
+  EngineParams params_;
+  std::unique_ptr<IndirectMethod> method_;  // null: radiance cells on the backend
+  SurfaceTexels texels_;
+  ProbeGrid probes_;
+  ProbeStats probe_stats_;
+  std::vector<ProbeWeights> probe_weights_;
+  std::vector<std::uint32_t> unit_texels_, unit_offsets_;
+  std::uint32_t updates_ = 0;
+  std::uint64_t generation_ = 0;  // PassInput::generation
+  // Running means: [0] direct, [k] bounce k; probe radiance per bounce. A texel's means count
+  // samples_[i] samples; before its first sample since an edit they hold its old values.
+  std::vector<std::vector<glm::vec3>> mean_;
+  std::vector<std::vector<glm::vec3>> probe_mean_;
+  std::vector<std::uint32_t> samples_;         // direct samples since the last restart
+  std::vector<std::uint32_t> bounce_samples_;  // indirect samples since the last restart
+  std::uint32_t probe_samples_ = 0;            // every probe is gathered every update
+  std::vector<glm::vec3> before_;              // per texel: what it showed when the last edit came
+  std::vector<std::uint8_t> restarted_;        // per texel: restarted by the last edit (blends)
+  // Texels waiting for their first sample since the last edit, in priority order.
+  std::vector<std::uint32_t> queue_;
+  std::size_t queue_pos_ = 0;
+  std::string change_timings_;
+  // Welford statistics of each texel's total per-update estimate (luminance).
+  std::vector<double> total_mean_, total_m2_;
+};
+
+}  // namespace irradcast

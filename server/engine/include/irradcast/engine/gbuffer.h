@@ -1,0 +1,58 @@
+// The texel G-buffer ("global G-buffer" of seed 001): per lightmap texel the world position,
+// normal and albedo of the surface point it stands for. Texels whose centre lies in a triangle
+// sample that point; texels a triangle only partly covers sample the triangle's point closest to
+// the texel centre (so bilinear lookups at chart borders read real surface values); the rest
+// (gutters, unused space) are empty and filled by dilation of the lightmap values.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "irradcast/common/atlas.h"
+#include "irradcast/common/world.h"
+
+namespace irradcast {
+
+// Empty: no surface. Covered / Conservative: see rasterize_gbuffer. Hidden: a surface point
+// buried inside other geometry (see mark_hidden_texels); it holds no estimate of its own and is
+// filled from its visible neighbours like an empty texel.
+enum class TexelKind : std::uint8_t { Empty = 0, Covered = 1, Conservative = 2, Hidden = 3 };
+inline bool holds_estimate(TexelKind k) {
+  return k == TexelKind::Covered || k == TexelKind::Conservative;
+}
+
+struct TexelGBuffer {
+  int width = 0;
+  int height = 0;
+  std::vector<glm::vec3> position;     // world space
+  std::vector<glm::vec3> normal;       // unit, world space (shading normal)
+  std::vector<glm::vec3> albedo;       // linear
+  std::vector<std::int32_t> triangle;  // -1 for empty texels
+  std::vector<TexelKind> kind;
+
+  std::size_t size() const { return kind.size(); }
+  bool valid(std::size_t i) const { return holds_estimate(kind[i]); }
+  std::size_t valid_count() const;
+};
+
+// Per object: a texel whose centre lies in a triangle (inclusive; the lowest triangle index wins
+// on shared edges) is Covered and samples that point; a texel a triangle's footprint overlaps
+// (with positive area) but no triangle's interior contains the centre is Conservative and samples
+// the closest point, in lightmap space, of the nearest such triangle; the texel holding a
+// triangle's lightmap centroid is always valid (zero-area triangles get just that one).
+// Parallel over objects and bands of rows; deterministic.
+std::vector<TexelGBuffer> rasterize_gbuffer(const World& world, const Atlas& atlas);
+// Rasterizes again only the objects with which[o] != 0 (after a scene edit), in place.
+void rasterize_gbuffer(const World& world, const Atlas& atlas, std::vector<TexelGBuffer>& gbuffers,
+                       const std::vector<std::uint8_t>& which);
+
+// Fills the empty texels of a lightmap from their valid neighbours, ring by ring (each pass
+// averages the already-filled 8-neighbours), so bilinear lookups never read unfilled texels.
+// `valid` marks the texels holding real values; `rings` bounds the number of passes (-1 = until
+// every texel reachable is filled).
+void dilate(std::vector<glm::vec3>& texels, int width, int height,
+            const std::vector<TexelKind>& valid, int rings = -1);
+
+}  // namespace irradcast

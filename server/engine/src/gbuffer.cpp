@@ -1,0 +1,302 @@
+// Texel G-buffer: rasterises every object's triangles in lightmap space (centre sampling plus
+// conservative coverage), and dilation of lightmap values into empty texels.
+#include "irradcast/engine/gbuffer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "irradcast/common/error.h"
+
+namespace irradcast {
+namespace {
+
+double cross2(glm::dvec2 a, glm::dvec2 b) {
+  return a.x * b.y - a.y * b.x;
+}
+
+// Closest point of triangle c to p (2D), as barycentrics (u, v) of corners 1 and 2, and the
+// squared distance. Works for degenerate triangles too.
+double closest_on_triangle(const glm::dvec2* c, glm::dvec2 p, glm::vec2& uv) {
+  double area = cross2(c[1] - c[0], c[2] - c[0]);
+  if (area != 0.0) {
+    double u = cross2(p - c[0], c[2] - c[0]) / area, v = cross2(c[1] - c[0], p - c[0]) / area;
+    if (u >= 0.0 && v >= 0.0 && u + v <= 1.0) {
+      uv = glm::vec2(static_cast<float>(u), static_cast<float>(v));
+      return 0.0;
+    }
+  }
+  double best = std::numeric_limits<double>::infinity();
+  for (int e = 0; e < 3; ++e) {
+    int i = e, j = (e + 1) % 3;
+    glm::dvec2 d = c[j] - c[i];
+    double len2 = glm::dot(d, d);
+    double s = len2 > 0.0 ? std::clamp(glm::dot(p - c[i], d) / len2, 0.0, 1.0) : 0.0;
+    glm::dvec2 q = c[i] + s * d;
+    double dist = glm::dot(q - p, q - p);
+    if (dist < best) {
+      best = dist;
+      double w[3] = {0.0, 0.0, 0.0};
+      w[i] = 1.0 - s;
+      w[j] = s;
+      uv = glm::vec2(static_cast<float>(w[1]), static_cast<float>(w[2]));
+    }
+  }
+  return best;
+}
+
+// Strict overlap of triangle c with the texel square [x, x+1) x [y, y+1) (separating axes).
+bool overlaps_texel(const glm::dvec2* c, int x, int y) {
+  double x0 = x, x1 = x + 1.0, y0 = y, y1 = y + 1.0;
+  double lx = std::min({c[0].x, c[1].x, c[2].x}), hx = std::max({c[0].x, c[1].x, c[2].x});
+  double ly = std::min({c[0].y, c[1].y, c[2].y}), hy = std::max({c[0].y, c[1].y, c[2].y});
+  if (hx <= x0 || lx >= x1 || hy <= y0 || ly >= y1) return false;
+  for (int e = 0; e < 3; ++e) {
+    glm::dvec2 d = c[(e + 1) % 3] - c[e];
+    glm::dvec2 axis(-d.y, d.x);
+    if (axis.x == 0.0 && axis.y == 0.0) continue;
+    double t = glm::dot(axis, c[e]);
+    double t2 = glm::dot(axis, c[(e + 2) % 3]);
+    double tlo = std::min(t, t2), thi = std::max(t, t2);
+    double b[4] = {glm::dot(axis, glm::dvec2(x0, y0)), glm::dot(axis, glm::dvec2(x1, y0)),
+                   glm::dot(axis, glm::dvec2(x0, y1)), glm::dot(axis, glm::dvec2(x1, y1))};
+    double blo = std::min({b[0], b[1], b[2], b[3]}), bhi = std::max({b[0], b[1], b[2], b[3]});
+    if (thi <= blo || bhi <= tlo) return false;
+  }
+  return true;
+}
+
+constexpr int kBand = 16;  // rows per parallel band
+
+TexelGBuffer rasterize_object(const World& world, std::size_t oi, const ObjectLightmap& lm) {
+  // Inset of sample points into their triangle: a quarter texel, and at least twice the ray
+  // offset RayScene uses (1e-4 of the scene size). Off the edge, a sample neither lies in the
+  // plane of the neighbouring face nor sits where light sampling of an adjacent emitter has an
+  // unbounded 1/d^2 integrand.
+  const float inset = std::max(lm.texels_per_unit > 0.0f ? 0.25f / lm.texels_per_unit : 0.0f,
+                               2e-4f * std::max(world.bounds.max_extent(), 1e-6f));
+  TexelGBuffer g;
+  g.width = std::max(0, lm.width);
+  g.height = std::max(0, lm.height);
+  const std::size_t size = static_cast<std::size_t>(g.width) * static_cast<std::size_t>(g.height);
+  g.position.assign(size, glm::vec3(0.0f));
+  g.normal.assign(size, glm::vec3(0.0f));
+  g.albedo.assign(size, glm::vec3(0.0f));
+  g.triangle.assign(size, -1);
+  g.kind.assign(size, TexelKind::Empty);
+  if (size == 0) return g;
+  const WorldObject& wo = world.objects[oi];
+  const std::size_t n = std::min(wo.triangles().size(), lm.corner_uv.size() / 3);
+  std::vector<glm::vec2> bary(size, glm::vec2(0.0f));
+  std::vector<float> dist(size, std::numeric_limits<float>::infinity());
+
+  auto corners = [&](std::size_t t, glm::dvec2* c) {
+    for (int j = 0; j < 3; ++j) c[j] = glm::dvec2(lm.corner_uv[3 * t + j]);
+  };
+  auto row_range = [&](std::size_t t, int& y0, int& y1) {
+    glm::dvec2 c[3];
+    corners(t, c);
+    double lo = std::min({c[0].y, c[1].y, c[2].y}), hi = std::max({c[0].y, c[1].y, c[2].y});
+    if (!(lo <= hi)) return false;  // NaN
+    y0 = static_cast<int>(std::clamp(std::floor(lo), 0.0, g.height - 1.0));
+    y1 = static_cast<int>(std::clamp(std::floor(hi), 0.0, g.height - 1.0));
+    return hi >= 0.0 && lo < g.height;
+  };
+
+  // Bin triangles into bands of rows (a triangle goes to every band it touches).
+  const int bands = (g.height + kBand - 1) / kBand;
+  std::vector<std::size_t> bstart(static_cast<std::size_t>(bands) + 1, 0);
+  for (std::size_t t = 0; t < n; ++t) {
+    int y0, y1;
+    if (!row_range(t, y0, y1)) continue;
+    for (int b = y0 / kBand; b <= y1 / kBand; ++b) ++bstart[b + 1];
+  }
+  for (int b = 0; b < bands; ++b) bstart[b + 1] += bstart[b];
+  std::vector<std::size_t> bfill(bstart.begin(), bstart.end() - 1);
+  std::vector<std::uint32_t> btris(bstart.back());
+  for (std::size_t t = 0; t < n; ++t) {
+    int y0, y1;
+    if (!row_range(t, y0, y1)) continue;
+    for (int b = y0 / kBand; b <= y1 / kBand; ++b)
+      btris[bfill[b]++] = static_cast<std::uint32_t>(t);
+  }
+
+  tbb::parallel_for(0, bands, [&](int b) {
+    const int band_y0 = b * kBand, band_y1 = std::min(g.height, band_y0 + kBand) - 1;
+    for (std::size_t k = bstart[b]; k < bstart[b + 1]; ++k) {
+      const std::uint32_t t = btris[k];
+      glm::dvec2 c[3];
+      corners(t, c);
+      double area = cross2(c[1] - c[0], c[2] - c[0]);
+      if (area == 0.0) continue;  // no footprint: it keeps its centroid texel (below)
+      double lx = std::min({c[0].x, c[1].x, c[2].x}), hx = std::max({c[0].x, c[1].x, c[2].x});
+      double ly = std::min({c[0].y, c[1].y, c[2].y}), hy = std::max({c[0].y, c[1].y, c[2].y});
+      if (!(lx <= hx) || hx < 0.0 || lx >= g.width) continue;
+      int x0 = static_cast<int>(std::clamp(std::floor(lx), 0.0, g.width - 1.0));
+      int x1 = static_cast<int>(std::clamp(std::floor(hx), 0.0, g.width - 1.0));
+      int y0 = std::max(band_y0, static_cast<int>(std::clamp(std::floor(ly), 0.0, g.height - 1.0)));
+      int y1 = std::min(band_y1, static_cast<int>(std::clamp(std::floor(hy), 0.0, g.height - 1.0)));
+      for (int y = y0; y <= y1; ++y) {
+        for (int x = x0; x <= x1; ++x) {
+          const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
+          if (g.kind[i] == TexelKind::Covered) continue;
+          glm::dvec2 p(x + 0.5, y + 0.5);
+          double u = cross2(p - c[0], c[2] - c[0]) / area;
+          double v = cross2(c[1] - c[0], p - c[0]) / area;
+          if (u >= 0.0 && v >= 0.0 && u + v <= 1.0) {
+            g.kind[i] = TexelKind::Covered;
+            g.triangle[i] = static_cast<std::int32_t>(t);
+            bary[i] = glm::vec2(static_cast<float>(u), static_cast<float>(v));
+            dist[i] = 0.0f;
+            continue;
+          }
+          if (!overlaps_texel(c, x, y)) continue;
+          glm::vec2 uv;
+          auto d = static_cast<float>(closest_on_triangle(c, p, uv));
+          if (d < dist[i] || g.kind[i] == TexelKind::Empty) {
+            g.kind[i] = TexelKind::Conservative;
+            g.triangle[i] = static_cast<std::int32_t>(t);
+            bary[i] = uv;
+            dist[i] = d;
+          }
+        }
+      }
+    }
+  });
+
+  // Every triangle keeps at least the texel of its centroid.
+  for (std::size_t t = 0; t < n; ++t) {
+    glm::dvec2 c[3];
+    corners(t, c);
+    glm::dvec2 m = (c[0] + c[1] + c[2]) / 3.0;
+    if (!(m.x >= 0.0 && m.y >= 0.0 && m.x < g.width && m.y < g.height)) continue;
+    int x = std::min(g.width - 1, static_cast<int>(m.x));
+    int y = std::min(g.height - 1, static_cast<int>(m.y));
+    const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
+    if (g.kind[i] != TexelKind::Empty) continue;
+    glm::vec2 uv;
+    closest_on_triangle(c, glm::dvec2(x + 0.5, y + 0.5), uv);
+    g.kind[i] = TexelKind::Conservative;
+    g.triangle[i] = static_cast<std::int32_t>(t);
+    bary[i] = uv;
+  }
+
+  // Surface attributes of every valid texel.
+  tbb::parallel_for(0, g.height, [&](int y) {
+    for (int x = 0; x < g.width; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
+      if (g.kind[i] == TexelKind::Empty) continue;
+      auto t = static_cast<std::uint32_t>(g.triangle[i]);
+      float u = bary[i].x, v = bary[i].y;
+      // Pull the sample a hair toward the triangle's centroid: points exactly on an edge (chart
+      // borders put texel centres there) lie in the plane of the neighbouring face too, and rays
+      // leaving them would hit that face at t = 0.
+      glm::vec3 p = wo.position(t, u, v);
+      float to_centroid = glm::length(wo.position(t, 1.0f / 3.0f, 1.0f / 3.0f) - p);
+      if (to_centroid > 0.0f) {
+        float s = std::min(0.5f, inset / to_centroid);
+        u += s * (1.0f / 3.0f - u);
+        v += s * (1.0f / 3.0f - v);
+      }
+      g.position[i] = wo.position(t, u, v);
+      g.normal[i] = wo.shading_normal(t, u, v);
+      g.albedo[i] = world.albedo(static_cast<int>(oi), t, u, v);
+    }
+  });
+  return g;
+}
+
+}  // namespace
+
+std::size_t TexelGBuffer::valid_count() const {
+  return static_cast<std::size_t>(std::count_if(kind.begin(), kind.end(), holds_estimate));
+}
+
+std::vector<TexelGBuffer> rasterize_gbuffer(const World& world, const Atlas& atlas) {
+  if (atlas.objects.size() != world.objects.size())
+    throw Error("rasterize_gbuffer: the atlas has " + std::to_string(atlas.objects.size()) +
+                " lightmaps for " + std::to_string(world.objects.size()) + " objects");
+  std::vector<TexelGBuffer> out(atlas.objects.size());
+  tbb::parallel_for(std::size_t(0), atlas.objects.size(), [&](std::size_t oi) {
+    out[oi] = rasterize_object(world, oi, atlas.objects[oi]);
+  });
+  return out;
+}
+
+void rasterize_gbuffer(const World& world, const Atlas& atlas, std::vector<TexelGBuffer>& gbuffers,
+                       const std::vector<std::uint8_t>& which) {
+  if (atlas.objects.size() != world.objects.size() || gbuffers.size() != world.objects.size())
+    throw Error("rasterize_gbuffer: the atlas or G-buffers do not match the scene's objects");
+  tbb::parallel_for(std::size_t(0), atlas.objects.size(), [&](std::size_t oi) {
+    if (oi < which.size() && which[oi])
+      gbuffers[oi] = rasterize_object(world, oi, atlas.objects[oi]);
+  });
+}
+
+void dilate(std::vector<glm::vec3>& texels, int width, int height,
+            const std::vector<TexelKind>& valid, int rings) {
+  const std::size_t size =
+      static_cast<std::size_t>(std::max(0, width)) * static_cast<std::size_t>(std::max(0, height));
+  if (texels.size() != size || valid.size() != size)
+    throw Error("dilate: buffer sizes do not match the " + std::to_string(width) + "x" +
+                std::to_string(height) + " lightmap");
+  if (size == 0 || rings == 0) return;
+  std::vector<std::uint8_t> state(size, 0);  // 0 empty, 1 filled, 2 queued
+  for (std::size_t i = 0; i < size; ++i) state[i] = holds_estimate(valid[i]) ? 1 : 0;
+  std::vector<std::uint32_t> frontier, next;
+  auto push_neighbours = [&](int x, int y, std::vector<std::uint32_t>& out) {
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        int nx = x + dx, ny = y + dy;
+        if (nx < 0 || ny < 0 || nx >= width || ny >= height) continue;
+        std::size_t j = static_cast<std::size_t>(ny) * width + nx;
+        if (state[j] != 0) continue;
+        state[j] = 2;
+        out.push_back(static_cast<std::uint32_t>(j));
+      }
+  };
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x)
+      if (state[static_cast<std::size_t>(y) * width + x] == 1) push_neighbours(x, y, frontier);
+  std::vector<glm::vec3> values;
+  for (int ring = 0; !frontier.empty() && (rings < 0 || ring < rings); ++ring) {
+    // Average of the filled 8-neighbours, as first + mean difference so that equal neighbours
+    // reproduce their value exactly.
+    values.resize(frontier.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, frontier.size(), 1024),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t k = r.begin(); k < r.end(); ++k) {
+                          int x = static_cast<int>(frontier[k] % width);
+                          int y = static_cast<int>(frontier[k] / width);
+                          glm::vec3 first(0.0f), diff(0.0f);
+                          int count = 0;
+                          for (int dy = -1; dy <= 1; ++dy)
+                            for (int dx = -1; dx <= 1; ++dx) {
+                              int nx = x + dx, ny = y + dy;
+                              if (nx < 0 || ny < 0 || nx >= width || ny >= height) continue;
+                              std::size_t j = static_cast<std::size_t>(ny) * width + nx;
+                              if (state[j] != 1) continue;
+                              if (count++ == 0)
+                                first = texels[j];
+                              else
+                                diff += texels[j] - first;
+                            }
+                          values[k] = count > 1 ? first + diff / static_cast<float>(count) : first;
+                        }
+                      });
+    for (std::size_t k = 0; k < frontier.size(); ++k) {
+      texels[frontier[k]] = values[k];
+      state[frontier[k]] = 1;
+    }
+    next.clear();
+    for (std::uint32_t i : frontier)
+      push_neighbours(static_cast<int>(i % width), static_cast<int>(i / width), next);
+    frontier.swap(next);
+  }
+}
+
+}  // namespace irradcast

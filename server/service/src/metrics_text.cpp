@@ -1,0 +1,255 @@
+#include "irradcast/service/metrics_text.h"
+
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+namespace irradcast {
+
+namespace {
+
+using Labels = std::vector<std::pair<std::string, std::string>>;
+
+std::string escape_help(std::string_view text) {
+  std::string out;
+  for (char c : text) {
+    if (c == '\\')
+      out += "\\\\";
+    else if (c == '\n')
+      out += "\\n";
+    else
+      out += c;
+  }
+  return out;
+}
+
+// Writes families: # HELP and # TYPE once, then the family's samples.
+class Writer {
+ public:
+  void family(std::string_view name, std::string_view type, std::string_view help) {
+    name_ = name;
+    out_ += "# HELP ";
+    out_ += name;
+    out_ += ' ';
+    out_ += escape_help(help);
+    out_ += "\n# TYPE ";
+    out_ += name;
+    out_ += ' ';
+    out_ += type;
+    out_ += '\n';
+  }
+  void sample(const Labels& labels, double value) { line(labels, format_metric_value(value)); }
+  void sample(const Labels& labels, std::uint64_t value) { line(labels, std::to_string(value)); }
+
+  // A family with one unlabelled sample.
+  void gauge(std::string_view name, std::string_view help, double value) {
+    family(name, "gauge", help);
+    sample({}, value);
+  }
+  void gauge(std::string_view name, std::string_view help, std::uint64_t value) {
+    family(name, "gauge", help);
+    sample({}, value);
+  }
+  void counter(std::string_view name, std::string_view help, double value) {
+    family(name, "counter", help);
+    sample({}, value);
+  }
+  void counter(std::string_view name, std::string_view help, std::uint64_t value) {
+    family(name, "counter", help);
+    sample({}, value);
+  }
+
+  std::string take() { return std::move(out_); }
+
+ private:
+  void line(const Labels& labels, const std::string& value) {
+    out_ += name_;
+    if (!labels.empty()) {
+      out_ += '{';
+      for (std::size_t i = 0; i < labels.size(); ++i) {
+        if (i > 0) out_ += ',';
+        out_ += labels[i].first;
+        out_ += "=\"";
+        out_ += escape_label_value(labels[i].second);
+        out_ += '"';
+      }
+      out_ += '}';
+    }
+    out_ += ' ';
+    out_ += value;
+    out_ += '\n';
+  }
+
+  std::string out_;
+  std::string name_;
+};
+
+Labels pass_labels(const EnginePassStats& p) {
+  return {{"pass", p.pass}, {"bounce", std::to_string(p.bounce)}};
+}
+
+}  // namespace
+
+std::string escape_label_value(std::string_view value) {
+  std::string out;
+  out.reserve(value.size());
+  for (char c : value) {
+    if (c == '\\')
+      out += "\\\\";
+    else if (c == '"')
+      out += "\\\"";
+    else if (c == '\n')
+      out += "\\n";
+    else
+      out += c;
+  }
+  return out;
+}
+
+std::string format_metric_value(double value) {
+  if (std::isnan(value)) return "NaN";
+  if (std::isinf(value)) return value > 0 ? "+Inf" : "-Inf";
+  char buf[64];
+  auto [end, ec] = std::to_chars(buf, buf + sizeof buf, value);
+  if (ec != std::errc()) return "NaN";  // cannot happen: 64 characters hold any double
+  return std::string(buf, end);
+}
+
+MetricsSnapshot collect_metrics(const Server& server, const EngineHost& host,
+                                const MetricsEndpoint* endpoint) {
+  MetricsSnapshot m;
+  if (endpoint) m.endpoint = endpoint->stats();
+  m.scene = host.scene_id();
+  m.backend = host.backend_name();
+  m.server = server.stats();
+  m.engine = host.stats();
+  return m;
+}
+
+std::string format_metrics(const MetricsSnapshot& m) {
+  const ServerStats& s = m.server;
+  const EngineHostStats& e = m.engine;
+  Writer w;
+  w.family("irradcast_info", "gauge",
+           "Always 1; the labels name the scene being served and the engine's backend.");
+  w.sample({{"scene", m.scene}, {"backend", m.backend}}, std::uint64_t{1});
+  w.gauge("irradcast_uptime_seconds", "Seconds since the server started.", s.uptime_seconds);
+
+  // Clients and connections.
+  w.gauge("irradcast_clients", "Connected clients (sessions).", std::uint64_t{s.clients});
+  w.counter("irradcast_connections_total", "TCP connections accepted, refused ones included.",
+            s.connections);
+  w.counter("irradcast_clients_refused_total",
+            "Connections closed at once because the server had its maximum number of clients.",
+            s.clients_refused);
+  w.counter("irradcast_peer_refused_total",
+            "Connections closed at once because their address had its maximum of sessions.",
+            s.peer_refused);
+  w.counter("irradcast_banned_refused_total",
+            "Connections closed at once because their address is refused after wrong tokens.",
+            s.banned_refused);
+  w.counter("irradcast_accept_errors_total",
+            "Failed accepts (out of file descriptors and the like); accepting pauses on them.",
+            s.accept_errors);
+  w.counter("irradcast_token_failures_total", "Scene edits with a wrong control token.",
+            s.token_failures);
+  w.counter("irradcast_edits_dropped_total",
+            "Edit broadcasts dropped for clients that lagged (they load the scene again).",
+            s.edits_dropped);
+  w.counter("irradcast_log_lines_suppressed_total",
+            "Log lines a session caused over its rate, not written.", s.log_lines_suppressed);
+  w.gauge("irradcast_partial_frame_bytes", "Bytes of incomplete frames the sessions hold.",
+          s.partial_bytes);
+  w.family("irradcast_sessions_closed_total", "counter", "Sessions that ended, by reason.");
+  for (std::size_t r = 0; r < kCloseReasons; ++r)
+    w.sample({{"reason", close_reason_name(static_cast<CloseReason>(r))}}, s.sessions_closed[r]);
+
+  // Traffic.
+  w.counter("irradcast_bytes_sent_total", "Bytes written to clients (every frame).", s.bytes_sent);
+  w.counter("irradcast_tile_bytes_sent_total", "Bytes of TileUpdate frames written to clients.",
+            s.tile_bytes_sent);
+  w.counter("irradcast_scene_bytes_sent_total", "Bytes of SceneChunk frames written to clients.",
+            s.scene_bytes_sent);
+  w.counter("irradcast_bytes_received_total", "Bytes read from clients.", s.bytes_received);
+  w.counter("irradcast_frames_received_total", "Frames read from clients.", s.frames_received);
+  w.counter("irradcast_errors_sent_total", "Error frames sent to clients.", s.errors_sent);
+
+  // Tiles.
+  w.counter("irradcast_tiles_sent_total", "TileUpdate frames written to clients.", s.tiles_sent);
+  w.counter("irradcast_tiles_coalesced_total",
+            "Tile versions replaced by a newer one while waiting in a client's queue.",
+            s.tiles_coalesced);
+  w.gauge("irradcast_queue_depth", "Tiles waiting to be sent, summed over all clients.",
+          s.queue_depth);
+  w.gauge("irradcast_queue_depth_max", "Tiles waiting for the client with the longest queue.",
+          s.queue_depth_max);
+  w.gauge("irradcast_tiles", "Tiles of all lightmaps of the scene.", e.tiles);
+  w.counter("irradcast_tiles_published_total", "New tile versions the engine published.",
+            e.tiles_published);
+  w.gauge("irradcast_bytes_per_texel",
+          "Mean encoded size of the newest tile payloads (RGB9E5 + zstd), bytes per texel.",
+          e.bytes_per_texel);
+
+  // The engine.
+  w.counter("irradcast_engine_updates_total", "Progressive engine updates completed.", e.updates);
+  w.gauge("irradcast_engine_update_rate",
+          "Engine updates per second over the last 10 seconds (falls to 0 within 10 s once the "
+          "engine stops refining).",
+          e.update_rate);
+  w.gauge("irradcast_engine_update_seconds", "Wall time of the last engine update.",
+          e.last_update_ms * 1e-3);
+  w.counter("irradcast_engine_seconds_total", "Wall time spent in engine updates.",
+            e.seconds_total);
+  w.counter("irradcast_engine_rays_total", "Rays traced by the engine.", e.rays_total);
+  w.gauge("irradcast_engine_rays_per_second", "Rays per second of the last engine update.",
+          e.rays_per_s);
+  w.gauge("irradcast_engine_convergence",
+          "Mean relative standard error of the lightmap texels (lower is more converged).",
+          e.convergence);
+  w.gauge("irradcast_engine_idle",
+          "1 when the engine stopped refining (--max-updates reached): the tiles are final.",
+          std::uint64_t{e.idle ? 1u : 0u});
+  w.gauge("irradcast_engine_texels", "Texels the engine computes.", e.texels);
+  w.gauge("irradcast_scene_revision", "Scene edits applied since the scene was loaded.",
+          e.revision);
+  w.gauge("irradcast_edit_apply_seconds", "Wall time the last scene edit took to apply.",
+          e.last_edit_ms / 1e3);
+  w.gauge("irradcast_engine_stale_texels",
+          "Texels still waiting for new direct light since the last edit (0: caught up).",
+          e.stale_texels);
+  w.family("irradcast_engine_pass_seconds", "gauge",
+           "Wall time of each engine pass in the last update (bounce 0: direct).");
+  for (const EnginePassStats& p : e.passes) w.sample(pass_labels(p), p.seconds);
+  w.family("irradcast_engine_pass_rays", "gauge", "Rays of each engine pass in the last update.");
+  for (const EnginePassStats& p : e.passes) w.sample(pass_labels(p), p.rays);
+  w.family("irradcast_engine_pass_seconds_total", "counter",
+           "Wall time of each engine pass, summed over all updates.");
+  for (const EnginePassStats& p : e.passes) w.sample(pass_labels(p), p.seconds_total);
+  w.family("irradcast_engine_pass_rays_total", "counter",
+           "Rays of each engine pass, summed over all updates.");
+  for (const EnginePassStats& p : e.passes) w.sample(pass_labels(p), p.rays_total);
+
+  // The /metrics endpoint itself.
+  const MetricsEndpointStats& x = m.endpoint;
+  w.counter("irradcast_metrics_connections_total", "Connections the metrics endpoint accepted.",
+            x.connections);
+  w.gauge("irradcast_metrics_connections_open", "Connections open at the metrics endpoint.",
+          x.open);
+  w.counter("irradcast_metrics_connections_dropped_total",
+            "Metrics endpoint connections closed to make room for a new one (max_connections "
+            "open): answered ones first, then the oldest with an incomplete request.",
+            x.dropped);
+  w.counter("irradcast_metrics_connections_timed_out_total",
+            "Metrics endpoint connections closed by a deadline (request head or whole "
+            "connection) before their response was written.",
+            x.timeouts);
+  w.counter("irradcast_metrics_scrapes_total", "Metrics endpoint 200 responses.", x.ok);
+  w.counter("irradcast_metrics_errors_total", "Metrics endpoint 4xx and 5xx responses.", x.bad);
+  w.counter("irradcast_metrics_collections_total",
+            "Times the metrics text was made (concurrent scrapes share one).", x.collections);
+  return w.take();
+}
+
+}  // namespace irradcast
