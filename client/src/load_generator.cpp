@@ -13,13 +13,14 @@
 #include <thread>
 
 #include "irradcast/client/camera_message.h"
+#include "irradcast/client/client_session.h"
 #include "irradcast/common/compositor.h"
 #include "irradcast/common/error.h"
-#include "irradcast/wire/frame.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/sampling.h"
+#include "irradcast/wire/frame.h"
 #include "irradcast/wire/scene_package.h"
-#include "irradcast/client/tile_cache.h"
+#include "latency_histogram.h"
 
 namespace irradcast {
 
@@ -28,33 +29,23 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-std::uint64_t now_us() {
-  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
-                                        std::chrono::system_clock::now().time_since_epoch())
-                                        .count());
-}
-
 double ms_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
 // The scene as the users need it. Every user downloads the package and checks its hash; the
 // unpacking (and in render mode the BVH) is done once per process and shared, since it is the
-// same for everyone and would only make the load generator, not the server, slower.
-struct SharedScene {
-  wire::UnpackedScene unpacked;
-  World world;
-  std::unique_ptr<RayScene> rays;
-};
-
+// same for everyone and would only make the load generator, not the server, slower. (The users
+// do not follow edits, so nobody changes a shared scene.)
 class SceneCache {
  public:
-  std::shared_ptr<const SharedScene> get(const std::string& bytes, const std::string& hash,
-                                         bool need_rays) {
+  std::shared_ptr<ClientScene> get(const std::string& bytes, const std::string& hash,
+                                   bool need_rays) {
+    if (wire::sha256(bytes) != hash) throw Error("the scene package does not match its hash");
     std::lock_guard lock(mutex_);
     auto it = scenes_.find(hash);
     if (it != scenes_.end()) return it->second;
-    auto s = std::make_shared<SharedScene>();
+    auto s = std::make_shared<ClientScene>();
     s->unpacked = wire::open_scene_package(bytes, hash);
     s->world = World::build(s->unpacked.scene);
     if (need_rays) s->rays = std::make_unique<RayScene>(s->world);
@@ -64,40 +55,7 @@ class SceneCache {
 
  private:
   std::mutex mutex_;
-  std::map<std::string, std::shared_ptr<const SharedScene>> scenes_;
-};
-
-// Tile latencies for the progress line: 8 buckets per octave of microseconds.
-class LatencyHistogram {
- public:
-  static constexpr int kBuckets = 8 * 32;
-  void add(double us) {
-    const int b = std::clamp(static_cast<int>(std::log2(us + 1.0) * 8.0), 0, kBuckets - 1);
-    counts_[static_cast<std::size_t>(b)].fetch_add(1, std::memory_order_relaxed);
-  }
-  // p99 in ms of what was added since the last call.
-  double take_p99_ms() {
-    std::array<std::uint64_t, kBuckets> now{};
-    std::uint64_t total = 0;
-    for (int b = 0; b < kBuckets; ++b) {
-      const auto i = static_cast<std::size_t>(b);
-      now[i] = counts_[i].load(std::memory_order_relaxed) - seen_[i];
-      seen_[i] += now[i];
-      total += now[i];
-    }
-    if (total == 0) return 0.0;
-    const auto rank = static_cast<std::uint64_t>(std::ceil(0.99 * static_cast<double>(total)));
-    std::uint64_t acc = 0;
-    for (int b = 0; b < kBuckets; ++b) {
-      acc += now[static_cast<std::size_t>(b)];
-      if (acc >= rank) return (std::exp2((b + 1) / 8.0) - 1.0) / 1000.0;  // bucket's upper edge
-    }
-    return 0.0;
-  }
-
- private:
-  std::array<std::atomic<std::uint64_t>, kBuckets> counts_{};
-  std::array<std::uint64_t, kBuckets> seen_{};
+  std::map<std::string, std::shared_ptr<ClientScene>> scenes_;
 };
 
 // What all users share: options, the io_context, the resolved server, and live counters.
@@ -153,7 +111,11 @@ class User : public std::enable_shared_from_this<User> {
         frame_timer_(strand_),
         close_timer_(strand_),
         backoff_(run.options.backoff,
-                 mix64(run.options.seed ^ mix64(static_cast<std::uint64_t>(index) + 1))) {}
+                 mix64(run.options.seed ^ mix64(static_cast<std::uint64_t>(index) + 1))),
+        core_(session_options(run.options, index),
+              [&run](const std::string& bytes, const std::string& hash) {
+                return run.scenes.get(bytes, hash, run.options.render);
+              }) {}
 
   void start(Clock::duration delay) {
     retry_timer_.expires_after(delay);
@@ -178,8 +140,8 @@ class User : public std::enable_shared_from_this<User> {
       const Clock::time_point end = closed_ ? closed_at_ : Clock::now();
       r.seconds_after_full_image = std::chrono::duration<double>(end - full_image_at_).count();
     }
-    r.tiles_held = tiles_.tiles_received();
-    r.versions_digest = versions_digest(tiles_.versions());
+    r.tiles_held = core_.tiles().tiles_received();
+    r.versions_digest = versions_digest(core_.tiles().versions());
     return r;
   }
   std::vector<double> take_latencies() { return std::move(latencies_ms_); }
@@ -187,7 +149,20 @@ class User : public std::enable_shared_from_this<User> {
 
  private:
   // Waiting: no connection, the next attempt after a back-off delay (or none before the end).
-  enum class State { Idle, Connecting, AwaitWelcome, Downloading, Streaming, Waiting, Done };
+  // Session: Hello sent; the protocol's phase is the core's.
+  enum class State { Idle, Connecting, Session, Waiting, Done };
+  using Phase = ClientSession::Phase;
+
+  static ClientSessionOptions session_options(const LoadOptions& o, int index) {
+    ClientSessionOptions s;
+    s.name = o.name + "-" + std::to_string(index);
+    s.encoding = o.encoding;
+    s.ping_interval = std::chrono::milliseconds(5000);
+    s.min_ping_interval = std::chrono::milliseconds(100);
+    s.follow_edits = false;
+    s.log_tag = "load";
+    return s;
+  }
 
   using ConnPtr = std::shared_ptr<Connection>;
 
@@ -240,18 +215,8 @@ class User : public std::enable_shared_from_this<User> {
       result_.connected = true;
       ++run_.connected;
     }
-    wire::Envelope hello;
-    wire::Hello* h = hello.mutable_hello();
-    h->set_protocol_version(wire::kProtocolVersion);
-    h->set_client_name(run_.options.name + "-" + std::to_string(index_));
-    if (scene_) {
-      // Resume: the scene we hold and the tile versions we have.
-      h->set_cached_scene_hash(welcome_.scene_hash());
-      h->set_known_epoch(welcome_.tile_epoch());
-      tiles_.add_known(*h);
-    }
-    send(hello);
-    state_ = State::AwaitWelcome;
+    send(core_.hello());  // resuming with the scene and tile versions held
+    state_ = State::Session;
     arm_reply_timer("no Welcome within the reply timeout");
     read();
   }
@@ -288,8 +253,8 @@ class User : public std::enable_shared_from_this<User> {
     reply_timer_.expires_after(run_.options.reply_timeout);
     reply_timer_.async_wait([self = shared_from_this(), c = conn_, what](std::error_code ec) {
       if (ec || c != self->conn_ || self->finishing_ || self->closed_) return;
-      if (self->state_ == State::AwaitWelcome || self->state_ == State::Downloading)
-        self->lost("timeout", what);
+      const Phase phase = self->core_.phase();
+      if (self->state_ == State::Session && phase != Phase::Streaming) self->lost("timeout", what);
     });
   }
 
@@ -331,89 +296,52 @@ class User : public std::enable_shared_from_this<User> {
   }
 
   void handle(const wire::Envelope& env) {
-    using E = wire::Envelope;
-    if (finishing_ && env.msg_case() != E::kError) return;  // Bye is on its way
-    switch (env.msg_case()) {
-      case E::kWelcome:
-        on_welcome(env.welcome());
-        break;
-      case E::kSceneChunk:
-        on_chunk(env.scene_chunk());
-        break;
-      case E::kTileUpdate:
-        on_tile(env.tile_update());
-        break;
-      case E::kError: {
-        const std::string code = wire::ErrorCode_Name(env.error().code());
-        conn_->server_error = code + ": " + env.error().message();
-        run_.count_error("server " + code);
-        // The server closes after these: reconnect now rather than at the EOF.
-        if (server_error_is_transient(env.error().code()) && !finishing_)
-          lost("", conn_->server_error);
-        break;
-      }
-      default:
-        break;  // Pong, Stats, Bye, anything newer
-    }
-  }
-
-  void on_welcome(const wire::Welcome& w) {
-    if (state_ != State::AwaitWelcome) {
-      fail("protocol", "an unexpected Welcome");
-      return;
-    }
-    if (w.protocol_version() != wire::kProtocolVersion) {
-      fail("protocol", "the server speaks protocol " + std::to_string(w.protocol_version()));
-      return;
-    }
-    if (w.idle_timeout_ms() > 0)
-      ping_interval_ = std::clamp(std::chrono::milliseconds(w.idle_timeout_ms() / 3),
-                                  std::chrono::milliseconds(100), ping_interval_);
-    const bool same_scene = scene_ && w.scene_hash() == welcome_.scene_hash();
-    // Another lineage of versions: any version the server sends is news.
-    if (same_scene && w.tile_epoch() != welcome_.tile_epoch()) tiles_.forget_versions();
-    welcome_ = w;
-    if (same_scene) {  // resumed: the scene is the one we hold
-      subscribe();
-      return;
-    }
-    assembler_ = std::make_unique<wire::SceneAssembler>(w.scene_hash(), w.scene_bytes());
-    wire::Envelope req;
-    req.mutable_scene_request()->set_offset(0);
-    send(req);
-    state_ = State::Downloading;
-    arm_reply_timer("the scene download stalled");
-  }
-
-  void on_chunk(const wire::SceneChunk& c) {
-    if (state_ != State::Downloading) {
-      fail("protocol", "a SceneChunk outside a download");
-      return;
-    }
+    using Event = ClientStep::Event;
+    if (finishing_ && env.msg_case() != wire::Envelope::kError) return;  // Bye is on its way
     try {
-      arm_reply_timer("the scene download stalled");
-      if (!assembler_->add(c)) return;
-      const std::string& bytes = assembler_->bytes();
-      if (wire::sha256(bytes) != welcome_.scene_hash())
-        throw Error("the scene package does not match its hash");
-      scene_ = run_.scenes.get(bytes, welcome_.scene_hash(), run_.options.render);
-      tiles_.configure(welcome_, scene_->unpacked.atlas);
-    } catch (const std::exception& e) {
-      fail("bad scene", e.what());
-      return;
+      const ClientStep step = core_.on_frame(env);
+      switch (step.event) {
+        case Event::NeedScene:
+          send(core_.download());
+          arm_reply_timer("the scene download stalled");
+          break;
+        case Event::Downloading:
+          arm_reply_timer("the scene download stalled");
+          break;
+        case Event::SessionReady:
+          on_ready(step);
+          break;
+        case Event::TileApplied:
+          on_tile(env.tile_update());
+          break;
+        case Event::ServerError: {
+          const std::string code = wire::ErrorCode_Name(env.error().code());
+          conn_->server_error = code + ": " + env.error().message();
+          run_.count_error("server " + code);
+          // The server closes after these: reconnect now rather than at the EOF.
+          if (server_error_is_transient(env.error().code()) && !finishing_)
+            lost("", conn_->server_error);
+          break;
+        }
+        default:
+          break;  // Pong, Stats, Bye, edits (the users do not follow them), anything newer
+      }
+    } catch (const ClientSessionFailure& f) {
+      fail(f.kind(), f.what());
     }
-    assembler_.reset();
-    if (!result_.scene_loaded) {
-      result_.scene_loaded = true;
-      result_.scene_ms = ms_between(started_, Clock::now());
-      ++run_.scene_loaded;
-    }
-    make_path();
-    subscribe();
   }
 
-  // The session is set up: subscribe, and start the camera updates, pings and frames.
-  void subscribe() {
+  // The session is set up (after a download: with a new scene): subscribe, and start the camera
+  // updates, pings and frames.
+  void on_ready(const ClientStep& step) {
+    if (step.scene_loaded) {
+      if (!result_.scene_loaded) {
+        result_.scene_loaded = true;
+        result_.scene_ms = ms_between(started_, Clock::now());
+        ++run_.scene_loaded;
+      }
+      make_path();
+    }
     reply_timer_.cancel();
     backoff_.reset();
     if (lost_) {
@@ -421,12 +349,8 @@ class User : public std::enable_shared_from_this<User> {
       ++result_.reconnects;
       ++run_.reconnects;
     }
-    wire::Envelope s;
-    s.mutable_subscribe()->set_all(true);
-    s.mutable_subscribe()->set_encoding(run_.options.encoding);
-    subscribed_us_ = now_us();
-    send(s);
-    state_ = State::Streaming;
+    subscribed_us_ = wall_time_us();
+    for (const wire::Envelope& e : step.send) send(e);  // the Subscribe
     if (run_.options.camera_hz > 0.0) send_camera();
     arm_ping();
     if (run_.options.render) arm_frame(Clock::now());
@@ -437,31 +361,20 @@ class User : public std::enable_shared_from_this<User> {
         run_.options.users > 0 ? static_cast<double>(index_) / run_.options.users : 0.0;
     const std::string& p = run_.options.camera_path;
     if (p == "orbit")
-      path_ = CameraPath::orbit(scene_->world.bounds, 20.0, phase);
+      path_ = CameraPath::orbit(core_.scene().world.bounds, 20.0, phase);
     else if (p == "random-walk")
-      path_ = CameraPath::random_walk(scene_->world.bounds,
+      path_ = CameraPath::random_walk(core_.scene().world.bounds,
                                       run_.options.seed * 7919u + static_cast<unsigned>(index_));
     else
       path_ = CameraPath::keyframes(run_.keyframes, phase);
   }
 
+  // A tile newer than the one held was applied: its latency.
   void on_tile(const wire::TileUpdate& t) {
-    if (state_ != State::Streaming) {
-      fail("protocol", "a TileUpdate before the subscription");
-      return;
-    }
-    bool applied = false;
-    try {
-      applied = tiles_.apply(t);
-    } catch (const std::exception& e) {
-      fail("bad tile", e.what());
-      return;
-    }
-    if (!applied) return;
     ++result_.tiles_applied;
     ++run_.tiles;
     if (t.server_time_us() >= subscribed_us_) {
-      const std::uint64_t now = now_us();
+      const std::uint64_t now = wall_time_us();
       const double us =
           now > t.server_time_us() ? static_cast<double>(now - t.server_time_us()) : 0.0;
       latencies_ms_.push_back(us / 1000.0);
@@ -472,7 +385,8 @@ class User : public std::enable_shared_from_this<User> {
       run_.latency.add(us);
       ++result_.tiles_live;
     }
-    if (!run_.options.render && !result_.full_image && tiles_.all_received()) mark_full_image();
+    if (!run_.options.render && !result_.full_image && core_.tiles().all_received())
+      mark_full_image();
   }
 
   void mark_full_image() {
@@ -486,7 +400,8 @@ class User : public std::enable_shared_from_this<User> {
   // The timers of a session stop with its connection (drop_connection cancels them; a handler
   // that was already queued sees another connection, or none, and does nothing).
   bool streaming_on(const ConnPtr& c) const {
-    return c == conn_ && state_ == State::Streaming && !finishing_ && !closed_;
+    return c == conn_ && state_ == State::Session && core_.phase() == Phase::Streaming &&
+           !finishing_ && !closed_;
   }
 
   void send_camera() {
@@ -500,15 +415,11 @@ class User : public std::enable_shared_from_this<User> {
   }
 
   void arm_ping() {
-    ping_timer_.expires_after(ping_interval_);
+    ping_timer_.expires_after(core_.ping_interval());
     ping_timer_.async_wait([self = shared_from_this(), c = conn_](std::error_code ec) {
       if (ec || !self->streaming_on(c)) return;
-      if (Clock::now() - self->last_sent_ >= self->ping_interval_) {
-        wire::Envelope p;
-        p.mutable_ping()->set_nonce(self->result_.tiles_applied);
-        p.mutable_ping()->set_time_us(now_us());
-        self->send(p);
-      }
+      if (Clock::now() - self->last_sent_ >= self->core_.ping_interval())
+        self->send(ClientSession::ping(self->result_.tiles_applied, wall_time_us()));
       self->arm_ping();
     });
   }
@@ -522,15 +433,16 @@ class User : public std::enable_shared_from_this<User> {
 
   void render_frame() {
     const auto t0 = Clock::now();
+    const ClientScene& s = core_.scene();
     const ImageRGB img =
-        compose(scene_->world, *scene_->rays, scene_->unpacked.atlas, tiles_.lightmaps(),
+        compose(s.world, *s.rays, s.unpacked.atlas, core_.tiles().lightmaps(),
                 path_.at(run_.elapsed_s()), run_.options.width, run_.options.height);
     (void)img;
     const auto t1 = Clock::now();
     frame_ms_total_ += ms_between(t0, t1);
     ++result_.frames;
     ++run_.frames;
-    if (!result_.full_image && tiles_.all_received()) mark_full_image();
+    if (!result_.full_image && core_.tiles().all_received()) mark_full_image();
     const auto period = run_.options.fps > 0.0
                             ? std::chrono::duration_cast<Clock::duration>(
                                   std::chrono::duration<double>(1.0 / run_.options.fps))
@@ -573,8 +485,7 @@ class User : public std::enable_shared_from_this<User> {
   void do_finish() {
     if (finishing_ || closed_) return;
     finishing_ = true;
-    const bool live = conn_ && (state_ == State::AwaitWelcome || state_ == State::Downloading ||
-                                state_ == State::Streaming);
+    const bool live = conn_ && state_ == State::Session;
     if (!live) {
       if (result_.failure.empty()) {
         const std::string last = last_error_.empty() ? "" : " (last: " + last_error_ + ")";
@@ -615,6 +526,7 @@ class User : public std::enable_shared_from_this<User> {
     for (asio::steady_timer* t : {&reply_timer_, &camera_timer_, &ping_timer_, &frame_timer_})
       t->cancel();
     if (!conn_) return;
+    core_.disconnect();
     conn_->socket.close();
     conn_.reset();
   }
@@ -641,12 +553,8 @@ class User : public std::enable_shared_from_this<User> {
   State state_ = State::Idle;
   Clock::time_point started_ = Clock::now(), last_sent_ = Clock::now(), full_image_at_{},
                     closed_at_{};
-  std::chrono::milliseconds ping_interval_{5000};
   std::string last_error_;  // why the last connection attempt failed or the last one dropped
-  wire::Welcome welcome_;
-  std::unique_ptr<wire::SceneAssembler> assembler_;
-  std::shared_ptr<const SharedScene> scene_;
-  TileCache tiles_;
+  ClientSession core_;      // the protocol: the viewer's code
   CameraPath path_;
   std::uint64_t subscribed_us_ = 0;
   double frame_ms_total_ = 0.0;
@@ -666,41 +574,10 @@ void check(const LoadOptions& o) {
   o.backoff.validate();
 }
 
-}  // namespace
-
-Percentiles Percentiles::of(std::vector<double> v) {
-  Percentiles p;
-  p.count = v.size();
-  if (v.empty()) return p;
-  std::sort(v.begin(), v.end());
-  auto rank = [&](double q) {
-    const auto i = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())));
-    return v[std::clamp<std::size_t>(i, 1, v.size()) - 1];
-  };
-  p.p50 = rank(0.50);
-  p.p95 = rank(0.95);
-  p.p99 = rank(0.99);
-  p.max = v.back();
-  double sum = 0.0;
-  for (double x : v) sum += x;
-  p.mean = sum / static_cast<double>(v.size());
-  return p;
-}
-
-std::uint64_t versions_digest(const std::vector<std::uint64_t>& versions) {
-  std::uint64_t h = 1469598103934665603ull;
-  for (std::uint64_t v : versions)
-    for (int b = 0; b < 8; ++b) {
-      h ^= (v >> (8 * b)) & 0xffu;
-      h *= 1099511628211ull;
-    }
-  return h;
-}
-
-LoadReport run_load(const LoadOptions& options,
-                    const std::function<void(const LoadProgress&)>& on_progress) {
-  check(options);
-  Run run(options);
+// Camera keyframes, the server's address and the TLS context: everything that can fail before
+// a user starts.
+void prepare(Run& run) {
+  const LoadOptions& options = run.options;
   if (options.camera_path != "orbit" && options.camera_path != "random-walk")
     run.keyframes = load_camera_keyframes(options.camera_path);
   {
@@ -710,22 +587,11 @@ LoadReport run_load(const LoadOptions& options,
     if (ec) throw Error("cannot resolve '" + options.host + "': " + ec.message());
   }
   run.tls = make_tls_context(options.tls);
+}
 
-  std::vector<std::shared_ptr<User>> users;
-  users.reserve(static_cast<std::size_t>(options.users));
-  run.start = Clock::now();
-  const auto end = run.start + std::chrono::duration_cast<Clock::duration>(
-                                   std::chrono::duration<double>(options.duration_s));
-  run.end = end;
-  for (int i = 0; i < options.users; ++i) {
-    users.push_back(std::make_shared<User>(run, i));
-    const double at = options.users > 1 ? options.ramp_s * i / (options.users - 1) : 0.0;
-    users.back()->start(
-        std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(at)));
-  }
-  auto work = asio::make_work_guard(run.io);
-  const int threads = options.threads > 0
-                          ? options.threads
+std::vector<std::thread> start_io_threads(Run& run) {
+  const int threads = run.options.threads > 0
+                          ? run.options.threads
                           : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   std::vector<std::thread> pool;
   for (int i = 0; i < threads; ++i)
@@ -740,35 +606,36 @@ LoadReport run_load(const LoadOptions& options,
         }
       }
     });
+  return pool;
+}
 
-  // The main thread reports progress until the end of the run.
+// The main thread reports progress until the end of the run.
+void report_progress(Run& run, const std::function<void(const LoadProgress&)>& on_progress) {
   auto next_report = run.start + std::chrono::seconds(1);
-  while (Clock::now() < end) {
-    std::this_thread::sleep_until(std::min(end, next_report));
-    if (Clock::now() >= next_report) {
-      next_report += std::chrono::seconds(1);
-      if (on_progress) {
-        LoadProgress p;
-        p.elapsed_s = run.elapsed_s();
-        p.users = options.users;
-        p.connected = run.connected;
-        p.scene_loaded = run.scene_loaded;
-        p.full_image = run.full_image;
-        p.failed = run.failed;
-        p.tiles_applied = run.tiles;
-        p.bytes_received = run.bytes;
-        p.frames = run.frames;
-        p.errors = run.errors;
-        p.reconnects = run.reconnects;
-        p.latency_p99_ms = run.latency.take_p99_ms();
-        on_progress(p);
-      }
-    }
+  while (Clock::now() < run.end) {
+    std::this_thread::sleep_until(std::min(run.end, next_report));
+    if (Clock::now() < next_report) continue;
+    next_report += std::chrono::seconds(1);
+    if (!on_progress) continue;
+    LoadProgress p;
+    p.elapsed_s = run.elapsed_s();
+    p.users = run.options.users;
+    p.connected = run.connected;
+    p.scene_loaded = run.scene_loaded;
+    p.full_image = run.full_image;
+    p.failed = run.failed;
+    p.tiles_applied = run.tiles;
+    p.bytes_received = run.bytes;
+    p.frames = run.frames;
+    p.errors = run.errors;
+    p.reconnects = run.reconnects;
+    p.latency_p99_ms = run.latency.take_p99_ms();
+    on_progress(p);
   }
-  const double elapsed = run.elapsed_s();
-  for (auto& u : users) u->finish();
-  work.reset();
-  // Users close within a second of finish(); a server that never reads makes us stop anyway.
+}
+
+// Users close within a second of finish(); a server that never reads makes us stop anyway.
+void join_io_threads(Run& run, std::vector<std::thread>& pool) {
   std::mutex done_mutex;
   std::condition_variable done_cv;
   bool done = false;
@@ -783,55 +650,46 @@ LoadReport run_load(const LoadOptions& options,
   }
   done_cv.notify_all();
   stopper.join();
+}
 
-  LoadReport r;
-  r.options = options;
-  r.elapsed_s = elapsed;
-  r.users = options.users;
-  std::vector<double> scene, full, latency, steady_latency, rate, steady, to_full, fps, frame_ms;
+}  // namespace
+
+LoadReport run_load(const LoadOptions& options,
+                    const std::function<void(const LoadProgress&)>& on_progress) {
+  check(options);
+  Run run(options);
+  prepare(run);
+
+  std::vector<std::shared_ptr<User>> users;
+  users.reserve(static_cast<std::size_t>(options.users));
+  run.start = Clock::now();
+  run.end = run.start + std::chrono::duration_cast<Clock::duration>(
+                            std::chrono::duration<double>(options.duration_s));
+  for (int i = 0; i < options.users; ++i) {
+    users.push_back(std::make_shared<User>(run, i));
+    const double at = options.users > 1 ? options.ramp_s * i / (options.users - 1) : 0.0;
+    users.back()->start(
+        std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(at)));
+  }
+  auto work = asio::make_work_guard(run.io);
+  std::vector<std::thread> pool = start_io_threads(run);
+  report_progress(run, on_progress);
+  const double elapsed = run.elapsed_s();
+  for (auto& u : users) u->finish();
+  work.reset();
+  join_io_threads(run, pool);
+
+  std::vector<LoadUserResult> results;
+  std::vector<double> latency, steady_latency;
   for (auto& u : users) {
-    LoadUserResult res = u->result();
+    results.push_back(u->result());
     std::vector<double> l = u->take_latencies();
     latency.insert(latency.end(), l.begin(), l.end());
     l = u->take_steady_latencies();
     steady_latency.insert(steady_latency.end(), l.begin(), l.end());
-    r.connected += res.connected;
-    r.failed += !res.failure.empty();
-    r.scene_loaded += res.scene_loaded;
-    r.full_image += res.full_image;
-    if (res.scene_loaded) scene.push_back(res.scene_ms);
-    if (res.full_image) {
-      full.push_back(res.full_image_ms);
-      to_full.push_back(static_cast<double>(res.bytes_to_full_image));
-      if (res.seconds_after_full_image > 0.5)
-        steady.push_back(static_cast<double>(res.bytes_after_full_image) /
-                         res.seconds_after_full_image);
-    }
-    if (res.connected) rate.push_back(static_cast<double>(res.bytes_received) / elapsed);
-    if (options.render && res.connected) {
-      fps.push_back(static_cast<double>(res.frames) / elapsed);
-      if (res.frames > 0) frame_ms.push_back(res.frame_ms_mean);
-    }
-    r.tiles_applied += res.tiles_applied;
-    r.tiles_live += res.tiles_live;
-    r.bytes_received += res.bytes_received;
-    r.frames += res.frames;
-    r.camera_updates += res.camera_updates;
-    r.connections_lost += res.connections_lost;
-    r.reconnects += res.reconnects;
-    r.per_user.push_back(std::move(res));
   }
-  r.scene_ms = Percentiles::of(std::move(scene));
-  r.full_image_ms = Percentiles::of(std::move(full));
-  r.tile_latency_ms = Percentiles::of(std::move(latency));
-  r.steady_tile_latency_ms = Percentiles::of(std::move(steady_latency));
-  r.bytes_per_s = Percentiles::of(std::move(rate));
-  r.steady_bytes_per_s = Percentiles::of(std::move(steady));
-  r.bytes_to_full_image = Percentiles::of(std::move(to_full));
-  r.frames_per_s = Percentiles::of(std::move(fps));
-  r.frame_ms = Percentiles::of(std::move(frame_ms));
-  r.errors = run.error_kinds;
-  return r;
+  return LoadReport::of(options, elapsed, std::move(results), std::move(latency),
+                        std::move(steady_latency), run.error_kinds);
 }
 
 }  // namespace irradcast

@@ -1,6 +1,9 @@
-// LoadReport as text for people and as JSON for scripts and benchmarks.
+// LoadReport as text for people and as JSON for scripts and benchmarks, and the statistics it is
+// made of (percentiles, version digests).
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <sstream>
 
@@ -41,6 +44,84 @@ nlohmann::json to_json(const Percentiles& p) {
 }
 
 }  // namespace
+
+Percentiles Percentiles::of(std::vector<double> v) {
+  Percentiles p;
+  p.count = v.size();
+  if (v.empty()) return p;
+  std::sort(v.begin(), v.end());
+  auto rank = [&](double q) {
+    const auto i = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())));
+    return v[std::clamp<std::size_t>(i, 1, v.size()) - 1];
+  };
+  p.p50 = rank(0.50);
+  p.p95 = rank(0.95);
+  p.p99 = rank(0.99);
+  p.max = v.back();
+  double sum = 0.0;
+  for (double x : v) sum += x;
+  p.mean = sum / static_cast<double>(v.size());
+  return p;
+}
+
+std::uint64_t versions_digest(const std::vector<std::uint64_t>& versions) {
+  std::uint64_t h = 1469598103934665603ull;
+  for (std::uint64_t v : versions)
+    for (int b = 0; b < 8; ++b) {
+      h ^= (v >> (8 * b)) & 0xffu;
+      h *= 1099511628211ull;
+    }
+  return h;
+}
+
+LoadReport LoadReport::of(const LoadOptions& options, double elapsed,
+                          std::vector<LoadUserResult> users, std::vector<double> latency,
+                          std::vector<double> steady_latency,
+                          std::map<std::string, std::uint64_t> errors) {
+  LoadReport r;
+  r.options = options;
+  r.elapsed_s = elapsed;
+  r.users = options.users;
+  std::vector<double> scene, full, rate, steady, to_full, fps, frame_ms;
+  for (LoadUserResult& res : users) {
+    r.connected += res.connected;
+    r.failed += !res.failure.empty();
+    r.scene_loaded += res.scene_loaded;
+    r.full_image += res.full_image;
+    if (res.scene_loaded) scene.push_back(res.scene_ms);
+    if (res.full_image) {
+      full.push_back(res.full_image_ms);
+      to_full.push_back(static_cast<double>(res.bytes_to_full_image));
+      if (res.seconds_after_full_image > 0.5)
+        steady.push_back(static_cast<double>(res.bytes_after_full_image) /
+                         res.seconds_after_full_image);
+    }
+    if (res.connected) rate.push_back(static_cast<double>(res.bytes_received) / elapsed);
+    if (options.render && res.connected) {
+      fps.push_back(static_cast<double>(res.frames) / elapsed);
+      if (res.frames > 0) frame_ms.push_back(res.frame_ms_mean);
+    }
+    r.tiles_applied += res.tiles_applied;
+    r.tiles_live += res.tiles_live;
+    r.bytes_received += res.bytes_received;
+    r.frames += res.frames;
+    r.camera_updates += res.camera_updates;
+    r.connections_lost += res.connections_lost;
+    r.reconnects += res.reconnects;
+    r.per_user.push_back(std::move(res));
+  }
+  r.scene_ms = Percentiles::of(std::move(scene));
+  r.full_image_ms = Percentiles::of(std::move(full));
+  r.tile_latency_ms = Percentiles::of(std::move(latency));
+  r.steady_tile_latency_ms = Percentiles::of(std::move(steady_latency));
+  r.bytes_per_s = Percentiles::of(std::move(rate));
+  r.steady_bytes_per_s = Percentiles::of(std::move(steady));
+  r.bytes_to_full_image = Percentiles::of(std::move(to_full));
+  r.frames_per_s = Percentiles::of(std::move(fps));
+  r.frame_ms = Percentiles::of(std::move(frame_ms));
+  r.errors = std::move(errors);
+  return r;
+}
 
 std::string LoadReport::text() const {
   std::ostringstream s;

@@ -108,6 +108,13 @@ struct LoadReport {
   std::map<std::string, std::uint64_t> errors;         // by kind
   std::vector<LoadUserResult> per_user;
 
+  // The report of a run from its users' results, the live tile latencies of all users (ms)
+  // and the errors by kind.
+  static LoadReport of(const LoadOptions& options, double elapsed_s,
+                       std::vector<LoadUserResult> users, std::vector<double> tile_latency_ms,
+                       std::vector<double> steady_tile_latency_ms,
+                       std::map<std::string, std::uint64_t> errors);
+
   std::string text() const;
   std::string json(bool per_user_details = true) const;
 };

@@ -5,7 +5,9 @@
 // changed. A connection lost in any phase (connect, handshake, scene download, streaming) is
 // retried with capped, jittered exponential back-off (backoff.h) until the deadline; protocol
 // errors (a bad frame from the server, another protocol version) are not retried.
-// Single-threaded: call poll() to make progress.
+// The protocol itself is the ClientSession's (client_session.h); this class adds the blocking
+// socket, the scene cache on disk and the reconnection policy. Single-threaded: call poll() to
+// make progress.
 #pragma once
 
 #include <chrono>
@@ -16,14 +18,15 @@
 #include <vector>
 
 #include "irradcast.pb.h"
-#include "irradcast/common/atlas.h"
 #include "irradcast/client/backoff.h"
 #include "irradcast/client/client_passes.h"
+#include "irradcast/client/client_session.h"
 #include "irradcast/client/client_tls.h"
+#include "irradcast/client/tile_cache.h"
+#include "irradcast/common/atlas.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/lightmap.h"
 #include "irradcast/common/scene.h"
-#include "irradcast/client/tile_cache.h"
 #include "irradcast/common/world.h"
 
 namespace irradcast {
@@ -91,25 +94,24 @@ class ViewClient {
   const Scene& scene() const;
   const World& world() const;
   const Atlas& atlas() const;
-  const std::vector<Lightmap>& lightmaps() const { return tiles_.lightmaps(); }
+  const std::vector<Lightmap>& lightmaps() const { return core_.tiles().lightmaps(); }
   std::uint64_t tile_version(std::uint32_t lightmap, std::uint32_t tx, std::uint32_t ty) const {
-    return tiles_.version(lightmap, tx, ty);
+    return core_.tiles().version(lightmap, tx, ty);
   }
   // True when every tile has arrived at least once.
-  bool all_tiles_received() const { return tiles_.all_received(); }
-  std::size_t tile_count() const { return tiles_.tile_count(); }
-  const ViewClientCounters& counters() const { return counters_; }
+  bool all_tiles_received() const { return core_.tiles().all_received(); }
+  std::size_t tile_count() const { return core_.tiles().tile_count(); }
+  ViewClientCounters counters() const;
   // The hash of the scene package downloaded (or taken from the cache) at the last connection;
   // edits applied since then do not change it.
-  const std::string& scene_hash() const { return scene_hash_; }
+  const std::string& scene_hash() const { return core_.scene_hash(); }
   // The revision of the viewer's scene: the package's, plus the edits applied since (every
   // applied SceneEdit the server broadcasts, in order; docs/EDITS.md).
-  std::uint64_t scene_revision() const { return revision_; }
-  std::uint64_t session() const { return session_; }
+  std::uint64_t scene_revision() const { return core_.revision(); }
+  std::uint64_t session() const { return core_.session(); }
 
  private:
   struct Net;
-  struct Loaded;
   // Attempts connections (open_connection + handshake) until one sets up a session, sleeping a
   // back-off delay before each attempt but the first (and before the first too when
   // `after_loss`); throws irradcast::Error at the deadline or on a protocol error.
@@ -118,16 +120,15 @@ class ViewClient {
   void open_connection(std::chrono::steady_clock::time_point deadline);
   void drop_connection();
   void handshake();
-  void load_scene(const wire::Welcome& w);
-  void subscribe();
+  // After a Welcome for another scene: from the cache on disk, else downloaded (and cached).
+  ClientStep load_scene();
+  void log_scene(const wire::Welcome& w, bool from_cache) const;
   void send(const wire::Envelope& e);
+  void send_all(const ClientStep& step);
   // Next frame within the deadline; false on timeout. Throws ConnectionLost.
   bool read_frame(wire::Envelope& out, std::chrono::steady_clock::time_point deadline);
-  void apply(const wire::Envelope& e);
-  void apply_tile(const wire::TileUpdate& t);
-  // A SceneEdit from the server: buffered while the scene loads, applied in revision order.
-  void on_scene_edit(const wire::SceneEdit& m);
-  void apply_scene_edit(const wire::SceneEdit& m);
+  // Hands a frame to the protocol core and acts on a server Error or Bye.
+  ClientStep feed(const wire::Envelope& e);
   // After ConnectionLost: reconnects (establish) or, without options.reconnect, throws Error.
   void connection_lost(const std::exception& lost);
 
@@ -135,19 +136,11 @@ class ViewClient {
   std::shared_ptr<asio::ssl::context> tls_;  // null: plain TCP
   Backoff backoff_;
   std::unique_ptr<Net> net_;
-  std::unique_ptr<Loaded> loaded_;
-  std::string scene_hash_;
-  std::uint64_t session_ = 0;
-  std::uint64_t tile_epoch_ = 0;
-  TileCache tiles_;
-  std::optional<wire::Stats> last_stats_;
-  std::uint64_t revision_ = 0;
-  bool loading_ = false;                        // a scene download is in progress
-  std::vector<wire::SceneEdit> pending_edits_;  // arrived while loading_
-  bool reload_ = false;  // missed an edit: reconnect to get the current scene
-  ViewClientCounters counters_;
+  ClientSession core_;
+  // Connection counts; the protocol's counts are the core's.
+  std::uint64_t bytes_received_ = 0;
+  std::uint32_t connections_ = 0, connections_lost_ = 0, connect_attempts_ = 0;
   std::chrono::steady_clock::time_point last_ping_{};
-  std::chrono::milliseconds ping_interval_{5000};
 };
 
 }  // namespace irradcast

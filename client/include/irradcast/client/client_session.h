@@ -1,0 +1,173 @@
+// The client side of the irradcast protocol (docs/PROTOCOL.md), written once and without I/O:
+// fed the frames a server sends, it says what to send back and keeps the state a session builds
+// up: the Welcome's session and tile epoch, the scene package (downloaded chunk by chunk and
+// checked against the Welcome's hash, or taken from a cache), the tile cache and its versions,
+// and the scene's revision as broadcast SceneEdits are applied. A new connection resumes with the
+// Hello it makes (the scene hash held and the tile versions). Driven by the viewer (ViewClient,
+// blocking) and by each simulated user of the load generator (asynchronous), so the load test
+// runs the viewer's protocol code.
+//
+// Phases: hello() starts AwaitWelcome. A Welcome for the scene held subscribes at once (Streaming);
+// one for another scene gives NeedScene, and the driver offers a cached package
+// (use_cached_package) or asks for the download (download()). The last chunk, or the cached
+// package, subscribes. Bad input throws ClientSessionFailure, whose kind() says what was wrong.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "irradcast.pb.h"
+#include "irradcast/client/tile_cache.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/world.h"
+#include "irradcast/wire/scene_package.h"
+
+namespace irradcast {
+
+// The scene and what is derived from it; World and RayScene hold pointers into the Scene, so
+// they live together at a stable address.
+struct ClientScene {
+  wire::UnpackedScene unpacked;
+  World world;
+  std::unique_ptr<RayScene> rays;  // null when the client does not compose frames
+};
+
+// Makes the scene of a package (checking it against `hash`); throws irradcast::Error.
+using ClientSceneFactory =
+    std::function<std::shared_ptr<ClientScene>(const std::string& bytes, const std::string& hash)>;
+// The default: unpacks the package (hash checked), builds the world and its RayScene.
+std::shared_ptr<ClientScene> make_client_scene(const std::string& bytes, const std::string& hash);
+
+// Input the protocol does not allow: kind() is "protocol" (a message out of order or of another
+// protocol version), "bad scene" (a chunk or package that does not fit the Welcome) or "bad tile".
+class ClientSessionFailure : public Error {
+ public:
+  ClientSessionFailure(std::string kind, const std::string& what)
+      : Error(what), kind_(std::move(kind)) {}
+  const std::string& kind() const { return kind_; }
+
+ private:
+  std::string kind_;
+};
+
+struct ClientSessionOptions {
+  std::string name = "irradcast-client";  // Hello.client_name
+  wire::TileEncoding encoding = wire::TILE_RGB9E5_ZSTD;
+  std::uint64_t max_bytes_per_s = 0;  // 0 = no cap
+  // Pings at most this far apart, and a third of the server's idle timeout if that is shorter
+  // (but not below min_ping_interval).
+  std::chrono::milliseconds ping_interval{5000};
+  std::chrono::milliseconds min_ping_interval{0};
+  // Apply the SceneEdits the server broadcasts to the scene (the viewer). Off: they are ignored
+  // and the scene stays as the package made it (the load test's users share one scene).
+  bool follow_edits = true;
+  std::string log_tag = "client";  // for the log lines about edits
+};
+
+struct ClientSessionCounters {
+  std::uint64_t frames_received = 0;
+  std::uint64_t tiles_applied = 0;
+  std::uint64_t scene_bytes_downloaded = 0;
+  std::uint64_t errors_received = 0;
+  std::uint64_t edits_applied = 0;  // scene edits applied to the client's copy of the scene
+  bool scene_from_cache = false;    // the last scene loaded came from use_cached_package
+};
+
+// What a frame (or a step the driver asked for) did.
+struct ClientStep {
+  enum class Event {
+    None,          // nothing for the driver: Pong, a stale tile, an edit, anything newer
+    NeedScene,     // a Welcome for a scene not held: use_cached_package() or download()
+    Downloading,   // a chunk of the scene package arrived; more are to come
+    SessionReady,  // subscribed (`send` holds the Subscribe); scene_loaded when the scene is new
+    TileApplied,   // a TileUpdate newer than the version held was decoded
+    Stats,         // the server's Stats (last_stats())
+    ServerError,   // an Error frame (counted); server_error_is_transient says if it ends this one
+    Bye,           // the server's Bye
+  };
+  Event event = Event::None;
+  std::vector<wire::Envelope> send;  // to send, in order
+  bool scene_loaded = false;         // SessionReady: a scene package was loaded for it
+};
+
+// Microseconds since the Unix epoch: the time stamps of Pings and of TileUpdates.
+std::uint64_t wall_time_us();
+
+class ClientSession {
+ public:
+  enum class Phase { Idle, AwaitWelcome, NeedScene, Downloading, Streaming };
+
+  explicit ClientSession(ClientSessionOptions options, ClientSceneFactory factory = {});
+
+  // A new connection: the Hello to send first (resuming with the scene and tile versions held).
+  wire::Envelope hello();
+  // The connection is gone; the scene, tiles and versions stay for the next hello().
+  void disconnect();
+  // One decoded frame from the server. Throws ClientSessionFailure on input the protocol does not
+  // allow; the session is then unusable until the next hello().
+  ClientStep on_frame(const wire::Envelope& e);
+  // After NeedScene: a package from the driver's cache. False when it is damaged or another
+  // scene's (`why` says how; the session still needs the scene); else the session is ready.
+  bool use_cached_package(const std::string& bytes, ClientStep& step, std::string* why = nullptr);
+  // After NeedScene: the SceneRequest that starts the download.
+  wire::Envelope download();
+  // True once: the broadcast edits cannot be followed (one was missed or does not apply); the
+  // current scene comes with a new connection's Welcome.
+  bool take_reload();
+
+  static wire::Envelope ping(std::uint64_t nonce, std::uint64_t time_us);
+
+  Phase phase() const { return phase_; }
+  bool has_scene() const { return scene_ != nullptr; }
+  // Throws irradcast::Error before the first scene.
+  const ClientScene& scene() const;
+  std::shared_ptr<const ClientScene> scene_ptr() const { return scene_; }
+  const wire::Welcome& welcome() const { return welcome_; }
+  // The package of the last completed download (for the driver's cache); empty otherwise.
+  const std::string& downloaded_package() const { return downloaded_; }
+  const TileCache& tiles() const { return tiles_; }
+  const std::string& scene_hash() const { return scene_hash_; }
+  std::uint64_t tile_epoch() const { return tile_epoch_; }
+  std::uint64_t revision() const { return revision_; }
+  std::uint64_t session() const { return session_; }
+  std::chrono::milliseconds ping_interval() const { return ping_interval_; }
+  const std::optional<wire::Stats>& last_stats() const { return last_stats_; }
+  void clear_stats() { last_stats_.reset(); }
+  const ClientSessionCounters& counters() const { return counters_; }
+
+ private:
+  ClientStep on_welcome(const wire::Welcome& w);
+  ClientStep on_chunk(const wire::SceneChunk& c);
+  ClientStep on_tile(const wire::TileUpdate& t);
+  // Takes the scene (from a download or the cache) and subscribes.
+  ClientStep install(std::shared_ptr<ClientScene> scene, bool from_cache);
+  wire::Envelope subscribe();
+  void on_scene_edit(const wire::SceneEdit& m);
+  void apply_scene_edit(const wire::SceneEdit& m);
+
+  ClientSessionOptions options_;
+  ClientSceneFactory factory_;
+  Phase phase_ = Phase::Idle;
+  wire::Welcome welcome_;
+  std::unique_ptr<wire::SceneAssembler> assembler_;
+  std::string downloaded_;
+  std::shared_ptr<ClientScene> scene_;
+  std::string scene_hash_;
+  std::uint64_t session_ = 0;
+  std::uint64_t tile_epoch_ = 0;
+  std::uint64_t revision_ = 0;
+  TileCache tiles_;
+  std::vector<wire::SceneEdit> pending_edits_;  // arrived while the scene loads
+  bool reload_ = false;
+  std::chrono::milliseconds ping_interval_;
+  std::optional<wire::Stats> last_stats_;
+  ClientSessionCounters counters_;
+};
+
+}  // namespace irradcast

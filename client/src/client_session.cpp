@@ -1,0 +1,269 @@
+// The client side of the protocol without I/O (client_session.h).
+#include "irradcast/client/client_session.h"
+
+#include <algorithm>
+
+#include "irradcast/common/log.h"
+#include "irradcast/common/scene_edit.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast/wire/frame.h"
+
+namespace irradcast {
+
+std::shared_ptr<ClientScene> make_client_scene(const std::string& bytes, const std::string& hash) {
+  auto s = std::make_shared<ClientScene>();
+  s->unpacked = wire::open_scene_package(bytes, hash);
+  s->world = World::build(s->unpacked.scene);
+  s->rays = std::make_unique<RayScene>(s->world);
+  return s;
+}
+
+ClientSession::ClientSession(ClientSessionOptions options, ClientSceneFactory factory)
+    : options_(std::move(options)),
+      factory_(factory ? std::move(factory) : ClientSceneFactory(make_client_scene)),
+      ping_interval_(options_.ping_interval) {}
+
+wire::Envelope ClientSession::hello() {
+  phase_ = Phase::AwaitWelcome;
+  assembler_.reset();
+  pending_edits_.clear();
+  wire::Envelope hello;
+  wire::Hello* h = hello.mutable_hello();
+  h->set_protocol_version(wire::kProtocolVersion);
+  h->set_client_name(options_.name);
+  if (scene_) {
+    // Resume: the scene we hold and the tile versions we have.
+    h->set_cached_scene_hash(scene_hash_);
+    h->set_known_epoch(tile_epoch_);
+    tiles_.add_known(*h);
+  }
+  return hello;
+}
+
+void ClientSession::disconnect() {
+  phase_ = Phase::Idle;
+  assembler_.reset();
+}
+
+ClientStep ClientSession::on_frame(const wire::Envelope& e) {
+  ++counters_.frames_received;
+  ClientStep step;
+  switch (e.msg_case()) {
+    case wire::Envelope::kWelcome:
+      return on_welcome(e.welcome());
+    case wire::Envelope::kSceneChunk:
+      return on_chunk(e.scene_chunk());
+    case wire::Envelope::kTileUpdate:
+      return on_tile(e.tile_update());
+    case wire::Envelope::kSceneEdit:
+      on_scene_edit(e.scene_edit());
+      break;
+    case wire::Envelope::kStats:
+      last_stats_ = e.stats();
+      step.event = ClientStep::Event::Stats;
+      break;
+    case wire::Envelope::kError:
+      ++counters_.errors_received;
+      step.event = ClientStep::Event::ServerError;
+      break;
+    case wire::Envelope::kBye:
+      step.event = ClientStep::Event::Bye;
+      break;
+    default:
+      break;  // Pong and anything newer: nothing to do
+  }
+  return step;
+}
+
+ClientStep ClientSession::on_welcome(const wire::Welcome& w) {
+  if (phase_ != Phase::AwaitWelcome)
+    throw ClientSessionFailure("protocol", "an unexpected Welcome");
+  if (w.protocol_version() != wire::kProtocolVersion)
+    throw ClientSessionFailure(
+        "protocol", "the server speaks protocol " + std::to_string(w.protocol_version()) +
+                        ", this client " + std::to_string(wire::kProtocolVersion));
+  session_ = w.session();
+  // Another lineage of versions: what we hold stays on screen until replaced, but any version
+  // the server sends is news.
+  if (scene_ && w.tile_epoch() != tile_epoch_) tiles_.forget_versions();
+  tile_epoch_ = w.tile_epoch();
+  welcome_ = w;
+  // Ping often enough for the server's idle timer.
+  ping_interval_ = options_.ping_interval;
+  if (w.idle_timeout_ms() > 0)
+    ping_interval_ = std::min(
+        ping_interval_,
+        std::max(options_.min_ping_interval, std::chrono::milliseconds(w.idle_timeout_ms() / 3)));
+  ClientStep step;
+  if (scene_ && w.scene_hash() == scene_hash_) {  // resumed: the scene is the one we hold
+    phase_ = Phase::Streaming;
+    step.event = ClientStep::Event::SessionReady;
+    step.send.push_back(subscribe());
+    return step;
+  }
+  phase_ = Phase::NeedScene;
+  step.event = ClientStep::Event::NeedScene;
+  return step;
+}
+
+bool ClientSession::use_cached_package(const std::string& bytes, ClientStep& step,
+                                       std::string* why) {
+  if (phase_ != Phase::NeedScene) throw Error("use_cached_package() without NeedScene");
+  std::shared_ptr<ClientScene> scene;
+  try {
+    scene = factory_(bytes, welcome_.scene_hash());
+  } catch (const Error& e) {
+    if (why) *why = e.what();
+    return false;
+  }
+  step = install(std::move(scene), true);
+  return true;
+}
+
+wire::Envelope ClientSession::download() {
+  if (phase_ != Phase::NeedScene) throw Error("download() without NeedScene");
+  try {
+    assembler_ =
+        std::make_unique<wire::SceneAssembler>(welcome_.scene_hash(), welcome_.scene_bytes());
+  } catch (const Error& e) {
+    throw ClientSessionFailure("bad scene", e.what());
+  }
+  phase_ = Phase::Downloading;
+  wire::Envelope req;
+  req.mutable_scene_request()->set_offset(0);
+  return req;
+}
+
+ClientStep ClientSession::on_chunk(const wire::SceneChunk& c) {
+  if (phase_ != Phase::Downloading)
+    throw ClientSessionFailure("protocol", "a SceneChunk outside a download");
+  counters_.scene_bytes_downloaded += c.data().size();
+  std::shared_ptr<ClientScene> scene;
+  try {
+    if (!assembler_->add(c)) {
+      ClientStep step;
+      step.event = ClientStep::Event::Downloading;
+      return step;
+    }
+    scene = factory_(assembler_->bytes(), welcome_.scene_hash());
+  } catch (const Error& e) {
+    throw ClientSessionFailure("bad scene", e.what());
+  }
+  downloaded_ = assembler_->bytes();
+  assembler_.reset();
+  return install(std::move(scene), false);
+}
+
+ClientStep ClientSession::install(std::shared_ptr<ClientScene> scene, bool from_cache) {
+  try {
+    tiles_.configure(welcome_, scene->unpacked.atlas);
+  } catch (const Error& e) {
+    throw ClientSessionFailure("bad scene", e.what());
+  }
+  if (from_cache) downloaded_.clear();
+  counters_.scene_from_cache = from_cache;
+  scene_ = std::move(scene);
+  scene_hash_ = welcome_.scene_hash();
+  revision_ = scene_->unpacked.revision;
+  phase_ = Phase::Streaming;
+  // Edits that arrived during the download, in order (those the package has are skipped).
+  std::vector<wire::SceneEdit> pending;
+  pending.swap(pending_edits_);
+  for (const wire::SceneEdit& m : pending) on_scene_edit(m);
+  ClientStep step;
+  step.event = ClientStep::Event::SessionReady;
+  step.scene_loaded = true;
+  step.send.push_back(subscribe());
+  return step;
+}
+
+wire::Envelope ClientSession::subscribe() {
+  wire::Envelope s;
+  s.mutable_subscribe()->set_all(true);
+  s.mutable_subscribe()->set_encoding(options_.encoding);
+  s.mutable_subscribe()->set_max_bytes_per_s(options_.max_bytes_per_s);
+  return s;
+}
+
+ClientStep ClientSession::on_tile(const wire::TileUpdate& t) {
+  if (phase_ != Phase::Streaming)
+    throw ClientSessionFailure("protocol", "a TileUpdate before the subscription");
+  bool applied = false;
+  try {
+    applied = tiles_.apply(t);
+  } catch (const std::exception& e) {
+    throw ClientSessionFailure("bad tile", e.what());
+  }
+  ClientStep step;
+  if (applied) {
+    ++counters_.tiles_applied;
+    step.event = ClientStep::Event::TileApplied;
+  }
+  return step;
+}
+
+void ClientSession::on_scene_edit(const wire::SceneEdit& m) {
+  if (!options_.follow_edits || !m.applied()) return;  // an acknowledgement: for its sender
+  if (phase_ == Phase::NeedScene || phase_ == Phase::Downloading) {
+    pending_edits_.push_back(m);
+    return;
+  }
+  if (phase_ != Phase::Streaming || !scene_) return;  // before the Welcome
+  if (m.revision() <= revision_) return;              // the scene has it already
+  if (m.revision() > revision_ + 1) {
+    // Missed one: the simplest correct thing is the current scene package, which a new
+    // connection's Welcome names.
+    log::warn(options_.log_tag, "scene edit " + std::to_string(m.revision()) + " after revision " +
+                                    std::to_string(revision_) +
+                                    ": edits missed; loading the scene again");
+    reload_ = true;
+    return;
+  }
+  apply_scene_edit(m);
+}
+
+void ClientSession::apply_scene_edit(const wire::SceneEdit& m) {
+  ClientScene& s = *scene_;
+  try {
+    const SceneEdit edit = wire::from_proto(m);
+    apply_edit(s.unpacked.scene, edit);  // validates first: unchanged on a bad edit
+    const std::vector<int> changed = s.world.update(s.unpacked.scene);
+    if (s.rays) s.rays->update(changed);
+    revision_ = m.revision();
+    ++counters_.edits_applied;
+    log::info(options_.log_tag, "applied scene edit " + std::to_string(revision_) + ": " +
+                                    edit_to_json(edit) + " (" + std::to_string(changed.size()) +
+                                    " objects changed)");
+  } catch (const Error& e) {
+    log::warn(options_.log_tag, "scene edit " + std::to_string(m.revision()) +
+                                    " does not apply to this scene (" + e.what() +
+                                    "); loading the scene again");
+    reload_ = true;
+  }
+}
+
+bool ClientSession::take_reload() {
+  const bool r = reload_;
+  reload_ = false;
+  return r;
+}
+
+std::uint64_t wall_time_us() {
+  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
+                                        std::chrono::system_clock::now().time_since_epoch())
+                                        .count());
+}
+
+wire::Envelope ClientSession::ping(std::uint64_t nonce, std::uint64_t time_us) {
+  wire::Envelope p;
+  p.mutable_ping()->set_nonce(nonce);
+  p.mutable_ping()->set_time_us(time_us);
+  return p;
+}
+
+const ClientScene& ClientSession::scene() const {
+  if (!scene_) throw Error("no scene yet");
+  return *scene_;
+}
+
+}  // namespace irradcast
