@@ -19,13 +19,13 @@
 #include <vector>
 
 #include "irradcast/client/client_tls.h"
-#include "irradcast/wire/edit_message.h"
-#include "irradcast/common/error.h"
-#include "irradcast/wire/frame.h"
 #include "irradcast/client/host_port.h"
+#include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/scene_edit.h"
-#include "tls_flags.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast/wire/frame.h"
+#include "tool_main.h"
 
 namespace {
 
@@ -269,8 +269,7 @@ class Connection {
 
 int run(const Options& o, const std::vector<irradcast::EditStep>& steps, const std::string& token) {
   using namespace irradcast;
-  log::set_level(log::parse_level(o.log_level));
-  const HostPort hp = parse_host_port(o.connect);
+  const HostPort hp = tools::start_run(o.log_level, o.connect);
   Connection c(hp, std::chrono::milliseconds(o.timeout_ms), tools::tls_of(o.tls));
   wire::Envelope hello;
   hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
@@ -332,8 +331,7 @@ int main(int argc, char** argv) {
       "with --no-wait. Exits 2 when the server refuses the token, 1 on any other error.",
       "irradcast-edit"};
   app.option_defaults()->always_capture_default();
-  app.add_option("--connect", o.connect, "server address HOST:PORT")->required();
-  irradcast::tools::add_tls_flags(app, o.tls);
+  irradcast::tools::add_connect_flags(app, o.connect, o.tls);
   app.add_option("--token", o.token, "the server's control token");
   app.add_option("--token-file", o.token_file,
                  "read the control token from this file's first line");
@@ -363,28 +361,24 @@ int main(int argc, char** argv) {
   app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
   std::vector<irradcast::EditStep> steps;
   std::string token;
-  try {
-    app.parse(argc, argv);
+  // Exit 2 when the server refuses the token, 1 on any other error.
+  auto run_edits = [&]() -> int {
+    std::signal(SIGPIPE, SIG_IGN);
     try {
-      steps = steps_of(o);
-      token = token_of(o);
+      return run(o, steps, token);
+    } catch (const Refused& e) {
+      std::fprintf(stderr, "irradcast-edit: %s\n", e.what());
+      return e.code == irradcast::wire::PERMISSION_DENIED ? 2 : 1;
     } catch (const irradcast::Error& e) {
-      throw CLI::ValidationError(e.what());
+      std::fprintf(stderr, "irradcast-edit: %s\n", e.what());
+      return 1;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "irradcast-edit: internal error: %s\n", e.what());
+      return 1;
     }
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e);
-  }
-  std::signal(SIGPIPE, SIG_IGN);
-  try {
-    return run(o, steps, token);
-  } catch (const Refused& e) {
-    std::fprintf(stderr, "irradcast-edit: %s\n", e.what());
-    return e.code == irradcast::wire::PERMISSION_DENIED ? 2 : 1;
-  } catch (const irradcast::Error& e) {
-    std::fprintf(stderr, "irradcast-edit: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "irradcast-edit: internal error: %s\n", e.what());
-    return 1;
-  }
+  };
+  return irradcast::tools::parse_and_run(app, argc, argv, run_edits, [&] {
+    steps = steps_of(o);
+    token = token_of(o);
+  });
 }

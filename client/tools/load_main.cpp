@@ -11,11 +11,11 @@
 #include <fstream>
 #include <string>
 
-#include "irradcast/common/error.h"
 #include "irradcast/client/host_port.h"
 #include "irradcast/client/load_generator.h"
+#include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
-#include "tls_flags.h"
+#include "tool_main.h"
 
 namespace {
 
@@ -54,8 +54,7 @@ void raise_fd_limit(int users) {
 
 int run(const Options& o) {
   using namespace irradcast;
-  log::set_level(log::parse_level(o.log_level));
-  const HostPort hp = parse_host_port(o.connect);
+  const HostPort hp = tools::start_run(o.log_level, o.connect);
   LoadOptions lo;
   lo.host = hp.host;
   lo.port = hp.port;
@@ -73,12 +72,7 @@ int run(const Options& o) {
   lo.ramp_s = o.ramp;
   lo.threads = o.threads;
   lo.name = o.name;
-  if (o.encoding == "rgb9e5")
-    lo.encoding = wire::TILE_RGB9E5_ZSTD;
-  else if (o.encoding == "half")
-    lo.encoding = wire::TILE_HALF_ZSTD;
-  else
-    throw Error("--encoding must be rgb9e5 or half, not '" + o.encoding + "'");
+  lo.encoding = tools::parse_encoding(o.encoding);
   raise_fd_limit(o.users);
 
   const bool tty = isatty(fileno(stderr)) != 0;
@@ -124,8 +118,7 @@ int main(int argc, char** argv) {
       "back-off until the end of the run and resumes. Exits 3 when a user failed.",
       "irradcast-load"};
   app.option_defaults()->always_capture_default();
-  app.add_option("--connect", o.connect, "server address HOST:PORT")->required();
-  irradcast::tools::add_tls_flags(app, o.tls);
+  irradcast::tools::add_connect_flags(app, o.connect, o.tls);
   app.add_option("--users", o.users, "simulated users")->check(CLI::Range(1, 100000));
   app.add_option("--duration", o.duration, "seconds from start to the users' Bye")
       ->check(CLI::PositiveNumber);
@@ -147,18 +140,5 @@ int main(int argc, char** argv) {
   app.add_option("--name", o.name, "client name prefix in the server's logs");
   app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
   app.add_flag("--quiet", o.quiet, "no progress line");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e);
-  }
-  try {
-    return run(o);
-  } catch (const irradcast::Error& e) {
-    std::fprintf(stderr, "irradcast-load: error: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "irradcast-load: internal error: %s\n", e.what());
-    return 2;
-  }
+  return irradcast::tools::parse_and_run(app, argc, argv, [&] { return run(o); });
 }

@@ -14,16 +14,16 @@
 #include <sstream>
 #include <string>
 
-#include "irradcast/common/camera.h"
 #include "irradcast/client/camera_path.h"
 #include "irradcast/client/client_passes.h"
-#include "irradcast/common/error.h"
 #include "irradcast/client/host_port.h"
+#include "irradcast/client/view_client.h"
+#include "irradcast/common/camera.h"
+#include "irradcast/common/error.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/tonemap.h"
-#include "irradcast/client/view_client.h"
-#include "tls_flags.h"
+#include "tool_main.h"
 
 namespace {
 
@@ -111,10 +111,9 @@ std::string default_cache_dir() {
   return "";
 }
 
-int run(const Options& o) {
+irradcast::ViewClientOptions client_options(const Options& o) {
   using namespace irradcast;
-  log::set_level(log::parse_level(o.log_level));
-  const HostPort hp = parse_host_port(o.connect);
+  const HostPort hp = tools::start_run(o.log_level, o.connect);
   ViewClientOptions vo;
   vo.host = hp.host;
   vo.port = hp.port;
@@ -122,19 +121,19 @@ int run(const Options& o) {
   vo.cache_dir = o.cache_dir == "auto"   ? default_cache_dir()
                  : o.cache_dir == "none" ? ""
                                          : o.cache_dir;
-  if (o.encoding == "rgb9e5")
-    vo.encoding = wire::TILE_RGB9E5_ZSTD;
-  else if (o.encoding == "half")
-    vo.encoding = wire::TILE_HALF_ZSTD;
-  else
-    throw Error("--encoding must be rgb9e5 or half, not '" + o.encoding + "'");
+  vo.encoding = tools::parse_encoding(o.encoding);
   vo.max_bytes_per_s = o.max_rate;
   vo.reconnect = !o.no_reconnect;
   vo.tls = tools::tls_of(o.tls);
+  return vo;
+}
+
+irradcast::ToneMapOptions tone_map_of(const Options& o) {
+  using irradcast::Error;
   const std::string ext = fs::path(o.out).extension().string();
   if (ext != ".png" && ext != ".exr") throw Error("--out must end in .png or .exr: " + o.out);
-  ToneMapOptions tm;
-  tm.op = parse_tone_operator(o.tonemap);
+  irradcast::ToneMapOptions tm;
+  tm.op = irradcast::parse_tone_operator(o.tonemap);
   if (o.exposure != "auto") {
     tm.auto_exposure = false;
     try {
@@ -143,12 +142,133 @@ int run(const Options& o) {
       throw Error("--exposure must be 'auto' or a number of stops");
     }
   }
+  return tm;
+}
 
+// The path of --camera-path over the scene the client holds (none without the flag).
+std::optional<irradcast::CameraPath> camera_path_of(
+    const Options& o, const irradcast::ViewClient& client,
+    const std::vector<irradcast::CameraKeyframe>& keyframes) {
+  using irradcast::CameraPath;
+  if (o.camera_path == "orbit") return CameraPath::orbit(client.world().bounds, o.path_period, 0.0);
+  if (o.camera_path == "random-walk")
+    return CameraPath::random_walk(client.world().bounds, o.path_seed);
+  if (!o.camera_path.empty()) return CameraPath::keyframes(keyframes, 0.0);
+  return std::nullopt;
+}
+
+// The frames composed and what they cost.
+struct Frames {
+  irradcast::ImageRGB last;
+  int count = 0;
+  bool converged = false;
+  double t_converged = -1.0;
+  double compose_s = 0.0, ssao_s = 0.0, reproject_s = 0.0, reused = 0.0;
+};
+
+// Streams tiles and composes frames: --frames of them, or with --until-converged the one after
+// convergence (or the deadline).
+Frames compose_frames(const Options& o, irradcast::ViewClient& client,
+                      irradcast::ClientPasses& passes,
+                      const std::optional<irradcast::CameraPath>& path,
+                      irradcast::CameraPose camera, Clock::time_point start,
+                      Clock::time_point deadline) {
+  using namespace irradcast;
+  client.send_camera(camera);
+  std::uint64_t revision = client.scene_revision();
+  Frames f;
+  const auto interval = std::chrono::milliseconds(o.frame_ms);
+  for (;;) {
+    client.poll(interval);
+    if (o.until_converged) {
+      auto stats = client.request_stats(std::chrono::seconds(5));
+      if (stats && client.all_tiles_received() && stats->queue_depth() == 0 &&
+          (stats->engine_idle() || stats->convergence() <= o.converge_at)) {
+        f.converged = true;
+        f.t_converged = std::chrono::duration<double>(Clock::now() - start).count();
+      }
+    }
+    const bool timed_out = Clock::now() > deadline;
+    // --frames: a frame per interval. --until-converged: only the final frame (a headless
+    // viewer has no one to show the others to, and composing them would take CPU from the
+    // server on a shared machine).
+    if (!o.until_converged || f.converged || timed_out) {
+      if (path) {
+        camera = path->at(static_cast<double>(f.count) * o.path_dt);
+        client.send_camera(camera);
+      }
+      if (client.scene_revision() != revision) {  // the history shows the old scene
+        passes.reset();
+        revision = client.scene_revision();
+      }
+      ClientFrameStats fs;
+      f.last = client.compose(camera, o.width, o.height, passes, &fs);
+      f.compose_s += fs.total_s;
+      f.ssao_s += fs.ssao_s;
+      f.reproject_s += fs.reproject_s;
+      f.reused += fs.reprojection.reused_fraction();
+      ++f.count;
+    }
+    if (o.until_converged ? f.converged : f.count >= o.frames) break;
+    if (timed_out) {
+      log::warn("view", "timed out after " + std::to_string(o.timeout_s) + " s");
+      break;
+    }
+  }
+  return f;
+}
+
+// The summary lines on stdout and, with --json, the JSON report.
+void report(const Options& o, const irradcast::ViewClientCounters& c, const Frames& f,
+            double t_scene, double t_total, bool on_path) {
+  char line[512];
+  std::snprintf(line, sizeof line,
+                "%s: %d frames, %.1f KB received (scene %s, %.1f KB), %llu tiles applied, "
+                "scene ready after %.2f s, %s %.2f s, %u connection(s)",
+                o.out.c_str(), f.count, c.bytes_received / 1024.0,
+                c.scene_from_cache ? "from cache" : "downloaded", c.scene_bytes_downloaded / 1024.0,
+                static_cast<unsigned long long>(c.tiles_applied), t_scene,
+                o.until_converged ? (f.converged ? "converged image after" : "NOT converged after")
+                                  : "done after",
+                o.until_converged && f.converged ? f.t_converged : t_total, c.connections);
+  std::printf("%s\n", line);
+  const double per_frame = f.count > 0 ? 1e3 / f.count : 0.0;
+  std::printf(
+      "compose: %.2f ms/frame (ssao %.2f ms, reprojection %.2f ms), SSAO reused on "
+      "%.1f%% of the pixels%s\n",
+      f.compose_s * per_frame, f.ssao_s * per_frame, f.reproject_s * per_frame,
+      f.count > 0 ? 100.0 * f.reused / f.count : 0.0, on_path ? " along the camera path" : "");
+  if (o.json.empty()) return;
+  nlohmann::json j = {{"out", o.out},
+                      {"frames", f.count},
+                      {"bytes_received", c.bytes_received},
+                      {"scene_bytes_downloaded", c.scene_bytes_downloaded},
+                      {"scene_from_cache", c.scene_from_cache},
+                      {"tiles_applied", c.tiles_applied},
+                      {"connections", c.connections},
+                      {"connections_lost", c.connections_lost},
+                      {"connect_attempts", c.connect_attempts},
+                      {"seconds_to_scene", t_scene},
+                      {"converged", f.converged},
+                      {"seconds_to_converged", f.t_converged},
+                      {"seconds_total", t_total},
+                      {"compose_ms_per_frame", f.compose_s * per_frame},
+                      {"ssao_ms_per_frame", f.ssao_s * per_frame},
+                      {"reproject_ms_per_frame", f.reproject_s * per_frame},
+                      {"ssao_reused_fraction", f.count > 0 ? f.reused / f.count : 0.0}};
+  std::ofstream out(o.json);
+  out << j.dump(2) << "\n";
+  if (!out) throw irradcast::Error(o.json + ": cannot write");
+}
+
+int run(const Options& o) {
+  using namespace irradcast;
+  ViewClientOptions vo = client_options(o);
+  const ToneMapOptions tm = tone_map_of(o);
   // Everything the flags say is checked before connecting.
   ClientPasses passes(pass_options(o));
   std::vector<CameraKeyframe> keyframes;
-  const bool on_path = !o.camera_path.empty();
-  if (on_path && o.camera_path != "orbit" && o.camera_path != "random-walk")
+  if (!o.camera_path.empty() && o.camera_path != "orbit" && o.camera_path != "random-walk")
     keyframes = load_camera_keyframes(o.camera_path);
 
   const auto start = Clock::now();
@@ -161,107 +281,18 @@ int run(const Options& o) {
   const double t_scene = std::chrono::duration<double>(Clock::now() - start).count();
   CameraPose camera = default_camera(client.scene(), client.world());
   if (!o.camera.empty()) camera = parse_camera(o.camera, camera);
-  std::optional<CameraPath> path;
-  if (o.camera_path == "orbit")
-    path = CameraPath::orbit(client.world().bounds, o.path_period, 0.0);
-  else if (o.camera_path == "random-walk")
-    path = CameraPath::random_walk(client.world().bounds, o.path_seed);
-  else if (on_path)
-    path = CameraPath::keyframes(keyframes, 0.0);
+  const std::optional<CameraPath> path = camera_path_of(o, client, keyframes);
   if (path) camera = path->at(0.0);
-  client.send_camera(camera);
-  std::uint64_t revision = client.scene_revision();
-  double compose_s = 0.0, ssao_s = 0.0, reproject_s = 0.0, reused = 0.0;
-
-  ImageRGB frame;
-  int frames = 0;
-  bool converged = false;
-  double t_converged = -1.0;
-  const auto interval = std::chrono::milliseconds(o.frame_ms);
-  for (;;) {
-    client.poll(interval);
-    if (o.until_converged) {
-      auto stats = client.request_stats(std::chrono::seconds(5));
-      if (stats && client.all_tiles_received() && stats->queue_depth() == 0 &&
-          (stats->engine_idle() || stats->convergence() <= o.converge_at)) {
-        converged = true;
-        t_converged = std::chrono::duration<double>(Clock::now() - start).count();
-      }
-    }
-    const bool timed_out = Clock::now() > deadline;
-    // --frames: a frame per interval. --until-converged: only the final frame (a headless
-    // viewer has no one to show the others to, and composing them would take CPU from the
-    // server on a shared machine).
-    if (!o.until_converged || converged || timed_out) {
-      if (path) {
-        camera = path->at(static_cast<double>(frames) * o.path_dt);
-        client.send_camera(camera);
-      }
-      if (client.scene_revision() != revision) {  // the history shows the old scene
-        passes.reset();
-        revision = client.scene_revision();
-      }
-      ClientFrameStats fs;
-      frame = client.compose(camera, o.width, o.height, passes, &fs);
-      compose_s += fs.total_s;
-      ssao_s += fs.ssao_s;
-      reproject_s += fs.reproject_s;
-      reused += fs.reprojection.reused_fraction();
-      ++frames;
-    }
-    if (o.until_converged ? converged : frames >= o.frames) break;
-    if (timed_out) {
-      log::warn("view", "timed out after " + std::to_string(o.timeout_s) + " s");
-      break;
-    }
-  }
-  if (ext == ".exr")
-    write_exr(o.out, frame);
+  const Frames f = compose_frames(o, client, passes, path, camera, start, deadline);
+  if (fs::path(o.out).extension() == ".exr")
+    write_exr(o.out, f.last);
   else
-    write_png(o.out, frame.width, frame.height, tonemap_srgb8(frame, tm));
-  const ViewClientCounters& c = client.counters();
+    write_png(o.out, f.last.width, f.last.height, tonemap_srgb8(f.last, tm));
+  const ViewClientCounters c = client.counters();
   client.close();
   const double t_total = std::chrono::duration<double>(Clock::now() - start).count();
-  char line[512];
-  std::snprintf(line, sizeof line,
-                "%s: %d frames, %.1f KB received (scene %s, %.1f KB), %llu tiles applied, "
-                "scene ready after %.2f s, %s %.2f s, %u connection(s)",
-                o.out.c_str(), frames, c.bytes_received / 1024.0,
-                c.scene_from_cache ? "from cache" : "downloaded", c.scene_bytes_downloaded / 1024.0,
-                static_cast<unsigned long long>(c.tiles_applied), t_scene,
-                o.until_converged ? (converged ? "converged image after" : "NOT converged after")
-                                  : "done after",
-                o.until_converged && converged ? t_converged : t_total, c.connections);
-  std::printf("%s\n", line);
-  const double per_frame = frames > 0 ? 1e3 / frames : 0.0;
-  std::printf(
-      "compose: %.2f ms/frame (ssao %.2f ms, reprojection %.2f ms), SSAO reused on "
-      "%.1f%% of the pixels%s\n",
-      compose_s * per_frame, ssao_s * per_frame, reproject_s * per_frame,
-      frames > 0 ? 100.0 * reused / frames : 0.0, path ? " along the camera path" : "");
-  if (!o.json.empty()) {
-    nlohmann::json j = {{"out", o.out},
-                        {"frames", frames},
-                        {"bytes_received", c.bytes_received},
-                        {"scene_bytes_downloaded", c.scene_bytes_downloaded},
-                        {"scene_from_cache", c.scene_from_cache},
-                        {"tiles_applied", c.tiles_applied},
-                        {"connections", c.connections},
-                        {"connections_lost", c.connections_lost},
-                        {"connect_attempts", c.connect_attempts},
-                        {"seconds_to_scene", t_scene},
-                        {"converged", converged},
-                        {"seconds_to_converged", t_converged},
-                        {"seconds_total", t_total},
-                        {"compose_ms_per_frame", compose_s * per_frame},
-                        {"ssao_ms_per_frame", ssao_s * per_frame},
-                        {"reproject_ms_per_frame", reproject_s * per_frame},
-                        {"ssao_reused_fraction", frames > 0 ? reused / frames : 0.0}};
-    std::ofstream f(o.json);
-    f << j.dump(2) << "\n";
-    if (!f) throw Error(o.json + ": cannot write");
-  }
-  return o.until_converged && !converged ? 3 : 0;
+  report(o, c, f, t_scene, t_total, path.has_value());
+  return o.until_converged && !f.converged ? 3 : 0;
 }
 
 }  // namespace
@@ -274,8 +305,7 @@ int main(int argc, char** argv) {
       "own viewpoint into FILE.png or FILE.exr.",
       "irradcast-view"};
   app.option_defaults()->always_capture_default();
-  app.add_option("--connect", o.connect, "server address HOST:PORT")->required();
-  irradcast::tools::add_tls_flags(app, o.tls);
+  irradcast::tools::add_connect_flags(app, o.connect, o.tls);
   app.add_option("--camera", o.camera,
                  "eye=x,y,z:target=x,y,z:fov=deg[:up=x,y,z] (default: the scene's camera)");
   app.add_option("--width", o.width, "image width")->check(CLI::Range(1, 16384));
@@ -332,18 +362,5 @@ int main(int argc, char** argv) {
   app.add_option("--path-dt", o.path_dt, "seconds along the camera path per frame");
   app.add_option("--path-period", o.path_period, "seconds per turn of the orbit path");
   app.add_option("--path-seed", o.path_seed, "random-walk path seed");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e);
-  }
-  try {
-    return run(o);
-  } catch (const irradcast::Error& e) {
-    std::fprintf(stderr, "irradcast-view: error: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "irradcast-view: internal error: %s\n", e.what());
-    return 2;
-  }
+  return irradcast::tools::parse_and_run(app, argc, argv, [&] { return run(o); });
 }
