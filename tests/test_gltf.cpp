@@ -17,6 +17,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
 
+#include "gltf_builders.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/gltf.h"
@@ -31,22 +32,10 @@ namespace {
 const std::string kSamples = std::string(IRRADCAST_TESTDATA_DIR) + "/gltf-samples";
 
 // A fresh temporary directory per test, removed afterwards.
-class GltfTest : public ::testing::Test {
+class GltfTest : public test::ScratchDirTest {
  protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    dir_ = fs::temp_directory_path() /
-           ("irradcast_gltf_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
+  GltfTest() : ScratchDirTest("irradcast_gltf_") {}
   std::string path(const std::string& name) const { return (dir_ / name).string(); }
-
-  fs::path dir_;
 };
 
 void write_bytes(const std::string& path, const void* data, std::size_t size) {
@@ -92,12 +81,7 @@ TestModel triangle_model() {
        {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 36}},
         {{"buffer", 0}, {"byteOffset", 36}, {"byteLength", 6}}}},
       {"accessors",
-       {{{"bufferView", 0},
-         {"componentType", 5126},
-         {"count", 3},
-         {"type", "VEC3"},
-         {"min", {0, 0, 0}},
-         {"max", {1, 1, 0}}},
+       {test::triangle_positions_accessor(),
         {{"bufferView", 1}, {"componentType", 5123}, {"count", 3}, {"type", "SCALAR"}}}},
       {"meshes",
        {{{"name", "tri"}, {"primitives", {{{"attributes", {{"POSITION", 0}}}, {"indices", 1}}}}}}},
@@ -105,21 +89,6 @@ TestModel triangle_model() {
       {"scenes", {{{"nodes", {0}}}}},
       {"scene", 0}};
   return m;
-}
-
-std::string base64(const std::vector<unsigned char>& data) {
-  static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-  std::string out;
-  for (std::size_t i = 0; i < data.size(); i += 3) {
-    std::uint32_t v = data[i] << 16;
-    if (i + 1 < data.size()) v |= data[i + 1] << 8;
-    if (i + 2 < data.size()) v |= data[i + 2];
-    out += table[(v >> 18) & 63];
-    out += table[(v >> 12) & 63];
-    out += i + 1 < data.size() ? table[(v >> 6) & 63] : '=';
-    out += i + 2 < data.size() ? table[v & 63] : '=';
-  }
-  return out;
 }
 
 // Writes dir/name.gltf and, unless bin_name is empty, dir/<bin_name> with the buffer.
@@ -511,7 +480,7 @@ TEST_F(GltfTest, GltfInterleavedNormalizedSparseAndU8Indices) {
 
 TEST_F(GltfTest, GltfHierarchyTrsLightsMaterialsCameras) {
   TestModel m = triangle_model();
-  m.gltf["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64(m.bin);
+  m.gltf["buffers"][0]["uri"] = test::data_uri(std::string(m.bin.begin(), m.bin.end()));
   // Parent: T(10,0,0) * R(90 deg about z) * S(2); child: translation (0,0,1), has the mesh.
   const float h = std::sqrt(0.5f);
   m.gltf["nodes"] = {{{"name", "parent"},

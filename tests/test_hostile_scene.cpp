@@ -23,8 +23,8 @@
 #include <nlohmann/json.hpp>
 
 #include "cli.h"
+#include "gltf_builders.h"
 #include "irradcast/common/builtin.h"
-#include "irradcast/service/engine_host.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/gltf.h"
 #include "irradcast/common/image.h"
@@ -32,6 +32,7 @@
 #include "irradcast/common/progress.h"
 #include "irradcast/common/scene_edit.h"
 #include "irradcast/common/world.h"
+#include "irradcast/service/engine_host.h"
 #include "scene_builders.h"
 
 using namespace irradcast;
@@ -40,20 +41,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class HostileScene : public ::testing::Test {
+class HostileScene : public test::ScratchDirTest {
  protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    dir_ = fs::temp_directory_path() /
-           ("irradcast_hostile_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  fs::path dir_;
+  HostileScene() : ScratchDirTest("irradcast_hostile_") {}
 };
 
 void write_bytes(const fs::path& path, const std::string& bytes) {
@@ -73,32 +63,11 @@ json triangle_gltf(const std::string& buffer_uri) {
   return {{"asset", {{"version", "2.0"}}},
           {"buffers", {{{"byteLength", 36}, {"uri", buffer_uri}}}},
           {"bufferViews", {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 36}}}},
-          {"accessors",
-           {{{"bufferView", 0},
-             {"componentType", 5126},
-             {"count", 3},
-             {"type", "VEC3"},
-             {"min", {0, 0, 0}},
-             {"max", {1, 1, 0}}}}},
+          {"accessors", json::array({test::triangle_positions_accessor()})},
           {"meshes", {{{"name", "tri"}, {"primitives", {{{"attributes", {{"POSITION", 0}}}}}}}}},
           {"nodes", {{{"mesh", 0}}}},
           {"scenes", {{{"nodes", {0}}}}},
           {"scene", 0}};
-}
-
-std::string data_uri(const std::string& bytes) {
-  static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-  std::string out = "data:application/octet-stream;base64,";
-  for (std::size_t i = 0; i < bytes.size(); i += 3) {
-    std::uint32_t v = static_cast<unsigned char>(bytes[i]) << 16;
-    if (i + 1 < bytes.size()) v |= static_cast<unsigned char>(bytes[i + 1]) << 8;
-    if (i + 2 < bytes.size()) v |= static_cast<unsigned char>(bytes[i + 2]);
-    out += table[(v >> 18) & 63];
-    out += table[(v >> 12) & 63];
-    out += i + 1 < bytes.size() ? table[(v >> 6) & 63] : '=';
-    out += i + 2 < bytes.size() ? table[v & 63] : '=';
-  }
-  return out;
 }
 
 // The message of the irradcast::Error that loading `path` throws ("" if it loads).
@@ -169,7 +138,7 @@ TEST_F(HostileScene, GltfBufferUriOutsideTheFolderIsRefusedByName) {
   write_bytes(scene, triangle_gltf("bin/../bin/tri.bin").dump());
   EXPECT_EQ(load_error(scene.string()), "");
   // data: URIs need no file.
-  write_bytes(scene, triangle_gltf(data_uri(triangle_bin())).dump());
+  write_bytes(scene, triangle_gltf(test::data_uri(triangle_bin())).dump());
   EXPECT_EQ(load_error(scene.string()), "");
 }
 
@@ -195,7 +164,7 @@ TEST_F(HostileScene, GltfSymlinkPointingOutsideIsRefused) {
 
 TEST_F(HostileScene, GltfImageUriOutsideTheFolderIsRefused) {
   write_png((dir_ / "secret.png").string(), 2, 2, std::vector<std::uint8_t>(12, 200));
-  json g = triangle_gltf(data_uri(triangle_bin()));
+  json g = triangle_gltf(test::data_uri(triangle_bin()));
   g["images"] = {{{"uri", "../secret.png"}}};
   g["textures"] = {{{"source", 0}}};
   g["materials"] = {{{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
@@ -268,7 +237,7 @@ TEST_F(HostileScene, ServerRefusesASceneThatReadsOutsideItsFolder) {
 // `chain` nodes, each the only child of the one before (node 0 the root, the last one carries a
 // triangle, every node moves 1 mm along x), then `ring` nodes that form one cycle.
 std::string hierarchy_gltf(int chain, int ring) {
-  json g = triangle_gltf(data_uri(triangle_bin()));
+  json g = triangle_gltf(test::data_uri(triangle_bin()));
   json nodes = json::array();
   for (int i = 0; i < chain; ++i) {
     json n = {{"translation", {0.001, 0, 0}}};
@@ -392,7 +361,7 @@ json broken_gltf(bool good) {
                 {"type", "VEC3"},  {"min", {0, 0, 0}},     {"max", {max, max, max}}};
   };
   json g = {{"asset", {{"version", "2.0"}}},
-            {"buffers", {{{"byteLength", bin.size()}, {"uri", data_uri(bin)}}}},
+            {"buffers", {{{"byteLength", bin.size()}, {"uri", test::data_uri(bin)}}}},
             {"bufferViews", {{{"buffer", 0}, {"byteLength", bin.size()}}}},
             {"accessors", {accessor(0, 2), accessor(36, 1e15f), accessor(72, 1)}},
             {"meshes",

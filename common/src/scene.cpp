@@ -149,81 +149,71 @@ std::size_t Scene::triangle_count() const {
   return n;
 }
 
-std::size_t drop_degenerate_triangles(Scene& scene, const std::string& label) {
-  const std::vector<glm::mat4> world = scene.world_matrices();
-  const std::vector<Object> objects = scene.objects();
-  std::vector<std::vector<int>> placed(scene.meshes.size());  // nodes placing each mesh
-  for (const Object& o : objects) placed[static_cast<std::size_t>(o.mesh)].push_back(o.node);
+namespace {
 
-  std::size_t dropped = 0, total = 0, meshes_hit = 0;
-  std::string which;
-  for (std::size_t m = 0; m < scene.meshes.size(); ++m) {
-    Mesh& mesh = scene.meshes[m];
-    if (placed[m].empty()) continue;  // not in the world
-    const std::size_t nv = mesh.positions.size(), nt = mesh.triangles.size();
-    total += nt;
-    std::vector<bool> keep(nt, true);
-    bool bad_vertex = false;
-    auto check = [&](const std::vector<glm::vec3>& p) {
-      for (const glm::vec3& v : p) bad_vertex = bad_vertex || !usable_point(v);
-      for (std::size_t t = 0; t < nt; ++t) {
-        const glm::uvec3& i = mesh.triangles[t];
-        if (keep[t] &&
-            !(i.x < nv && i.y < nv && i.z < nv && usable_triangle(p[i.x], p[i.y], p[i.z])))
-          keep[t] = false;
-      }
-    };
-    check(mesh.positions);
-    std::vector<glm::vec3> wp(nv);
-    const glm::mat4* last = nullptr;
-    for (int node : placed[m]) {
-      const glm::mat4& mat = world[static_cast<std::size_t>(node)];
-      if (last && *last == mat) continue;
-      last = &mat;
-      for (std::size_t v = 0; v < nv; ++v)
-        wp[v] = glm::vec3(mat * glm::vec4(mesh.positions[v], 1.0f));
-      check(wp);
-    }
-    const std::size_t kept = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), true));
-    if (kept == nt && !bad_vertex) continue;
-    // Keep the triangles that are usable everywhere and the vertices they use.
-    std::vector<std::uint32_t> remap(nv, ~0u);
-    std::vector<glm::uvec3> triangles;
-    std::vector<std::uint32_t> materials;
-    std::uint32_t next = 0;
+// Which of the mesh's triangles are usable (indices in range, usable_triangle()) in the mesh and
+// wherever a node in `placed` puts it. Sets *bad_vertex if some vertex is not a usable point.
+std::vector<bool> usable_triangles(const Mesh& mesh, const std::vector<int>& placed,
+                                   const std::vector<glm::mat4>& world, bool* bad_vertex) {
+  const std::size_t nv = mesh.positions.size(), nt = mesh.triangles.size();
+  std::vector<bool> keep(nt, true);
+  auto check = [&](const std::vector<glm::vec3>& p) {
+    for (const glm::vec3& v : p) *bad_vertex = *bad_vertex || !usable_point(v);
     for (std::size_t t = 0; t < nt; ++t) {
-      if (!keep[t]) continue;
-      glm::uvec3 tri = mesh.triangles[t];
-      for (int k = 0; k < 3; ++k) {
-        if (remap[tri[k]] == ~0u) remap[tri[k]] = next++;
-        tri[k] = remap[tri[k]];
-      }
-      triangles.push_back(tri);
-      if (t < mesh.triangle_material.size()) materials.push_back(mesh.triangle_material[t]);
+      const glm::uvec3& i = mesh.triangles[t];
+      if (keep[t] && !(i.x < nv && i.y < nv && i.z < nv && usable_triangle(p[i.x], p[i.y], p[i.z])))
+        keep[t] = false;
     }
-    auto compact = [&](auto& values) {
-      if (values.size() != nv) return;
-      std::remove_reference_t<decltype(values)> out(next);
-      for (std::size_t v = 0; v < nv; ++v)
-        if (remap[v] != ~0u) out[remap[v]] = values[v];
-      values = std::move(out);
-    };
-    compact(mesh.normals);
-    compact(mesh.uv0);
-    compact(mesh.uv1);
-    compact(mesh.positions);
-    mesh.triangles = std::move(triangles);
-    mesh.triangle_material = std::move(materials);
-    if (mesh.triangles.empty())
-      for (int node : placed[m]) scene.nodes[static_cast<std::size_t>(node)].mesh = -1;
-    if (kept == nt) continue;  // only unused vertices went
-    dropped += nt - kept;
-    if (++meshes_hit <= 4)
-      which += std::string(which.empty() ? "" : ", ") + "mesh " + std::to_string(m) +
-               (mesh.name.empty() ? "" : " \"" + printable(mesh.name) + "\"") + " " +
-               std::to_string(nt - kept) + " of " + std::to_string(nt);
+  };
+  check(mesh.positions);
+  std::vector<glm::vec3> wp(nv);
+  const glm::mat4* last = nullptr;
+  for (int node : placed) {
+    const glm::mat4& mat = world[static_cast<std::size_t>(node)];
+    if (last && *last == mat) continue;
+    last = &mat;
+    for (std::size_t v = 0; v < nv; ++v)
+      wp[v] = glm::vec3(mat * glm::vec4(mesh.positions[v], 1.0f));
+    check(wp);
   }
+  return keep;
+}
 
+// Keeps the triangles marked in `keep` and the vertices they use (in first-use order).
+void compact_mesh(Mesh& mesh, const std::vector<bool>& keep) {
+  const std::size_t nv = mesh.positions.size(), nt = mesh.triangles.size();
+  std::vector<std::uint32_t> remap(nv, ~0u);
+  std::vector<glm::uvec3> triangles;
+  std::vector<std::uint32_t> materials;
+  std::uint32_t next = 0;
+  for (std::size_t t = 0; t < nt; ++t) {
+    if (!keep[t]) continue;
+    glm::uvec3 tri = mesh.triangles[t];
+    for (int k = 0; k < 3; ++k) {
+      if (remap[tri[k]] == ~0u) remap[tri[k]] = next++;
+      tri[k] = remap[tri[k]];
+    }
+    triangles.push_back(tri);
+    if (t < mesh.triangle_material.size()) materials.push_back(mesh.triangle_material[t]);
+  }
+  auto compact = [&](auto& values) {
+    if (values.size() != nv) return;
+    std::remove_reference_t<decltype(values)> out(next);
+    for (std::size_t v = 0; v < nv; ++v)
+      if (remap[v] != ~0u) out[remap[v]] = values[v];
+    values = std::move(out);
+  };
+  compact(mesh.normals);
+  compact(mesh.uv0);
+  compact(mesh.uv1);
+  compact(mesh.positions);
+  mesh.triangles = std::move(triangles);
+  mesh.triangle_material = std::move(materials);
+}
+
+// Removes the lights and cameras of nodes whose world transform is not finite (with a warning).
+void drop_unplaced_lights_and_cameras(Scene& scene, const std::vector<glm::mat4>& world,
+                                      const std::string& label) {
   std::size_t lights = 0, cameras = 0;
   for (std::size_t n = 0; n < scene.nodes.size(); ++n) {
     Node& node = scene.nodes[n];
@@ -237,6 +227,40 @@ std::size_t drop_degenerate_triangles(Scene& scene, const std::string& label) {
     log::warn("scene", label + ": dropped " + std::to_string(lights) + " lights and " +
                            std::to_string(cameras) +
                            " cameras on nodes whose world transform is not finite");
+}
+
+}  // namespace
+
+std::size_t drop_degenerate_triangles(Scene& scene, const std::string& label) {
+  const std::vector<glm::mat4> world = scene.world_matrices();
+  const std::vector<Object> objects = scene.objects();
+  std::vector<std::vector<int>> placed(scene.meshes.size());  // nodes placing each mesh
+  for (const Object& o : objects) placed[static_cast<std::size_t>(o.mesh)].push_back(o.node);
+
+  std::size_t dropped = 0, total = 0, meshes_hit = 0;
+  std::string which;
+  for (std::size_t m = 0; m < scene.meshes.size(); ++m) {
+    Mesh& mesh = scene.meshes[m];
+    if (placed[m].empty()) continue;  // not in the world
+    const std::size_t nt = mesh.triangles.size();
+    total += nt;
+    bool bad_vertex = false;
+    const std::vector<bool> keep = usable_triangles(mesh, placed[m], world, &bad_vertex);
+    const std::size_t kept = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), true));
+    if (kept == nt && !bad_vertex) continue;
+    // Keep the triangles that are usable everywhere and the vertices they use.
+    compact_mesh(mesh, keep);
+    if (mesh.triangles.empty())
+      for (int node : placed[m]) scene.nodes[static_cast<std::size_t>(node)].mesh = -1;
+    if (kept == nt) continue;  // only unused vertices went
+    dropped += nt - kept;
+    if (++meshes_hit <= 4)
+      which += std::string(which.empty() ? "" : ", ") + "mesh " + std::to_string(m) +
+               (mesh.name.empty() ? "" : " \"" + printable(mesh.name) + "\"") + " " +
+               std::to_string(nt - kept) + " of " + std::to_string(nt);
+  }
+
+  drop_unplaced_lights_and_cameras(scene, world, label);
   if (dropped == 0) return 0;
   log::warn("scene", label + ": dropped " + std::to_string(dropped) + " of " +
                          std::to_string(total) +

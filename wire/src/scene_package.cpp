@@ -165,11 +165,7 @@ int to_int(std::int32_t v) {
   return static_cast<int>(v);
 }
 
-SceneData to_proto(const Scene& s, const Atlas& atlas, std::uint64_t revision) {
-  SceneData d;
-  d.set_format(kSceneFormat);
-  d.set_name(s.name);
-  d.set_revision(revision);
+void put_nodes(SceneData& d, const Scene& s) {
   for (const Node& n : s.nodes) {
     SceneNode* o = d.add_nodes();
     o->set_name(n.name);
@@ -185,6 +181,9 @@ SceneData to_proto(const Scene& s, const Atlas& atlas, std::uint64_t revision) {
     o->set_hidden(!n.visible);
   }
   for (int r : s.roots) d.add_roots(r);
+}
+
+void put_meshes(SceneData& d, const Scene& s) {
   for (const Mesh& m : s.meshes) {
     SceneMesh* o = d.add_meshes();
     o->set_name(m.name);
@@ -200,6 +199,9 @@ SceneData to_proto(const Scene& s, const Atlas& atlas, std::uint64_t revision) {
     }
     o->mutable_triangle_material()->Add(m.triangle_material.begin(), m.triangle_material.end());
   }
+}
+
+void put_materials(SceneData& d, const Scene& s) {
   for (const Material& m : s.materials) {
     SceneMaterial* o = d.add_materials();
     o->set_name(m.name);
@@ -212,6 +214,9 @@ SceneData to_proto(const Scene& s, const Atlas& atlas, std::uint64_t revision) {
     o->set_emissive_strength(m.emissive_strength);
     o->set_double_sided(m.double_sided);
   }
+}
+
+void put_textures(SceneData& d, const Scene& s) {
   for (const Texture& t : s.textures) {
     SceneTexture* o = d.add_textures();
     o->set_name(t.name);
@@ -219,6 +224,9 @@ SceneData to_proto(const Scene& s, const Atlas& atlas, std::uint64_t revision) {
     o->set_height(static_cast<std::uint32_t>(t.height));
     o->set_rgba8(t.rgba8.data(), t.rgba8.size());
   }
+}
+
+void put_lights(SceneData& d, const Scene& s) {
   for (const Light& l : s.lights) {
     SceneLight* o = d.add_lights();
     o->set_name(l.name);
@@ -231,6 +239,9 @@ SceneData to_proto(const Scene& s, const Atlas& atlas, std::uint64_t revision) {
     o->set_inner_cone_angle(l.inner_cone_angle);
     o->set_outer_cone_angle(l.outer_cone_angle);
   }
+}
+
+void put_cameras(SceneData& d, const Scene& s) {
   for (const Camera& c : s.cameras) {
     SceneCamera* o = d.add_cameras();
     o->set_name(c.name);
@@ -239,6 +250,9 @@ SceneData to_proto(const Scene& s, const Atlas& atlas, std::uint64_t revision) {
     o->set_znear(c.znear);
     o->set_zfar(c.zfar);
   }
+}
+
+void put_layouts(SceneData& d, const Atlas& atlas) {
   for (const ObjectLightmap& l : atlas.objects) {
     ObjectLayout* o = d.add_layouts();
     o->set_width(static_cast<std::uint32_t>(l.width));
@@ -253,17 +267,24 @@ SceneData to_proto(const Scene& s, const Atlas& atlas, std::uint64_t revision) {
     o->set_from_file_uv1(l.from_file_uv1);
     o->set_texels_per_unit(l.texels_per_unit);
   }
+}
+
+SceneData to_proto(const Scene& s, const Atlas& atlas, std::uint64_t revision) {
+  SceneData d;
+  d.set_format(kSceneFormat);
+  d.set_name(s.name);
+  d.set_revision(revision);
+  put_nodes(d, s);
+  put_meshes(d, s);
+  put_materials(d, s);
+  put_textures(d, s);
+  put_lights(d, s);
+  put_cameras(d, s);
+  put_layouts(d, atlas);
   return d;
 }
 
-UnpackedScene from_proto(const SceneData& d) {
-  if (d.format() != kSceneFormat)
-    fail("format " + std::to_string(d.format()) + " is not supported (expected " +
-         std::to_string(kSceneFormat) + ")");
-  UnpackedScene out;
-  out.revision = d.revision();
-  Scene& s = out.scene;
-  s.name = d.name();
+void get_nodes(const SceneData& d, Scene& s) {
   for (int i = 0; i < d.nodes_size(); ++i) {
     const SceneNode& o = d.nodes(i);
     Node n;
@@ -282,6 +303,9 @@ UnpackedScene from_proto(const SceneData& d) {
     s.nodes.push_back(std::move(n));
   }
   s.roots.assign(d.roots().begin(), d.roots().end());
+}
+
+void get_meshes(const SceneData& d, Scene& s) {
   for (int i = 0; i < d.meshes_size(); ++i) {
     const SceneMesh& o = d.meshes(i);
     const std::string what = idx("mesh", i);
@@ -302,6 +326,9 @@ UnpackedScene from_proto(const SceneData& d) {
     m.triangle_material.assign(o.triangle_material().begin(), o.triangle_material().end());
     s.meshes.push_back(std::move(m));
   }
+}
+
+void get_materials(const SceneData& d, Scene& s) {
   for (int i = 0; i < d.materials_size(); ++i) {
     const SceneMaterial& o = d.materials(i);
     Material m;
@@ -318,6 +345,9 @@ UnpackedScene from_proto(const SceneData& d) {
     m.double_sided = o.double_sided();
     s.materials.push_back(std::move(m));
   }
+}
+
+void get_textures(const SceneData& d, Scene& s) {
   for (int i = 0; i < d.textures_size(); ++i) {
     const SceneTexture& o = d.textures(i);
     if (o.width() > static_cast<std::uint32_t>(kMaxTextureSize) ||
@@ -331,6 +361,9 @@ UnpackedScene from_proto(const SceneData& d) {
     t.rgba8.assign(o.rgba8().begin(), o.rgba8().end());
     s.textures.push_back(std::move(t));
   }
+}
+
+void get_lights(const SceneData& d, Scene& s) {
   for (int i = 0; i < d.lights_size(); ++i) {
     const SceneLight& o = d.lights(i);
     Light l;
@@ -355,6 +388,9 @@ UnpackedScene from_proto(const SceneData& d) {
     l.outer_cone_angle = o.outer_cone_angle();
     s.lights.push_back(std::move(l));
   }
+}
+
+void get_cameras(const SceneData& d, Scene& s) {
   for (int i = 0; i < d.cameras_size(); ++i) {
     const SceneCamera& o = d.cameras(i);
     Camera c;
@@ -365,6 +401,9 @@ UnpackedScene from_proto(const SceneData& d) {
     c.zfar = o.zfar();
     s.cameras.push_back(std::move(c));
   }
+}
+
+void get_layouts(const SceneData& d, Atlas& atlas) {
   for (int i = 0; i < d.layouts_size(); ++i) {
     const ObjectLayout& o = d.layouts(i);
     if (o.width() > kMaxLightmapSize || o.height() > kMaxLightmapSize)
@@ -382,8 +421,25 @@ UnpackedScene from_proto(const SceneData& d) {
     l.chart_count = static_cast<int>(o.chart_count());
     l.from_file_uv1 = o.from_file_uv1();
     l.texels_per_unit = o.texels_per_unit();
-    out.atlas.objects.push_back(std::move(l));
+    atlas.objects.push_back(std::move(l));
   }
+}
+
+UnpackedScene from_proto(const SceneData& d) {
+  if (d.format() != kSceneFormat)
+    fail("format " + std::to_string(d.format()) + " is not supported (expected " +
+         std::to_string(kSceneFormat) + ")");
+  UnpackedScene out;
+  out.revision = d.revision();
+  Scene& s = out.scene;
+  s.name = d.name();
+  get_nodes(d, s);
+  get_meshes(d, s);
+  get_materials(d, s);
+  get_textures(d, s);
+  get_lights(d, s);
+  get_cameras(d, s);
+  get_layouts(d, out.atlas);
   validate_scene(s);
   validate_layout(s, out.atlas);
   return out;
