@@ -11,6 +11,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 
 #include "irradcast/client/view_client.h"
 #include "irradcast/common/log.h"
@@ -78,6 +79,28 @@ inline wire::Envelope hello_frame(const std::string& name = "raw",
   return e;
 }
 
+// One read into `buf` that gives up at `deadline` (then `cancel` cancels it): the read's error
+// and size; operation_aborted when it timed out.
+template <class AsyncReadStream, class Cancel>
+std::pair<std::error_code, std::size_t> read_some_before(
+    asio::io_context& io, AsyncReadStream& s, asio::mutable_buffer buf,
+    std::chrono::steady_clock::time_point deadline, Cancel cancel) {
+  std::error_code result = asio::error::would_block;
+  std::size_t n = 0;
+  s.async_read_some(buf, [&](std::error_code ec, std::size_t got) {
+    result = ec;
+    n = got;
+  });
+  io.restart();
+  io.run_until(deadline);
+  if (result == asio::error::would_block) {
+    cancel();
+    io.restart();
+    io.run();
+  }
+  return {result, n};
+}
+
 // A raw protocol connection to 127.0.0.1:port, plain or TLS (the server's name is 127.0.0.1).
 // Writes ignore errors (a test may write to a server that closed); reads wait at most a limit.
 struct RawConnection {
@@ -106,22 +129,11 @@ struct RawConnection {
     for (;;) {
       if (decoder.next(e) == wire::DecodeStatus::Frame) return e;
       if (Clock::now() > deadline || eof) return std::nullopt;
-      std::error_code result = asio::error::would_block;
-      std::size_t n = 0;
-      stream.async_read_some(asio::buffer(buf), [&](std::error_code ec, std::size_t got) {
-        result = ec;
-        n = got;
-      });
-      io.restart();
-      io.run_for(deadline - Clock::now());
-      if (result == asio::error::would_block) {
+      const auto [result, n] = read_some_before(io, stream, asio::buffer(buf), deadline, [&] {
         std::error_code ignored;
         stream.socket().cancel(ignored);
-        io.restart();
-        io.run();
-      }
-      if (result && result != asio::error::would_block && result != asio::error::operation_aborted)
-        eof = true;
+      });
+      if (result && result != asio::error::operation_aborted) eof = true;
       decoder.feed(buf.data(), n);
     }
   }

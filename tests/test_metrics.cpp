@@ -237,20 +237,9 @@ std::string read_until_closed(asio::io_context& io, tcp::socket& s, std::chrono:
   const auto deadline = std::chrono::steady_clock::now() + limit;
   closed = false;
   for (;;) {
-    std::error_code result = asio::error::would_block;
-    std::size_t n = 0;
-    s.async_read_some(asio::buffer(buf), [&](std::error_code ec, std::size_t got) {
-      result = ec;
-      n = got;
-    });
-    io.restart();
-    io.run_until(deadline);
-    if (result == asio::error::would_block) {  // timed out
-      s.cancel();
-      io.restart();
-      io.run();
-      return out;
-    }
+    const auto [result, n] =
+        test::read_some_before(io, s, asio::buffer(buf), deadline, [&] { s.cancel(); });
+    if (result == asio::error::operation_aborted) return out;  // timed out
     out.append(buf.data(), n);
     if (result) {
       closed = true;

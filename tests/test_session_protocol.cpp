@@ -110,6 +110,24 @@ class SessionProtocolTest : public ::testing::Test {
     return counters.sessions_closed[static_cast<std::size_t>(r)].load();
   }
 
+  // The session failed: it asks for the grace timer, writes one Error with `code`, then closes
+  // and counts `reason`. The Error.
+  wire::Error expect_failed(SessionProtocol& s, wire::ErrorCode code, CloseReason reason) {
+    EXPECT_TRUE(s.take_events().closing);
+    SessionWrite::Kind last{};
+    const auto out = written(s, &last);
+    EXPECT_EQ(last, SessionWrite::Kind::Close) << "the session closes once the Error is written";
+    const std::uint64_t before = closed(reason);
+    s.close(CloseReason::Disconnect);
+    EXPECT_EQ(closed(reason), before + 1) << "the failure's reason counts";
+    if (out.size() != 1 || !out[0].has_error()) {
+      ADD_FAILURE() << out.size() << " frames written, expected one Error";
+      return {};
+    }
+    EXPECT_EQ(out[0].error().code(), code);
+    return out[0].error();
+  }
+
   static EngineHost* host_;
   ServerOptions options;
   ServerCounters counters;
@@ -142,15 +160,7 @@ TEST_F(SessionProtocolTest, HelloIsAnsweredWithAWelcomeDescribingTheSceneAndTheL
 TEST_F(SessionProtocolTest, AnotherProtocolVersionGetsAnErrorAndCloses) {
   SessionProtocol& s = session();
   feed(s, hello(wire::kProtocolVersion + 1));
-  EXPECT_TRUE(s.take_events().closing);
-  SessionWrite::Kind last{};
-  const auto out = written(s, &last);
-  ASSERT_EQ(out.size(), 1u);
-  ASSERT_TRUE(out[0].has_error());
-  EXPECT_EQ(out[0].error().code(), wire::UNSUPPORTED_VERSION);
-  EXPECT_EQ(last, SessionWrite::Kind::Close) << "the session closes once the Error is written";
-  s.close(CloseReason::Disconnect);
-  EXPECT_EQ(closed(CloseReason::UnsupportedVersion), 1u) << "the failure's reason counts";
+  expect_failed(s, wire::UNSUPPORTED_VERSION, CloseReason::UnsupportedVersion);
   EXPECT_EQ(closed(CloseReason::Disconnect), 0u);
   EXPECT_EQ(counters.errors_sent.load(), 1u);
 }
@@ -161,10 +171,8 @@ TEST_F(SessionProtocolTest, AFrameBeforeHelloIsUnexpected) {
   ping.mutable_ping()->set_nonce(1);
   feed(s, ping);
   EXPECT_TRUE(s.closing());
-  const auto out = written(s);
-  ASSERT_EQ(out.size(), 1u);
-  EXPECT_EQ(out[0].error().code(), wire::UNEXPECTED_MESSAGE);
-  EXPECT_NE(out[0].error().message().find("expected hello"), std::string::npos);
+  const wire::Error e = expect_failed(s, wire::UNEXPECTED_MESSAGE, CloseReason::UnexpectedMessage);
+  EXPECT_NE(e.message().find("expected hello"), std::string::npos);
 }
 
 TEST_F(SessionProtocolTest, AFrameOverTheHelloCapIsTooLargeBeforeHelloButNotAfter) {
@@ -174,12 +182,7 @@ TEST_F(SessionProtocolTest, AFrameOverTheHelloCapIsTooLargeBeforeHelloButNotAfte
                            static_cast<char>((n >> 16) & 0xff), static_cast<char>(n >> 24)};
   SessionProtocol& early = session();
   feed(early, header);
-  EXPECT_TRUE(early.take_events().closing);
-  auto out = written(early);
-  ASSERT_EQ(out.size(), 1u);
-  EXPECT_EQ(out[0].error().code(), wire::FRAME_TOO_LARGE);
-  early.close(CloseReason::Disconnect);
-  EXPECT_EQ(closed(CloseReason::FrameTooLarge), 1u);
+  expect_failed(early, wire::FRAME_TOO_LARGE, CloseReason::FrameTooLarge);
 
   // After Hello the cap is max_frame: the same header only means "more bytes to come".
   SessionProtocol& late = session();
@@ -229,15 +232,28 @@ TEST_F(SessionProtocolTest, AResumeWithTheSameSceneAndEpochSendsOnlyNewerTiles) 
 TEST_F(SessionProtocolTest, TheByteRateCapMakesTilesWait) {
   SessionProtocol& s = session();
   feed(s, hello());
-  feed(s, subscribe_all(1000));  // the first 64 KiB burst, then 1000 bytes/s
+  feed(s, subscribe_all(1000));  // a 64 KiB burst, then 1000 bytes/s
   SessionWrite::Kind last{};
-  const auto out = written(s, &last);
-  ASSERT_EQ(last, SessionWrite::Kind::Wait) << "the burst does not hold every tile";
-  EXPECT_LT(out.size(), 1 + host_->tiles().tile_count());
-  const SessionWrite w = s.next_write(std::chrono::steady_clock::now());
-  EXPECT_EQ(w.kind, SessionWrite::Kind::Wait);
-  EXPECT_GT(w.wait.count(), 0);
+  std::size_t sent = written(s, &last).size() - 1;  // the Welcome, then tiles
+  EXPECT_EQ(sent, host_->tiles().tile_count()) << "the first tiles fit in the burst";
+  // New versions of every tile until the burst is spent.
+  std::vector<std::uint32_t> all(host_->tiles().tile_count());
+  for (std::uint32_t t = 0; t < all.size(); ++t) all[t] = t;
+  for (int i = 0; i < 50 && last != SessionWrite::Kind::Wait; ++i) {
+    host_->step();
+    s.tiles_changed(all);
+    sent += written(s, &last).size();
+  }
+  ASSERT_EQ(last, SessionWrite::Kind::Wait) << sent << " tiles sent";
   EXPECT_GT(s.queue_depth(), 0u);
+  const auto now = std::chrono::steady_clock::now();
+  const SessionWrite wait = s.next_write(now);
+  ASSERT_EQ(wait.kind, SessionWrite::Kind::Wait);
+  EXPECT_GT(wait.wait.count(), 0);
+  EXPECT_FALSE(wait.frame);
+  // Once the cap has refilled enough, the held tile goes.
+  const SessionWrite tile = s.next_write(now + wait.wait + 1ms);
+  EXPECT_EQ(tile.kind, SessionWrite::Kind::Tile);
 }
 
 TEST_F(SessionProtocolTest, AWrongTokenIsAnsweredAfterADelayAndBansAfterTooMany) {
@@ -269,12 +285,7 @@ TEST_F(SessionProtocolTest, AWrongTokenIsAnsweredAfterADelayAndBansAfterTooMany)
   EXPECT_TRUE(ev.banned) << "the third failure bans the address";
   s.penalty_ended();
   s.answer_token_failure(ev.banned);
-  EXPECT_TRUE(s.take_events().closing);
-  out = written(s);
-  ASSERT_EQ(out.size(), 1u);
-  EXPECT_EQ(out[0].error().code(), wire::PERMISSION_DENIED);
-  s.close(CloseReason::Disconnect);
-  EXPECT_EQ(closed(CloseReason::TokenFailures), 1u);
+  expect_failed(s, wire::PERMISSION_DENIED, CloseReason::TokenFailures);
   EXPECT_EQ(counters.token_failures.load(), 3u);
   EXPECT_EQ(peers.admit("10.0.0.1", [] { return std::size_t{0}; }), PeerTable::Admission::Banned);
   EXPECT_EQ(peers.admit("10.0.0.2", [] { return std::size_t{0}; }), PeerTable::Admission::Ok);
@@ -338,12 +349,7 @@ TEST_F(SessionProtocolTest, HelloTimeoutClosesAtOnceDuringTheHandshakeOrWithAnEr
 
   SessionProtocol& silent = session();
   silent.hello_timed_out(false);
-  EXPECT_TRUE(silent.take_events().closing);
-  const auto out = written(silent);
-  ASSERT_EQ(out.size(), 1u);
-  EXPECT_EQ(out[0].error().code(), wire::IDLE_TIMEOUT);
-  silent.close(CloseReason::Disconnect);
-  EXPECT_EQ(closed(CloseReason::HelloTimeout), 1u);
+  expect_failed(silent, wire::IDLE_TIMEOUT, CloseReason::HelloTimeout);
 
   SessionProtocol& greeted = session();
   feed(greeted, hello());

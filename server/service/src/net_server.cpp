@@ -8,6 +8,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <mutex>
 #include <optional>
@@ -22,6 +23,7 @@
 #include "irradcast/wire/frame.h"
 #include "irradcast/wire/transport.h"
 #include "peer_table.h"
+#include "run_io.h"
 #include "session.h"
 
 namespace irradcast {
@@ -262,15 +264,7 @@ void Server::start() {
   for (int i = 0; i < im.options.io_threads; ++i)
     im.threads.emplace_back([&im] {
       set_thread_name("irradcast-io");
-      for (;;) {
-        try {
-          im.io.run();
-          break;
-        } catch (const std::exception& e) {
-          // A handler threw: log it and keep serving the other clients.
-          log::error("server", std::string("I/O handler failed: ") + e.what());
-        }
-      }
+      run_io(im.io, "server", "I/O handler");  // a handler that throws: the others go on
     });
   log::info("server", "listening on " + im.options.bind + ":" + std::to_string(port()));
 }
@@ -357,35 +351,23 @@ std::uint64_t raise_open_file_limit() {
 }
 
 const char* close_reason_name(CloseReason reason) {
-  switch (reason) {
-    case CloseReason::Bye:
-      return "bye";
-    case CloseReason::Disconnect:
-      return "disconnect";
-    case CloseReason::IdleTimeout:
-      return "idle_timeout";
-    case CloseReason::BadFrame:
-      return "bad_frame";
-    case CloseReason::FrameTooLarge:
-      return "frame_too_large";
-    case CloseReason::UnsupportedVersion:
-      return "unsupported_version";
-    case CloseReason::UnexpectedMessage:
-      return "unexpected_message";
-    case CloseReason::SlowClient:
-      return "slow_client";
-    case CloseReason::Shutdown:
-      return "shutdown";
-    case CloseReason::Internal:
-      return "internal";
-    case CloseReason::HelloTimeout:
-      return "hello_timeout";
-    case CloseReason::TokenFailures:
-      return "token_failures";
-    case CloseReason::Tls:
-      return "tls";
-  }
-  return "unknown";
+  // In the order of CloseReason.
+  static constexpr const char* kNames[] = {"bye",
+                                           "disconnect",
+                                           "idle_timeout",
+                                           "bad_frame",
+                                           "frame_too_large",
+                                           "unsupported_version",
+                                           "unexpected_message",
+                                           "slow_client",
+                                           "shutdown",
+                                           "internal",
+                                           "hello_timeout",
+                                           "token_failures",
+                                           "tls"};
+  static_assert(std::size(kNames) == kCloseReasons);
+  const auto i = static_cast<std::size_t>(reason);
+  return i < kCloseReasons ? kNames[i] : "unknown";
 }
 
 }  // namespace irradcast

@@ -26,6 +26,7 @@
 #include "irradcast/service/send_queue.h"
 #include "irradcast/wire/frame.h"
 #include "peer_table.h"
+#include "session_messages.h"
 
 namespace irradcast {
 
@@ -49,9 +50,6 @@ struct SessionContext {
   std::function<ServerStats()> server_stats;  // for a StatsRequest
   std::size_t hello_frame_cap = 0;            // the decoder's cap before Hello
 };
-
-// The reason a session ends after sending an Error frame with this code.
-CloseReason reason_of(wire::ErrorCode code);
 
 // What the connection must do after a call into the protocol (SessionProtocol::take_events()).
 struct SessionEvents {
