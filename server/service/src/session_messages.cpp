@@ -1,25 +1,21 @@
 // The messages a session builds from the server's state.
 #include "session_messages.h"
 
+#include <utility>
+
 namespace irradcast {
 
 CloseReason reason_of(wire::ErrorCode code) {
-  switch (code) {
-    case wire::BAD_FRAME:
-      return CloseReason::BadFrame;
-    case wire::FRAME_TOO_LARGE:
-      return CloseReason::FrameTooLarge;
-    case wire::UNSUPPORTED_VERSION:
-      return CloseReason::UnsupportedVersion;
-    case wire::UNEXPECTED_MESSAGE:
-      return CloseReason::UnexpectedMessage;
-    case wire::IDLE_TIMEOUT:
-      return CloseReason::IdleTimeout;
-    case wire::SERVER_SHUTDOWN:
-      return CloseReason::Shutdown;
-    default:
-      return CloseReason::Internal;
-  }
+  static constexpr std::pair<wire::ErrorCode, CloseReason> kReasons[] = {
+      {wire::BAD_FRAME, CloseReason::BadFrame},
+      {wire::FRAME_TOO_LARGE, CloseReason::FrameTooLarge},
+      {wire::UNSUPPORTED_VERSION, CloseReason::UnsupportedVersion},
+      {wire::UNEXPECTED_MESSAGE, CloseReason::UnexpectedMessage},
+      {wire::IDLE_TIMEOUT, CloseReason::IdleTimeout},
+      {wire::SERVER_SHUTDOWN, CloseReason::Shutdown}};
+  for (const auto& [c, reason] : kReasons)
+    if (c == code) return reason;
+  return CloseReason::Internal;
 }
 
 // The Welcome that answers a Hello: the session, the scene package, the lightmaps and tiles,
