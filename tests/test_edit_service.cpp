@@ -12,16 +12,17 @@
 #include <string>
 
 #include "cli.h"
-#include "irradcast/common/builtin.h"
 #include "irradcast/client/camera_message.h"
-#include "irradcast/wire/edit_message.h"
-#include "irradcast/service/engine_host.h"
-#include "irradcast/wire/frame.h"
-#include "irradcast/common/log.h"
-#include "irradcast/service/net_server.h"
-#include "irradcast/common/progress.h"
-#include "irradcast/wire/scene_package.h"
 #include "irradcast/client/view_client.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/wire/scene_package.h"
+#include "service_fixture.h"
 
 using namespace irradcast;
 using asio::ip::tcp;
@@ -32,62 +33,17 @@ namespace {
 // At least kMinTokenLength characters.
 const std::string kToken = "secret-token-for-tests";
 
-EngineHostOptions quick_host() {
-  Progress::set_enabled(false);
-  log::set_level(log::Level::Warn);
-  EngineHostOptions o;
-  o.atlas.texels_per_scene = 32.0f;
-  o.tiles.tile_size = 16;
-  o.max_updates = 1;
-  return o;
-}
+using test::quick_host;
 
 ServerOptions edit_server(const std::string& token) {
-  ServerOptions o;
-  o.bind = "127.0.0.1";
-  o.port = 0;
-  o.idle_timeout = 10000ms;
+  ServerOptions o = test::loopback(10000ms);
   o.control_token = token;
   return o;
 }
 
 // A raw protocol client: Hello, then whatever the test sends.
-struct Raw {
-  explicit Raw(std::uint16_t port) : socket(io) {
-    socket.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
-    wire::Envelope h;
-    h.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
-    h.mutable_hello()->set_client_name("raw-editor");
-    send(h);
-    auto w = read();
-    EXPECT_TRUE(w && w->has_welcome());
-    if (w && w->has_welcome()) welcome = w->welcome();
-  }
-  void send(const wire::Envelope& e) { asio::write(socket, asio::buffer(wire::encode_frame(e))); }
-  std::optional<wire::Envelope> read(std::chrono::milliseconds limit = 5000ms) {
-    wire::Envelope e;
-    const auto deadline = std::chrono::steady_clock::now() + limit;
-    for (;;) {
-      if (decoder.next(e) == wire::DecodeStatus::Frame) return e;
-      if (std::chrono::steady_clock::now() > deadline || eof) return std::nullopt;
-      std::error_code result = asio::error::would_block;
-      std::size_t n = 0;
-      socket.async_read_some(asio::buffer(buf), [&](std::error_code ec, std::size_t got) {
-        result = ec;
-        n = got;
-      });
-      io.restart();
-      io.run_for(deadline - std::chrono::steady_clock::now());
-      if (result == asio::error::would_block) {
-        socket.cancel();
-        io.restart();
-        io.run();
-      }
-      if (result && result != asio::error::would_block && result != asio::error::operation_aborted)
-        eof = true;
-      decoder.feed(buf.data(), n);
-    }
-  }
+struct Raw : test::RawConnection {
+  explicit Raw(std::uint16_t port) : RawConnection(port) { EXPECT_TRUE(join("raw-editor")); }
   // The next SceneEdit or Error frame (others, e.g. Pong, are skipped).
   std::optional<wire::Envelope> reply(std::chrono::milliseconds limit = 5000ms) {
     while (auto e = read(limit))
@@ -110,12 +66,6 @@ struct Raw {
       if (e->has_pong()) return e->pong().nonce() == 4242;
     return false;
   }
-  asio::io_context io;
-  tcp::socket socket;
-  wire::FrameDecoder decoder;
-  std::array<char, 4096> buf{};
-  bool eof = false;
-  wire::Welcome welcome;
 };
 
 // The Error a raw client gets for `json` with `token` (code and message), after which the

@@ -18,15 +18,16 @@
 
 #include "cli.h"
 #include "irradcast/common/builtin.h"
-#include "irradcast/wire/edit_message.h"
-#include "irradcast/service/engine_host.h"
 #include "irradcast/common/error.h"
-#include "irradcast/wire/frame.h"
 #include "irradcast/common/log.h"
-#include "irradcast/service/net_server.h"
 #include "irradcast/common/progress.h"
 #include "irradcast/common/scene_edit.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast/wire/frame.h"
 #include "irradcast/wire/transport.h"
+#include "service_fixture.h"
 #include "tls_cert.h"
 
 using namespace irradcast;
@@ -38,98 +39,16 @@ namespace {
 
 const std::string kToken = "hostile-test-token-0123";
 
-EngineHostOptions quick_host(std::uint32_t max_updates = 1) {
-  Progress::set_enabled(false);
-  log::set_level(log::Level::Warn);
-  EngineHostOptions o;
-  o.atlas.texels_per_scene = 32.0f;
-  o.tiles.tile_size = 16;
-  o.max_updates = max_updates;
-  return o;
-}
+using test::quick_host;
 
 ServerOptions loopback() {
-  ServerOptions o;
-  o.bind = "127.0.0.1";
-  o.port = 0;
-  o.idle_timeout = 30000ms;  // longer than any test: what closes a session is the feature
-  return o;
+  return test::loopback(30000ms);  // longer than any test: what closes a session is the feature
 }
 
-// A raw protocol connection, plain or TLS, that reads with a deadline.
-struct Raw {
-  explicit Raw(std::uint16_t port, asio::ssl::context* tls = nullptr)
-      : stream(io.get_executor(), tls) {
-    stream.socket().connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port),
-                            connect_error);
-    if (!connect_error && tls) {
-      stream.expect_server_name("127.0.0.1");
-      stream.handshake(asio::ssl::stream_base::client, connect_error);
-    }
-  }
-  void write(const std::string& bytes) {
-    std::error_code ec;
-    asio::write(stream, asio::buffer(bytes), ec);
-  }
-  void send(const wire::Envelope& e) { write(wire::encode_frame(e)); }
-  std::optional<wire::Envelope> read(std::chrono::milliseconds limit = 5000ms) {
-    wire::Envelope e;
-    const auto deadline = Clock::now() + limit;
-    for (;;) {
-      if (decoder.next(e) == wire::DecodeStatus::Frame) return e;
-      if (Clock::now() > deadline || eof) return std::nullopt;
-      std::error_code result = asio::error::would_block;
-      std::size_t n = 0;
-      stream.async_read_some(asio::buffer(buf), [&](std::error_code ec, std::size_t got) {
-        result = ec;
-        n = got;
-      });
-      io.restart();
-      io.run_for(deadline - Clock::now());
-      if (result == asio::error::would_block) {
-        std::error_code ignored;
-        stream.socket().cancel(ignored);
-        io.restart();
-        io.run();
-        return std::nullopt;
-      }
-      if (result) eof = true;
-      decoder.feed(buf.data(), n);
-    }
-  }
-  // Reads until the server closes the connection (or the limit); the first Error frame.
-  std::optional<wire::Error> error_then_close(std::chrono::milliseconds limit = 5000ms) {
-    std::optional<wire::Error> error;
-    const auto deadline = Clock::now() + limit;
-    while (!eof && Clock::now() < deadline) {
-      auto e = read(std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()));
-      if (e && e->has_error() && !error) error = e->error();
-    }
-    return error;
-  }
-  asio::io_context io;
-  wire::Stream stream;
-  std::error_code connect_error;
-  wire::FrameDecoder decoder;
-  std::array<char, 16384> buf{};
-  bool eof = false;
-};
+using Raw = test::RawConnection;
 
 wire::Envelope hello(const std::string& name = "raw") {
-  wire::Envelope e;
-  e.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
-  e.mutable_hello()->set_client_name(name);
-  return e;
-}
-
-// Hello, then waits for the Welcome.
-bool join(Raw& r, const std::string& name = "raw") {
-  r.send(hello(name));
-  for (;;) {
-    auto e = r.read();
-    if (!e) return false;
-    if (e->has_welcome()) return true;
-  }
+  return test::hello_frame(name);
 }
 
 wire::Envelope edit_frame(const std::string& token, std::uint64_t request_id) {
@@ -176,7 +95,7 @@ TEST(HostileService, FramesBeforeHelloAreCapped) {
   EXPECT_TRUE(r.eof);
   // After Hello the full cap applies: a client may send larger frames.
   Raw ok(server.port());
-  ASSERT_TRUE(join(ok));
+  ASSERT_TRUE(ok.join());
   wire::Envelope big;
   big.mutable_ping()->set_nonce(1);
   big.mutable_bye()->set_reason(std::string(20000, 'b'));  // the last oneof wins: a 20 KB Bye
@@ -204,7 +123,7 @@ TEST(HostileService, ConnectionsWithoutHelloAreClosed) {
   EXPECT_EQ(closed(server, CloseReason::HelloTimeout, 2), 2u);
   // A client that says Hello in time is not affected.
   Raw ok(server.port());
-  ASSERT_TRUE(join(ok));
+  ASSERT_TRUE(ok.join());
   std::this_thread::sleep_for(600ms);
   wire::Envelope ping;
   ping.mutable_ping()->set_nonce(7);
@@ -229,7 +148,7 @@ TEST(HostileService, IncompleteFramesAreBoundedTogether) {
   int refused = 0;
   for (int i = 0; i < 6; ++i) {
     clients.push_back(std::make_unique<Raw>(server.port()));
-    ASSERT_TRUE(join(*clients.back()));
+    ASSERT_TRUE(clients.back()->join());
     clients.back()->write(header + std::string(512u << 10, 'p'));
   }
   for (auto& c : clients) {
@@ -258,10 +177,10 @@ TEST(HostileService, AnEditBurstDropsNobody) {
   std::vector<std::unique_ptr<Raw>> viewers;
   for (int i = 0; i < 3; ++i) {
     viewers.push_back(std::make_unique<Raw>(server.port()));
-    ASSERT_TRUE(join(*viewers.back(), "viewer"));
+    ASSERT_TRUE(viewers.back()->join("viewer"));
   }
   Raw editor(server.port());
-  ASSERT_TRUE(join(editor, "editor"));
+  ASSERT_TRUE(editor.join("editor"));
   const int kEdits = 400;
   std::string burst;
   for (int i = 1; i <= kEdits; ++i) burst += wire::encode_frame(edit_frame(kToken, i));
@@ -304,7 +223,7 @@ TEST(HostileService, ClientTextIsEscapedAndRateLimitedInTheLog) {
   testing::internal::CaptureStderr();
   {
     Raw r(server.port());
-    ASSERT_TRUE(join(r, "evil\n2026-01-01T00:00:00.000Z ERROR server FORGED-NAME"));
+    ASSERT_TRUE(r.join("evil\n2026-01-01T00:00:00.000Z ERROR server FORGED-NAME"));
     wire::Envelope err =
         wire::make_error(wire::INTERNAL, "x\nFORGED-ERROR " + std::string(1 << 20, 'e'));
     for (int i = 0; i < 25; ++i) r.send(err);
@@ -362,7 +281,7 @@ TEST(HostileService, WrongTokensAreDelayedThenTheAddressIsRefused) {
   server.start();
   {
     Raw r(server.port());
-    ASSERT_TRUE(join(r));
+    ASSERT_TRUE(r.join());
     const auto began = Clock::now();
     std::string guesses;
     for (int i = 0; i < 50; ++i)
@@ -394,7 +313,7 @@ TEST(HostileService, WrongTokensAreDelayedThenTheAddressIsRefused) {
   std::this_thread::sleep_for(1600ms);
   {  // The ban ends; the right token works.
     Raw r(server.port());
-    ASSERT_TRUE(join(r));
+    ASSERT_TRUE(r.join());
     r.send(edit_frame(kToken, 99));
     auto ack = r.read();
     ASSERT_TRUE(ack.has_value());
@@ -412,7 +331,7 @@ TEST(HostileService, SessionsPerAddressAreLimited) {
   std::vector<std::unique_ptr<Raw>> ok;
   for (int i = 0; i < 3; ++i) {
     ok.push_back(std::make_unique<Raw>(server.port()));
-    ASSERT_TRUE(join(*ok.back()));
+    ASSERT_TRUE(ok.back()->join());
   }
   {
     Raw fourth(server.port());
@@ -426,7 +345,7 @@ TEST(HostileService, SessionsPerAddressAreLimited) {
   ok.pop_back();  // one leaves: another may come
   std::this_thread::sleep_for(200ms);
   Raw again(server.port());
-  EXPECT_TRUE(join(again));
+  EXPECT_TRUE(again.join());
   server.stop();
 }
 
@@ -517,7 +436,7 @@ TEST(HostileService, AcceptPausesWhenOutOfDescriptors) {
   // The flood is gone: a new client is served.
   std::this_thread::sleep_for(1500ms);
   Raw late(port);
-  EXPECT_TRUE(join(late)) << read_log().substr(0, 4000);
+  EXPECT_TRUE(late.join()) << read_log().substr(0, 4000);
   kill(pid, SIGTERM);
   int status = 0;
   waitpid(pid, &status, 0);
@@ -541,7 +460,7 @@ TEST(HostileService, TlsOnTheProtocolPort) {
     auto ctx = wire::make_client_tls(files.ca);
     Raw r(server.port(), ctx.get());
     ASSERT_FALSE(r.connect_error) << wire::describe_tls_error(r.connect_error);
-    EXPECT_TRUE(join(r));
+    EXPECT_TRUE(r.join());
   }
   {
     auto ctx = wire::make_client_tls(files.other_ca);

@@ -18,6 +18,7 @@
 #include "irradcast/common/log.h"
 #include "irradcast/service/net_server.h"
 #include "irradcast/common/progress.h"
+#include "service_fixture.h"
 
 using namespace irradcast;
 using namespace std::chrono_literals;
@@ -25,23 +26,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-EngineHostOptions small_host(std::uint32_t max_updates) {
-  Progress::set_enabled(false);
-  log::set_level(log::Level::Warn);
-  EngineHostOptions o;
-  o.atlas.texels_per_scene = 48.0f;
-  o.tiles.tile_size = 16;
-  o.max_updates = max_updates;
-  return o;
-}
-
-ServerOptions loopback() {
-  ServerOptions o;
-  o.bind = "127.0.0.1";
-  o.port = 0;
-  o.io_threads = 2;
-  return o;
-}
+using test::loopback;
+using test::small_host;
 
 // The server's tile versions in the clients' layout order, as irradcast-load digests them.
 std::uint64_t server_digest(const TileStore& store) {

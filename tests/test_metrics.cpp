@@ -13,16 +13,17 @@
 #include <stdexcept>
 #include <thread>
 
+#include "irradcast/client/view_client.h"
 #include "irradcast/common/builtin.h"
-#include "irradcast/service/engine_host.h"
 #include "irradcast/common/error.h"
-#include "irradcast/wire/frame.h"
 #include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/service/engine_host.h"
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/metrics_text.h"
 #include "irradcast/service/net_server.h"
-#include "irradcast/common/progress.h"
-#include "irradcast/client/view_client.h"
+#include "irradcast/wire/frame.h"
+#include "service_fixture.h"
 
 using namespace irradcast;
 using asio::ip::tcp;
@@ -236,20 +237,9 @@ std::string read_until_closed(asio::io_context& io, tcp::socket& s, std::chrono:
   const auto deadline = std::chrono::steady_clock::now() + limit;
   closed = false;
   for (;;) {
-    std::error_code result = asio::error::would_block;
-    std::size_t n = 0;
-    s.async_read_some(asio::buffer(buf), [&](std::error_code ec, std::size_t got) {
-      result = ec;
-      n = got;
-    });
-    io.restart();
-    io.run_until(deadline);
-    if (result == asio::error::would_block) {  // timed out
-      s.cancel();
-      io.restart();
-      io.run();
-      return out;
-    }
+    const auto [result, n] =
+        test::read_some_before(io, s, asio::buffer(buf), deadline, [&] { s.cancel(); });
+    if (result == asio::error::operation_aborted) return out;  // timed out
     out.append(buf.data(), n);
     if (result) {
       closed = true;
@@ -292,23 +282,14 @@ HttpResult get(std::uint16_t port, const std::string& path = "/metrics") {
 }
 
 // ---------------------------------------------------------------------------------------------
-// An in-process engine host and server (as in test_service.cpp).
+// An in-process engine host and server (service_fixture.h).
 
 EngineHostOptions small_host(float texels_per_scene = 48.0f) {
-  Progress::set_enabled(false);
-  log::set_level(log::Level::Warn);
-  EngineHostOptions o;
-  o.atlas.texels_per_scene = texels_per_scene;
-  o.tiles.tile_size = 16;
-  return o;
+  return test::host_options(texels_per_scene, 0);
 }
 
 ServerOptions loopback() {
-  ServerOptions o;
-  o.bind = "127.0.0.1";
-  o.port = 0;
-  o.idle_timeout = 10000ms;
-  return o;
+  return test::loopback(10000ms);
 }
 
 MetricsEndpointOptions local_endpoint(std::chrono::milliseconds timeout = 5000ms) {
@@ -319,23 +300,8 @@ MetricsEndpointOptions local_endpoint(std::chrono::milliseconds timeout = 5000ms
   return o;
 }
 
-ViewClientOptions client_of(const Server& server, const std::string& name) {
-  ViewClientOptions o;
-  o.port = server.port();
-  o.name = name;
-  o.connect_timeout = 5000ms;
-  return o;
-}
-
-template <class F>
-bool eventually(F condition, std::chrono::milliseconds limit = 10000ms) {
-  const auto deadline = std::chrono::steady_clock::now() + limit;
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (condition()) return true;
-    std::this_thread::sleep_for(10ms);
-  }
-  return condition();
-}
+using test::client_of;
+using test::eventually;
 
 // ---------------------------------------------------------------------------------------------
 // Many connections at once, all on one io_context in the test's thread.

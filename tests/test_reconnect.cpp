@@ -24,6 +24,7 @@
 #include "irradcast/common/progress.h"
 #include "irradcast/client/view_client.h"
 #include "process.h"
+#include "service_fixture.h"
 
 using namespace irradcast;
 using asio::ip::tcp;
@@ -48,15 +49,8 @@ std::uint16_t free_port() {
 // An in-process server for `port`: cornell, small lightmaps, final after 2 updates.
 struct LocalServer {
   explicit LocalServer(std::uint16_t port) {
-    Progress::set_enabled(false);
-    log::set_level(log::Level::Warn);
-    EngineHostOptions ho;
-    ho.atlas.texels_per_scene = 48.0f;
-    ho.tiles.tile_size = 16;
-    ho.max_updates = 2;
-    host = std::make_unique<EngineHost>(make_cornell_box(), "cornell", ho);
-    ServerOptions so;
-    so.bind = "127.0.0.1";
+    host = std::make_unique<EngineHost>(make_cornell_box(), "cornell", test::small_host(2));
+    ServerOptions so = test::loopback();
     so.port = port;
     so.io_threads = 1;
     server = std::make_unique<Server>(*host, so);

@@ -8,16 +8,17 @@
 #include <future>
 #include <thread>
 
+#include "irradcast/client/view_client.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
 #include "irradcast/common/compositor.h"
-#include "irradcast/service/engine_host.h"
-#include "irradcast/wire/frame.h"
 #include "irradcast/common/log.h"
-#include "irradcast/service/net_server.h"
 #include "irradcast/common/progress.h"
 #include "irradcast/common/ray_scene.h"
-#include "irradcast/client/view_client.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/wire/frame.h"
+#include "service_fixture.h"
 
 using namespace irradcast;
 using asio::ip::tcp;
@@ -25,30 +26,12 @@ using namespace std::chrono_literals;
 
 namespace {
 
-EngineHostOptions small_host(std::uint32_t max_updates) {
-  Progress::set_enabled(false);
-  log::set_level(log::Level::Warn);
-  EngineHostOptions o;
-  o.atlas.texels_per_scene = 48.0f;
-  o.tiles.tile_size = 16;
-  o.max_updates = max_updates;
-  return o;
-}
+using test::client_of;
+using test::small_host;
 
 ServerOptions loopback(std::chrono::milliseconds idle = 5000ms) {
-  ServerOptions o;
-  o.bind = "127.0.0.1";
-  o.port = 0;
-  o.idle_timeout = idle;
+  ServerOptions o = test::loopback(idle);
   o.scene_chunk_bytes = 512;  // many chunks, so a download can be cut in the middle
-  return o;
-}
-
-ViewClientOptions client_of(const Server& server, const std::string& name) {
-  ViewClientOptions o;
-  o.port = server.port();
-  o.name = name;
-  o.connect_timeout = 5000ms;
   return o;
 }
 
@@ -64,58 +47,19 @@ bool run_until_final(ViewClient& c, std::chrono::seconds limit = 60s) {
 }
 
 // A raw connection for the robustness tests.
-struct Raw {
-  explicit Raw(std::uint16_t port) : socket(io) {
-    socket.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
-  }
-  void write(const std::string& bytes) { asio::write(socket, asio::buffer(bytes)); }
-  void send(const wire::Envelope& e) { write(wire::encode_frame(e)); }
-  // The next frame, or nullopt at EOF / after `limit`.
-  std::optional<wire::Envelope> read(std::chrono::milliseconds limit = 5000ms) {
-    wire::Envelope e;
-    const auto deadline = std::chrono::steady_clock::now() + limit;
-    for (;;) {
-      if (decoder.next(e) == wire::DecodeStatus::Frame) return e;
-      if (std::chrono::steady_clock::now() > deadline || eof) return std::nullopt;
-      std::error_code result = asio::error::would_block;
-      std::size_t n = 0;
-      socket.async_read_some(asio::buffer(buf), [&](std::error_code ec, std::size_t got) {
-        result = ec;
-        n = got;
-      });
-      io.restart();
-      io.run_for(deadline - std::chrono::steady_clock::now());
-      if (result == asio::error::would_block) {
-        socket.cancel();
-        io.restart();
-        io.run();
-        return std::nullopt;
-      }
-      if (result) eof = true;
-      decoder.feed(buf.data(), n);
-    }
-  }
+struct Raw : test::RawConnection {
+  using RawConnection::RawConnection;
   // Reads until the server closes the connection; returns the first Error frame's code.
   std::optional<wire::ErrorCode> error_then_close(std::chrono::milliseconds limit = 5000ms) {
-    std::optional<wire::ErrorCode> code;
-    while (auto e = read(limit)) {
-      if (e->has_error() && !code) code = e->error().code();
-    }
+    const std::optional<wire::Error> error = RawConnection::error_then_close(limit);
     EXPECT_TRUE(eof) << "the server should close the connection";
-    return code;
+    if (!error) return std::nullopt;
+    return error->code();
   }
-  asio::io_context io;
-  tcp::socket socket;
-  wire::FrameDecoder decoder;
-  std::array<char, 4096> buf{};
-  bool eof = false;
 };
 
 wire::Envelope hello(std::uint32_t version = wire::kProtocolVersion) {
-  wire::Envelope e;
-  e.mutable_hello()->set_protocol_version(version);
-  e.mutable_hello()->set_client_name("raw");
-  return e;
+  return test::hello_frame("raw", version);
 }
 
 }  // namespace

@@ -11,14 +11,15 @@
 
 #include "cli.h"
 #include "irradcast/common/builtin.h"
-#include "irradcast/service/engine_host.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/service/engine_host.h"
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/metrics_text.h"
 #include "irradcast/service/net_server.h"
-#include "irradcast/common/progress.h"
 #include "irradcast/wire/transport.h"
+#include "service_fixture.h"
 #include "tls_cert.h"
 
 using namespace irradcast;
@@ -59,21 +60,13 @@ std::string https_get(std::uint16_t port, const std::string& ca, std::string& er
 }  // namespace
 
 TEST(Tls, TheWholeServiceOverTls) {
-  Progress::set_enabled(false);
-  log::set_level(log::Level::Warn);
   const fs::path dir = fs::path(testing::TempDir()) / "irradcast_tls_service";
   fs::remove_all(dir);
   fs::create_directories(dir);
   const test::TlsFiles files = test::make_tls_files(dir.string());
 
-  EngineHostOptions ho;
-  ho.atlas.texels_per_scene = 32.0f;
-  ho.tiles.tile_size = 16;
-  ho.max_updates = 4;
-  EngineHost host(make_cornell_box(), "cornell", ho);
-  ServerOptions so;
-  so.bind = "127.0.0.1";
-  so.port = 0;
+  EngineHost host(make_cornell_box(), "cornell", test::quick_host(4));
+  ServerOptions so = test::loopback();
   so.control_token = kToken;
   so.tls_cert = files.cert;
   so.tls_key = files.key;

@@ -16,6 +16,7 @@
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/wire/transport.h"
+#include "run_io.h"
 
 namespace irradcast {
 
@@ -497,16 +498,7 @@ void MetricsEndpoint::start() {
   im.max_open_applied = im.max_open;
   im.work.emplace(asio::make_work_guard(im.io));
   im.accept();
-  im.thread = std::thread([&im] {
-    for (;;) {
-      try {
-        im.io.run();
-        break;
-      } catch (const std::exception& e) {
-        log::error("metrics", std::string("handler failed: ") + e.what());
-      }
-    }
-  });
+  im.thread = std::thread([&im] { run_io(im.io, "metrics", "handler"); });
   log::info("metrics", "metrics on " + url());
 }
 

@@ -1,3 +1,4 @@
+// The Prometheus text exposition of the server's and the engine's stats (metrics_text.h).
 #include "irradcast/service/metrics_text.h"
 
 #include <charconv>
@@ -12,11 +13,15 @@ namespace {
 
 using Labels = std::vector<std::pair<std::string, std::string>>;
 
-std::string escape_help(std::string_view text) {
+// Escapes backslashes and newlines (HELP text), and double quotes too for label values.
+std::string escape(std::string_view text, bool quotes) {
   std::string out;
+  out.reserve(text.size());
   for (char c : text) {
     if (c == '\\')
       out += "\\\\";
+    else if (c == '"' && quotes)
+      out += "\\\"";
     else if (c == '\n')
       out += "\\n";
     else
@@ -33,7 +38,7 @@ class Writer {
     out_ += "# HELP ";
     out_ += name;
     out_ += ' ';
-    out_ += escape_help(help);
+    out_ += escape(help, false);
     out_ += "\n# TYPE ";
     out_ += name;
     out_ += ' ';
@@ -90,54 +95,15 @@ Labels pass_labels(const EnginePassStats& p) {
   return {{"pass", p.pass}, {"bounce", std::to_string(p.bounce)}};
 }
 
-}  // namespace
-
-std::string escape_label_value(std::string_view value) {
-  std::string out;
-  out.reserve(value.size());
-  for (char c : value) {
-    if (c == '\\')
-      out += "\\\\";
-    else if (c == '"')
-      out += "\\\"";
-    else if (c == '\n')
-      out += "\\n";
-    else
-      out += c;
-  }
-  return out;
+// One family with a sample per engine pass.
+template <class Value>
+void pass_family(Writer& w, const EngineHostStats& e, std::string_view name, std::string_view type,
+                 std::string_view help, Value value) {
+  w.family(name, type, help);
+  for (const EnginePassStats& p : e.passes) w.sample(pass_labels(p), value(p));
 }
 
-std::string format_metric_value(double value) {
-  if (std::isnan(value)) return "NaN";
-  if (std::isinf(value)) return value > 0 ? "+Inf" : "-Inf";
-  char buf[64];
-  auto [end, ec] = std::to_chars(buf, buf + sizeof buf, value);
-  if (ec != std::errc()) return "NaN";  // cannot happen: 64 characters hold any double
-  return std::string(buf, end);
-}
-
-MetricsSnapshot collect_metrics(const Server& server, const EngineHost& host,
-                                const MetricsEndpoint* endpoint) {
-  MetricsSnapshot m;
-  if (endpoint) m.endpoint = endpoint->stats();
-  m.scene = host.scene_id();
-  m.backend = host.backend_name();
-  m.server = server.stats();
-  m.engine = host.stats();
-  return m;
-}
-
-std::string format_metrics(const MetricsSnapshot& m) {
-  const ServerStats& s = m.server;
-  const EngineHostStats& e = m.engine;
-  Writer w;
-  w.family("irradcast_info", "gauge",
-           "Always 1; the labels name the scene being served and the engine's backend.");
-  w.sample({{"scene", m.scene}, {"backend", m.backend}}, std::uint64_t{1});
-  w.gauge("irradcast_uptime_seconds", "Seconds since the server started.", s.uptime_seconds);
-
-  // Clients and connections.
+void write_clients(Writer& w, const ServerStats& s) {
   w.gauge("irradcast_clients", "Connected clients (sessions).", std::uint64_t{s.clients});
   w.counter("irradcast_connections_total", "TCP connections accepted, refused ones included.",
             s.connections);
@@ -165,8 +131,10 @@ std::string format_metrics(const MetricsSnapshot& m) {
   w.family("irradcast_sessions_closed_total", "counter", "Sessions that ended, by reason.");
   for (std::size_t r = 0; r < kCloseReasons; ++r)
     w.sample({{"reason", close_reason_name(static_cast<CloseReason>(r))}}, s.sessions_closed[r]);
+}
 
-  // Traffic.
+// Traffic and tiles.
+void write_traffic(Writer& w, const ServerStats& s, const EngineHostStats& e) {
   w.counter("irradcast_bytes_sent_total", "Bytes written to clients (every frame).", s.bytes_sent);
   w.counter("irradcast_tile_bytes_sent_total", "Bytes of TileUpdate frames written to clients.",
             s.tile_bytes_sent);
@@ -191,8 +159,9 @@ std::string format_metrics(const MetricsSnapshot& m) {
   w.gauge("irradcast_bytes_per_texel",
           "Mean encoded size of the newest tile payloads (RGB9E5 + zstd), bytes per texel.",
           e.bytes_per_texel);
+}
 
-  // The engine.
+void write_engine(Writer& w, const EngineHostStats& e) {
   w.counter("irradcast_engine_updates_total", "Progressive engine updates completed.", e.updates);
   w.gauge("irradcast_engine_update_rate",
           "Engine updates per second over the last 10 seconds (falls to 0 within 10 s once the "
@@ -219,20 +188,22 @@ std::string format_metrics(const MetricsSnapshot& m) {
   w.gauge("irradcast_engine_stale_texels",
           "Texels still waiting for new direct light since the last edit (0: caught up).",
           e.stale_texels);
-  w.family("irradcast_engine_pass_seconds", "gauge",
-           "Wall time of each engine pass in the last update (bounce 0: direct).");
-  for (const EnginePassStats& p : e.passes) w.sample(pass_labels(p), p.seconds);
-  w.family("irradcast_engine_pass_rays", "gauge", "Rays of each engine pass in the last update.");
-  for (const EnginePassStats& p : e.passes) w.sample(pass_labels(p), p.rays);
-  w.family("irradcast_engine_pass_seconds_total", "counter",
-           "Wall time of each engine pass, summed over all updates.");
-  for (const EnginePassStats& p : e.passes) w.sample(pass_labels(p), p.seconds_total);
-  w.family("irradcast_engine_pass_rays_total", "counter",
-           "Rays of each engine pass, summed over all updates.");
-  for (const EnginePassStats& p : e.passes) w.sample(pass_labels(p), p.rays_total);
+  pass_family(w, e, "irradcast_engine_pass_seconds", "gauge",
+              "Wall time of each engine pass in the last update (bounce 0: direct).",
+              [](const EnginePassStats& p) { return p.seconds; });
+  pass_family(w, e, "irradcast_engine_pass_rays", "gauge",
+              "Rays of each engine pass in the last update.",
+              [](const EnginePassStats& p) { return p.rays; });
+  pass_family(w, e, "irradcast_engine_pass_seconds_total", "counter",
+              "Wall time of each engine pass, summed over all updates.",
+              [](const EnginePassStats& p) { return p.seconds_total; });
+  pass_family(w, e, "irradcast_engine_pass_rays_total", "counter",
+              "Rays of each engine pass, summed over all updates.",
+              [](const EnginePassStats& p) { return p.rays_total; });
+}
 
-  // The /metrics endpoint itself.
-  const MetricsEndpointStats& x = m.endpoint;
+// The /metrics endpoint itself.
+void write_endpoint(Writer& w, const MetricsEndpointStats& x) {
   w.counter("irradcast_metrics_connections_total", "Connections the metrics endpoint accepted.",
             x.connections);
   w.gauge("irradcast_metrics_connections_open", "Connections open at the metrics endpoint.",
@@ -249,6 +220,44 @@ std::string format_metrics(const MetricsSnapshot& m) {
   w.counter("irradcast_metrics_errors_total", "Metrics endpoint 4xx and 5xx responses.", x.bad);
   w.counter("irradcast_metrics_collections_total",
             "Times the metrics text was made (concurrent scrapes share one).", x.collections);
+}
+
+}  // namespace
+
+std::string escape_label_value(std::string_view value) {
+  return escape(value, true);
+}
+
+std::string format_metric_value(double value) {
+  if (std::isnan(value)) return "NaN";
+  if (std::isinf(value)) return value > 0 ? "+Inf" : "-Inf";
+  char buf[64];
+  auto [end, ec] = std::to_chars(buf, buf + sizeof buf, value);
+  if (ec != std::errc()) return "NaN";  // cannot happen: 64 characters hold any double
+  return std::string(buf, end);
+}
+
+MetricsSnapshot collect_metrics(const Server& server, const EngineHost& host,
+                                const MetricsEndpoint* endpoint) {
+  MetricsSnapshot m;
+  if (endpoint) m.endpoint = endpoint->stats();
+  m.scene = host.scene_id();
+  m.backend = host.backend_name();
+  m.server = server.stats();
+  m.engine = host.stats();
+  return m;
+}
+
+std::string format_metrics(const MetricsSnapshot& m) {
+  Writer w;
+  w.family("irradcast_info", "gauge",
+           "Always 1; the labels name the scene being served and the engine's backend.");
+  w.sample({{"scene", m.scene}, {"backend", m.backend}}, std::uint64_t{1});
+  w.gauge("irradcast_uptime_seconds", "Seconds since the server started.", m.server.uptime_seconds);
+  write_clients(w, m.server);
+  write_traffic(w, m.server, m.engine);
+  write_engine(w, m.engine);
+  write_endpoint(w, m.endpoint);
   return w.take();
 }
 

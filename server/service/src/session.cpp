@@ -1,0 +1,262 @@
+// One client connection: TLS handshake, reads, writes, timers and the write-stall watch around
+// the session's protocol.
+#include "session.h"
+
+#include "irradcast/common/log.h"
+
+namespace irradcast {
+
+using asio::ip::tcp;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+// "address:port" of the peer, for log lines.
+std::string peer_name(tcp::socket& socket) {
+  std::error_code ec;
+  auto ep = socket.remote_endpoint(ec);
+  return ec ? std::string("?") : ep.address().to_string() + ":" + std::to_string(ep.port());
+}
+
+}  // namespace
+
+Session::Session(SessionServer& server, tcp::socket socket, std::string peer_key, std::uint64_t id)
+    : server_(server),
+      strand_(socket.get_executor()),
+      stream_(std::move(socket), server_.tls),
+      idle_timer_(strand_),
+      rate_timer_(strand_),
+      close_timer_(strand_),
+      hello_timer_(strand_),
+      penalty_timer_(strand_),
+      stall_timer_(strand_),
+      protocol_(server_.context, id, std::move(peer_key), peer_name(stream_.socket())) {}
+
+void Session::start() {
+  asio::post(strand_, [self = shared_from_this()] {
+    self->arm_idle_timer();
+    self->arm_hello_timer();
+    self->stream_.async_handshake(asio::ssl::stream_base::server,
+                                  asio::bind_executor(self->strand_, [self](std::error_code ec) {
+                                    if (self->protocol_.closed()) return;
+                                    if (ec) {
+                                      self->protocol_.note(
+                                          log::Level::Info,
+                                          "TLS handshake failed: " + wire::describe_tls_error(ec));
+                                      self->close(CloseReason::Tls);
+                                      return;
+                                    }
+                                    self->read();
+                                  }));
+  });
+}
+
+void Session::tiles_changed(std::shared_ptr<const std::vector<std::uint32_t>> tiles) {
+  asio::post(strand_, [self = shared_from_this(), tiles] {
+    if (self->protocol_.closed()) return;
+    self->protocol_.tiles_changed(*tiles);
+    self->pump();
+  });
+}
+
+void Session::edit_applied(std::shared_ptr<const std::string> frame) {
+  asio::post(strand_, [self = shared_from_this(), frame = std::move(frame)]() mutable {
+    if (self->protocol_.closed()) return;
+    self->protocol_.edit_applied(std::move(frame));
+    self->pump();
+  });
+}
+
+void Session::shutdown() {
+  asio::post(strand_, [self = shared_from_this()] {
+    self->protocol_.shutdown();
+    self->act();
+  });
+}
+
+// No Hello (after the TLS handshake) within the hello timeout: close.
+void Session::arm_hello_timer() {
+  hello_timer_.expires_after(server_.context.options.hello_timeout);
+  hello_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
+    if (ec) return;
+    self->protocol_.hello_timed_out(self->handshaking());
+    self->act();
+  });
+}
+
+// Watches a write in flight: one that made no progress for the write stall timeout means a
+// client that does not read, and it is closed as slow. Armed while writes are in flight.
+void Session::arm_stall_timer() {
+  const auto timeout = server_.context.options.write_stall_timeout;
+  if (stall_armed_ || timeout.count() <= 0) return;
+  stall_armed_ = true;
+  stall_timer_.expires_after(timeout / 4);
+  stall_timer_.async_wait([self = shared_from_this(), timeout](std::error_code ec) {
+    self->stall_armed_ = false;
+    if (ec || self->protocol_.closed() || !self->writing_) return;
+    if (Clock::now() - self->write_progress_at_ >= timeout) {
+      self->protocol_.note(log::Level::Info, "closed: slow client (no write progress for " +
+                                                 std::to_string(timeout.count()) + " ms)");
+      self->close(CloseReason::SlowClient);
+      return;
+    }
+    self->arm_stall_timer();
+  });
+}
+
+void Session::arm_idle_timer() {
+  idle_timer_.expires_after(server_.context.options.idle_timeout);
+  idle_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
+    if (ec) return;
+    self->protocol_.idle_timed_out();
+    self->act();
+  });
+}
+
+void Session::read() {
+  reading_started_ = true;
+  if (protocol_.closed() || protocol_.closing() || read_pending_) return;
+  read_pending_ = true;
+  stream_.async_read_some(
+      asio::buffer(buffer_),
+      asio::bind_executor(strand_, [self = shared_from_this()](std::error_code ec, std::size_t n) {
+        self->read_pending_ = false;
+        self->on_read(ec, n);
+      }));
+}
+
+void Session::on_read(std::error_code ec, std::size_t n) {
+  if (protocol_.closed()) return;
+  if (ec) {
+    if (ec != asio::error::eof && ec != asio::error::operation_aborted)
+      log::debug("server", "session " + std::to_string(protocol_.id()) + ": read: " + ec.message());
+    close(CloseReason::Disconnect);
+    return;
+  }
+  server_.context.counters.bytes_received += n;
+  protocol_.receive(buffer_.data(), n);
+  drain();
+}
+
+// Handles the frames received, then reads on; stops while a wrong token's answer is delayed or
+// while the client's replies pile up (it reads on once they are written).
+void Session::drain() {
+  wire::Envelope env;
+  while (protocol_.next_frame(env)) {
+    arm_idle_timer();
+    protocol_.handle(env);
+    act();
+  }
+  act();
+  if (protocol_.closed() || protocol_.closing()) return;
+  if (!protocol_.account_partial()) {
+    act();
+    return;
+  }
+  if (!protocol_.paused()) read();
+}
+
+void Session::act() {
+  const SessionEvents ev = protocol_.take_events();
+  if (ev.welcomed) hello_timer_.cancel();
+  if (ev.closing) {
+    // The Error frame is written first; a client that does not read gets a grace period.
+    close_timer_.expires_after(std::chrono::seconds(2));
+    close_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
+      if (!ec) self->close(CloseReason::Disconnect);
+    });
+  }
+  if (ev.penalty) {
+    penalty_timer_.expires_after(*ev.penalty);
+    penalty_timer_.async_wait([self = shared_from_this(), banned = ev.banned](std::error_code ec) {
+      self->protocol_.penalty_ended();
+      if (ec || self->protocol_.closed()) return;
+      self->on_penalty_over(banned);
+    });
+  }
+  if (ev.close) close(*ev.close);
+  pump();
+}
+
+void Session::on_penalty_over(bool banned) {
+  protocol_.answer_token_failure(banned);
+  act();
+  if (!banned) drain();
+}
+
+// Starts the next write if none is in flight.
+void Session::pump() {
+  if (protocol_.closed() || writing_) return;
+  SessionWrite w = protocol_.next_write(Clock::now());
+  switch (w.kind) {
+    case SessionWrite::Kind::None:
+      return;
+    case SessionWrite::Kind::Close:
+      close(CloseReason::Disconnect);
+      return;
+    case SessionWrite::Kind::Wait:
+      if (rate_waiting_) return;
+      rate_waiting_ = true;
+      rate_timer_.expires_after(w.wait);
+      rate_timer_.async_wait([self = shared_from_this()](std::error_code ec) {
+        self->rate_waiting_ = false;
+        if (!ec) self->pump();
+      });
+      return;
+    default:
+      write(std::move(w));
+  }
+}
+
+void Session::write(SessionWrite w) {
+  writing_ = true;
+  write_progress_at_ = Clock::now();
+  write_progress_ = 0;
+  arm_stall_timer();
+  // The completion condition runs before each partial write: it notes progress for the stall
+  // timer.
+  auto progress = [self = this](const std::error_code& ec, std::size_t n) -> std::size_t {
+    if (n > self->write_progress_) {
+      self->write_progress_ = n;
+      self->write_progress_at_ = Clock::now();
+    }
+    return asio::transfer_all()(ec, n);
+  };
+  const std::string& data = *w.frame;
+  asio::async_write(
+      stream_, asio::buffer(data), progress,
+      asio::bind_executor(strand_, [self = shared_from_this(), frame = std::move(w.frame),
+                                    kind = w.kind](std::error_code ec, std::size_t n) {
+        self->writing_ = false;
+        if (ec) {
+          self->close(CloseReason::Disconnect);
+          return;
+        }
+        ServerCounters& counters = self->server_.context.counters;
+        counters.bytes_sent += n;
+        if (kind == SessionWrite::Kind::Tile) {
+          ++counters.tiles_sent;
+          counters.tile_bytes_sent += n;
+        }
+        if (kind == SessionWrite::Kind::Scene) counters.scene_bytes_sent += n;
+        const bool was_paused = self->protocol_.paused();
+        self->pump();
+        if (was_paused && !self->protocol_.paused()) self->drain();  // replies written: read on
+      }));
+}
+
+// Closes the connection. `reason` counts unless the protocol gave one before.
+void Session::close(CloseReason reason) {
+  if (protocol_.closed()) return;
+  idle_timer_.cancel();
+  rate_timer_.cancel();
+  close_timer_.cancel();
+  hello_timer_.cancel();
+  penalty_timer_.cancel();
+  stall_timer_.cancel();
+  stream_.close();
+  protocol_.close(reason);
+  server_.remove(shared_from_this());
+}
+
+}  // namespace irradcast

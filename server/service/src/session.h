@@ -1,0 +1,80 @@
+// One client connection: the Asio side of a session. It runs the TLS handshake, reads bytes into
+// the session's protocol (session_protocol.h), writes the frames the protocol hands out one at a
+// time, and runs the timers it asks for (hello, idle, the tile rate cap, a wrong token's delay,
+// the grace period before closing) and the write-stall watch. Every handler runs on the
+// session's strand, so the session needs no locks; the engine thread reaches it only through
+// asio::post.
+#pragma once
+
+#include <asio.hpp>
+
+#include <array>
+#include <cstddef>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "irradcast/wire/transport.h"
+#include "session_protocol.h"
+
+namespace irradcast {
+
+class Session;
+
+// What the server lends its sessions; outlives them.
+struct SessionServer {
+  SessionContext context;
+  asio::ssl::context* tls = nullptr;  // null: plain TCP
+  // A closed session leaves the server's set.
+  std::function<void(const std::shared_ptr<Session>&)> remove;
+};
+
+class Session : public std::enable_shared_from_this<Session> {
+ public:
+  // The socket was accepted on a strand of the server's io_context, which becomes the session's
+  // strand. peer_key: the address the server counts this session under (PeerTable::admit).
+  Session(SessionServer& server, asio::ip::tcp::socket socket, std::string peer_key,
+          std::uint64_t id);
+
+  void start();
+  // Engine thread: tiles that got new versions.
+  void tiles_changed(std::shared_ptr<const std::vector<std::uint32_t>> tiles);
+  // Engine thread: an edit the engine applied, as an encoded SceneEdit frame. Posted like the
+  // tile notifications, so it reaches the client before the tiles that show it (control frames
+  // go first).
+  void edit_applied(std::shared_ptr<const std::string> frame);
+  // Server shutdown: an Error SERVER_SHUTDOWN, then close.
+  void shutdown();
+  std::size_t queue_depth() const { return protocol_.queue_depth(); }
+
+ private:
+  void arm_hello_timer();
+  void arm_idle_timer();
+  void arm_stall_timer();
+  bool handshaking() const { return !reading_started_; }
+  void read();
+  void on_read(std::error_code ec, std::size_t n);
+  void drain();
+  // Runs what the protocol asked for, then writes on.
+  void act();
+  void on_penalty_over(bool banned);
+  void pump();
+  void write(SessionWrite w);
+  void close(CloseReason reason);
+
+  SessionServer& server_;
+  asio::any_io_executor strand_;  // the strand the socket was accepted on
+  wire::Stream stream_;
+  asio::steady_timer idle_timer_, rate_timer_, close_timer_, hello_timer_, penalty_timer_,
+      stall_timer_;
+  std::array<char, 64 * 1024> buffer_{};
+  SessionProtocol protocol_;
+  bool writing_ = false;
+  bool reading_started_ = false, read_pending_ = false;
+  bool stall_armed_ = false, rate_waiting_ = false;
+  std::size_t write_progress_ = 0;  // bytes of the write in flight written so far
+  std::chrono::steady_clock::time_point write_progress_at_{};
+};
+
+}  // namespace irradcast

@@ -1,0 +1,115 @@
+// The messages a session builds from the server's state.
+#include "session_messages.h"
+
+#include <utility>
+
+namespace irradcast {
+
+CloseReason reason_of(wire::ErrorCode code) {
+  static constexpr std::pair<wire::ErrorCode, CloseReason> kReasons[] = {
+      {wire::BAD_FRAME, CloseReason::BadFrame},
+      {wire::FRAME_TOO_LARGE, CloseReason::FrameTooLarge},
+      {wire::UNSUPPORTED_VERSION, CloseReason::UnsupportedVersion},
+      {wire::UNEXPECTED_MESSAGE, CloseReason::UnexpectedMessage},
+      {wire::IDLE_TIMEOUT, CloseReason::IdleTimeout},
+      {wire::SERVER_SHUTDOWN, CloseReason::Shutdown}};
+  for (const auto& [c, reason] : kReasons)
+    if (c == code) return reason;
+  return CloseReason::Internal;
+}
+
+// The Welcome that answers a Hello: the session, the scene package, the lightmaps and tiles,
+// the server's limits.
+wire::Envelope welcome_message(const EngineHost& host, const ServerOptions& options,
+                               std::uint64_t session, const wire::ScenePackage& package) {
+  const TileStore& tiles = host.tiles();
+  wire::Envelope w;
+  wire::Welcome* wm = w.mutable_welcome();
+  wm->set_protocol_version(wire::kProtocolVersion);
+  wm->set_session(session);
+  wm->set_scene_id(host.scene_id());
+  wm->set_scene_hash(package.hash);
+  wm->set_scene_bytes(package.bytes.size());
+  wm->set_tile_size(static_cast<std::uint32_t>(tiles.options().tile_size));
+  wm->add_capabilities("tiles.rgb9e5");
+  wm->add_capabilities("tiles.half");
+  for (std::uint32_t m = 0; m < tiles.lightmap_count(); ++m) {
+    wire::LightmapInfo* li = wm->add_lightmaps();
+    li->set_width(static_cast<std::uint32_t>(tiles.lightmap_size(m).first));
+    li->set_height(static_cast<std::uint32_t>(tiles.lightmap_size(m).second));
+    li->set_tiles_x(static_cast<std::uint32_t>(tiles.tiles_x(m)));
+    li->set_tiles_y(static_cast<std::uint32_t>(tiles.tiles_y(m)));
+  }
+  wm->set_max_frame_bytes(static_cast<std::uint32_t>(options.max_frame));
+  wm->set_idle_timeout_ms(static_cast<std::uint32_t>(options.idle_timeout.count()));
+  wm->set_tile_epoch(host.tile_epoch());
+  return w;
+}
+
+// The engine's part of a Stats reply.
+void add_engine_stats(const EngineHostStats& es, wire::Stats* s) {
+  s->set_updates(es.updates);
+  s->set_rays_per_s(es.rays_per_s);
+  s->set_convergence(es.convergence);
+  s->set_engine_update_ms(es.last_update_ms);
+  s->set_engine_idle(es.idle);
+  for (const EnginePassStats& p : es.passes) {
+    wire::PassTime* pt = s->add_pass_times();
+    pt->set_pass(p.pass);
+    pt->set_bounce(p.bounce);
+    pt->set_ms(1e3 * p.seconds);
+    pt->set_rays(p.rays);
+    pt->set_seconds_total(p.seconds_total);
+    pt->set_rays_total(p.rays_total);
+  }
+  s->set_update_rate(es.update_rate);
+  s->set_tiles_published(es.tiles_published);
+  s->set_engine_seconds_total(es.seconds_total);
+  s->set_rays_total(es.rays_total);
+  s->set_tiles(es.tiles);
+  s->set_texels(es.texels);
+  s->set_scene_revision(es.revision);
+  s->set_last_edit_ms(es.last_edit_ms);
+  s->set_stale_texels(es.stale_texels);
+}
+
+// The server's part of a Stats reply.
+void add_server_stats(const ServerStats& ss, wire::Stats* s) {
+  s->set_clients(ss.clients);
+  s->set_bytes_sent(ss.bytes_sent);
+  s->set_tiles_sent(ss.tiles_sent);
+  s->set_tiles_coalesced(ss.tiles_coalesced);
+  s->set_bytes_received(ss.bytes_received);
+  s->set_frames_received(ss.frames_received);
+  s->set_errors_sent(ss.errors_sent);
+  s->set_queue_depth_total(ss.queue_depth);
+  s->set_queue_depth_max(ss.queue_depth_max);
+  s->set_connections(ss.connections);
+  s->set_clients_refused(ss.clients_refused);
+  s->set_scene_bytes_sent(ss.scene_bytes_sent);
+  s->set_tile_bytes_sent(ss.tile_bytes_sent);
+  for (std::size_t r = 0; r < kCloseReasons; ++r) {
+    wire::SessionsClosed* c = s->add_sessions_closed();
+    c->set_reason(close_reason_name(static_cast<CloseReason>(r)));
+    c->set_sessions(ss.sessions_closed[r]);
+  }
+}
+
+// The TileUpdate that carries a snapshot of `tile`.
+wire::Envelope tile_update_message(const TileStore::Tile& tile, const TileStore::Snapshot& snap,
+                                   wire::TileEncoding encoding) {
+  wire::Envelope e;
+  wire::TileUpdate* u = e.mutable_tile_update();
+  u->set_lightmap(tile.lightmap);
+  u->set_tile_x(tile.tx);
+  u->set_tile_y(tile.ty);
+  u->set_version(snap.version);
+  u->set_encoding(encoding);
+  u->set_width(static_cast<std::uint32_t>(tile.rect.w));
+  u->set_height(static_cast<std::uint32_t>(tile.rect.h));
+  u->set_payload(*snap.payload);
+  u->set_server_time_us(snap.time_us);
+  return e;
+}
+
+}  // namespace irradcast

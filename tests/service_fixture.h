@@ -1,0 +1,174 @@
+// What the service tests share: an in-process engine host and server on loopback (their
+// options), a viewer's options for that server, and a raw protocol connection (plain or TLS)
+// that sends frames and reads them with a deadline, for tests that misbehave on purpose.
+#pragma once
+
+#include <asio.hpp>
+
+#include <array>
+#include <chrono>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <thread>
+#include <utility>
+
+#include "irradcast/client/view_client.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/wire/transport.h"
+
+namespace irradcast::test {
+
+// A small engine host for the cornell box: 16-texel tiles, final after `max_updates` (0: never
+// final). Quiets progress bars and logs below warnings.
+inline EngineHostOptions host_options(float texels_per_scene, std::uint32_t max_updates) {
+  Progress::set_enabled(false);
+  log::set_level(log::Level::Warn);
+  EngineHostOptions o;
+  o.atlas.texels_per_scene = texels_per_scene;
+  o.tiles.tile_size = 16;
+  o.max_updates = max_updates;
+  return o;
+}
+// 48 texels per scene: enough for images to compare.
+inline EngineHostOptions small_host(std::uint32_t max_updates = 0) {
+  return host_options(48.0f, max_updates);
+}
+// 32 texels per scene: the quickest host.
+inline EngineHostOptions quick_host(std::uint32_t max_updates = 1) {
+  return host_options(32.0f, max_updates);
+}
+
+// A server on 127.0.0.1, on any free port (Server::port()).
+inline ServerOptions loopback(std::chrono::milliseconds idle = ServerOptions{}.idle_timeout) {
+  ServerOptions o;
+  o.bind = "127.0.0.1";
+  o.port = 0;
+  o.idle_timeout = idle;
+  return o;
+}
+
+inline ViewClientOptions client_of(const Server& server, const std::string& name) {
+  ViewClientOptions o;
+  o.port = server.port();
+  o.name = name;
+  o.connect_timeout = std::chrono::milliseconds(5000);
+  return o;
+}
+
+// Polls `condition` every 10 ms until it holds or `limit` passed; its last value.
+template <class F>
+bool eventually(F condition, std::chrono::milliseconds limit = std::chrono::milliseconds(10000)) {
+  const auto deadline = std::chrono::steady_clock::now() + limit;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (condition()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return condition();
+}
+
+inline wire::Envelope hello_frame(const std::string& name = "raw",
+                                  std::uint32_t version = wire::kProtocolVersion) {
+  wire::Envelope e;
+  e.mutable_hello()->set_protocol_version(version);
+  e.mutable_hello()->set_client_name(name);
+  return e;
+}
+
+// One read into `buf` that gives up at `deadline` (then `cancel` cancels it): the read's error
+// and size; operation_aborted when it timed out.
+template <class AsyncReadStream, class Cancel>
+std::pair<std::error_code, std::size_t> read_some_before(
+    asio::io_context& io, AsyncReadStream& s, asio::mutable_buffer buf,
+    std::chrono::steady_clock::time_point deadline, Cancel cancel) {
+  std::error_code result = asio::error::would_block;
+  std::size_t n = 0;
+  s.async_read_some(buf, [&](std::error_code ec, std::size_t got) {
+    result = ec;
+    n = got;
+  });
+  io.restart();
+  io.run_until(deadline);
+  if (result == asio::error::would_block) {
+    cancel();
+    io.restart();
+    io.run();
+  }
+  return {result, n};
+}
+
+// A raw protocol connection to 127.0.0.1:port, plain or TLS (the server's name is 127.0.0.1).
+// Writes ignore errors (a test may write to a server that closed); reads wait at most a limit.
+struct RawConnection {
+  using Clock = std::chrono::steady_clock;
+
+  explicit RawConnection(std::uint16_t port, asio::ssl::context* tls = nullptr)
+      : stream(io.get_executor(), tls) {
+    stream.socket().connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port),
+                            connect_error);
+    if (!connect_error && tls) {
+      stream.expect_server_name("127.0.0.1");
+      stream.handshake(asio::ssl::stream_base::client, connect_error);
+    }
+  }
+  void write(const std::string& bytes) {
+    std::error_code ec;
+    asio::write(stream, asio::buffer(bytes), ec);
+  }
+  void send(const wire::Envelope& e) { write(wire::encode_frame(e)); }
+
+  // The next frame, or nullopt at EOF or after `limit`.
+  std::optional<wire::Envelope> read(
+      std::chrono::milliseconds limit = std::chrono::milliseconds(5000)) {
+    wire::Envelope e;
+    const auto deadline = Clock::now() + limit;
+    for (;;) {
+      if (decoder.next(e) == wire::DecodeStatus::Frame) return e;
+      if (Clock::now() > deadline || eof) return std::nullopt;
+      const auto [result, n] = read_some_before(io, stream, asio::buffer(buf), deadline, [&] {
+        std::error_code ignored;
+        stream.socket().cancel(ignored);
+      });
+      if (result && result != asio::error::operation_aborted) eof = true;
+      decoder.feed(buf.data(), n);
+    }
+  }
+
+  // Reads until the server closes the connection (or the limit); the first Error frame.
+  std::optional<wire::Error> error_then_close(
+      std::chrono::milliseconds limit = std::chrono::milliseconds(5000)) {
+    std::optional<wire::Error> error;
+    const auto deadline = Clock::now() + limit;
+    while (!eof && Clock::now() < deadline) {
+      auto e = read(std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()));
+      if (e && e->has_error() && !error) error = e->error();
+    }
+    return error;
+  }
+
+  // Hello, then waits for the Welcome (skipping other frames); false without one.
+  bool join(const std::string& name = "raw") {
+    send(hello_frame(name));
+    while (auto e = read()) {
+      if (e->has_welcome()) {
+        welcome = e->welcome();
+        return true;
+      }
+    }
+    return false;
+  }
+
+  asio::io_context io;
+  wire::Stream stream;
+  std::error_code connect_error;
+  wire::FrameDecoder decoder;
+  std::array<char, 16384> buf{};
+  bool eof = false;
+  wire::Welcome welcome;  // set by join()
+};
+
+}  // namespace irradcast::test
