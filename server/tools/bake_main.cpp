@@ -31,7 +31,6 @@
 #include "irradcast/engine/reference_lightmaps.h"
 #include "irradcast/engine/texel_validity.h"
 #include "irradcast/common/tonemap.h"
-#include "irradcast/engine/vulkan_backend.h"
 #include "irradcast/common/world.h"
 
 namespace fs = std::filesystem;
@@ -166,20 +165,15 @@ int run(const Options& o) {
   PathTracerOptions pto;
   pto.indirect_bounces = o.engine.bounces;
   pto.seed = o.engine.seed;
-  PathTracer tracer(world, rays, lights, pto);
   std::vector<Lightmap> maps;
   std::uint64_t lightmap_rays = 0;
   double lightmap_seconds = 0.0;
   if (o.method == "reference") {
     ReferenceLightmapStats lm_stats;
     // The per-texel path tracer on the chosen backend: the device's reference.comp, or Embree.
-    BackendChoice choice = make_backend(bo, world, rays, lights);
-    report["reference_backend"] = choice.backend->describe();
-    if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get()))
-      maps = vulkan->reference_lightmaps(gbuffers, o.lightmap_spp, o.engine.bounces, o.engine.seed,
-                                         &lm_stats);
-    else
-      maps = reference_lightmaps(world, tracer, gbuffers, o.lightmap_spp, &lm_stats);
+    const auto reference = make_reference(bo, world, rays, lights, pto);
+    report["reference_backend"] = reference->describe();
+    maps = reference->lightmaps(gbuffers, o.lightmap_spp, &lm_stats);
     lightmap_rays = lm_stats.rays;
     lightmap_seconds = lm_stats.seconds;
     timings["lightmaps"] = sw.lap();
@@ -272,22 +266,10 @@ int run(const Options& o) {
   json rate = {{"lightmaps", lightmap_rays / std::max(1e-9, lightmap_seconds)},
                {"compose", cs.rays / std::max(1e-9, cs.seconds)}};
   if (o.reference_spp > 0) {
-    PathTracer::RenderStats rs;
-    ImageRGB ref;
-    BackendChoice choice = make_backend(bo, world, rays, lights);
-    report["reference_view_backend"] = choice.backend->describe();
-    if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get())) {
-      ReferenceLightmapStats vs;
-      ref = vulkan->render_reference(camera, o.width, o.height, o.reference_spp, o.engine.bounces,
-                                     o.engine.seed, &vs);
-      rs.rays = vs.rays;
-      rs.seconds = vs.seconds;
-    } else {
-      Progress progress("reference", static_cast<std::uint64_t>(o.reference_spp), "spp");
-      ref = tracer.render(
-          camera, o.width, o.height, o.reference_spp, [&](int, int) { progress.advance(1); }, &rs);
-      progress.finish();
-    }
+    ReferenceLightmapStats rs;
+    const auto reference = make_reference(bo, world, rays, lights, pto);
+    report["reference_view_backend"] = reference->describe();
+    const ImageRGB ref = reference->render(camera, o.width, o.height, o.reference_spp, &rs);
     timings["reference"] = sw.lap();
     write_exr((fs::path(o.out) / "reference.exr").string(), ref);
     // The reference uses the view's exposure so the two PNGs compare by eye.
