@@ -297,12 +297,11 @@ BounceResult IrradianceCache::bounce(const PassInput& in, const RadianceField& p
 }
 
 void IrradianceCache::scene_changed(const SceneChange& change, const Lap& lap) {
-  move_records(change);
+  if (change.geometry) drop_records(change);  // lights and albedo: the records stay put
   lap(name());
 }
 
-void IrradianceCache::move_records(const SceneChange& change) {
-  if (!change.geometry) return;  // lights and albedo: the records stay where they are
+void IrradianceCache::drop_records(const SceneChange& change) {
   // Records within their radius of a changed region: their surroundings (and so R) changed, or
   // they sit on a moved object. The rest keep their place; the next prepare() covers the gaps.
   std::vector<IrradianceRecord> kept;

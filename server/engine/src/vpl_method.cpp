@@ -331,11 +331,6 @@ BounceResult VplMethod::bounce(const PassInput& in, const RadianceField& /*prev*
 }
 
 void VplMethod::scene_changed(const SceneChange& change, const Lap& lap) {
-  invalidate(change);
-  lap(name());
-}
-
-void VplMethod::invalidate(const SceneChange& change) {
   replaced_ = 0;
   build_emitters();
   const std::size_t paths = starts_.size();
@@ -384,6 +379,7 @@ void VplMethod::invalidate(const SceneChange& change) {
       parent = v.position + rays_->epsilon() * v.normal;
     }
   });
+  lap(name());
 }
 
 std::size_t VplMethod::invalid() const {

@@ -62,7 +62,8 @@ class IrradianceCache final : public IndirectMethod {
   const std::vector<IrradianceRecord>& records() const { return records_; }
 
  private:
-  void move_records(const SceneChange& change);
+  // Drops the records near a changed region (placed again by the next prepare()).
+  void drop_records(const SceneChange& change);
   // Ward weight of record k at (p, n), 0 if it may not contribute (below 1/a or in front).
   float weight(const IrradianceRecord& r, glm::vec3 p, glm::vec3 n) const;
   bool visible(const IrradianceRecord& r, glm::vec3 p, glm::vec3 ng) const;

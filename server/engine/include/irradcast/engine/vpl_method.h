@@ -49,7 +49,6 @@ class VplMethod final : public IndirectMethod {
   std::size_t invalid() const;
 
  private:
-  void invalidate(const SceneChange& change);
   struct PathStart {
     glm::vec3 origin{0.0f};  // the point on the light (the first VPL's parent)
     bool live = false;
