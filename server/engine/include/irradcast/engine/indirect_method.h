@@ -46,7 +46,8 @@ class IndirectMethod {
   virtual BounceResult bounce(const PassInput& in, const RadianceField& prev,
                               std::vector<glm::vec3>& out) = 0;
   // The host changed the scene (the world, rays and lights the method was built with), after
-  // the engine and its backend took the change.
+  // the engine and its backend took the change; `lap` times the method's work (a step under
+  // its name where it has any).
   virtual void scene_changed(const SceneChange& change, const Lap& lap) = 0;
   // One line for logs: "412 records", "2048 VPLs (37 replaced)"; "" when there is nothing to say.
   virtual std::string summary() const = 0;
