@@ -384,6 +384,39 @@ TEST(BackendChoice, AutoPrefersEmbreeToACpuVulkanDeviceAndVulkanCanBeAskedFor) {
   }
 }
 
+// The reference path tracer runs where the engine's backend would: on Embree, PathTracer with
+// the given bounces and seed (the same bits as calling it directly); on Vulkan, reference.comp
+// (the same bits as the backend's own reference passes).
+TEST(BackendChoice, ReferenceRunsWhereTheBackendWould) {
+  EngineSetup s(make_cornell_box(), 12.0f);
+  const CameraPose cam = default_camera(s.scene, s.world);
+  const PathTracerOptions pto{1, true, 9};
+  BackendOptions o;
+  o.kind = BackendKind::Embree;
+  auto cpu = make_reference(o, s.world, s.rays, s.lights, pto);
+  EXPECT_EQ(cpu->describe(), "embree");
+  ReferenceLightmapStats st;
+  const auto maps = cpu->lightmaps(s.gbuffers, 2, &st);
+  const PathTracer tracer(s.world, s.rays, s.lights, pto);
+  const auto direct = reference_lightmaps(s.world, tracer, s.gbuffers, 2);
+  ASSERT_EQ(maps.size(), direct.size());
+  for (std::size_t m = 0; m < maps.size(); ++m) EXPECT_EQ(maps[m].texels, direct[m].texels);
+  EXPECT_GT(st.rays, 0u);
+  EXPECT_EQ(cpu->render(cam, 16, 16, 2).pixels, tracer.render(cam, 16, 16, 2).pixels);
+
+  o.kind = BackendKind::Vulkan;
+  auto gpu = make_reference(o, s.world, s.rays, s.lights, pto);
+  EXPECT_EQ(gpu->describe().rfind("vulkan on ", 0), 0u) << gpu->describe();
+  auto v = vulkan(s);
+  const auto gpu_maps = gpu->lightmaps(s.gbuffers, 2);
+  const auto v_maps = v->reference_lightmaps(s.gbuffers, 2, pto.indirect_bounces, pto.seed);
+  ASSERT_EQ(gpu_maps.size(), v_maps.size());
+  for (std::size_t m = 0; m < gpu_maps.size(); ++m)
+    EXPECT_EQ(gpu_maps[m].texels, v_maps[m].texels);
+  EXPECT_EQ(gpu->render(cam, 16, 16, 2).pixels,
+            v->render_reference(cam, 16, 16, 2, pto.indirect_bounces, pto.seed).pixels);
+}
+
 // The command-line path, as a user runs it: without a Vulkan driver, auto runs on Embree and
 // says why; vulkan fails with the reason; with lavapipe, vulkan runs.
 TEST(BackendChoice, BakeFallsBackWithoutADriverAndVulkanFailsClearly) {

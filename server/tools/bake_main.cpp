@@ -27,11 +27,11 @@
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/tonemap.h"
 #include "irradcast/common/world.h"
+#include "irradcast/engine/backend_select.h"
 #include "irradcast/engine/engine.h"
 #include "irradcast/engine/path_tracer.h"
 #include "irradcast/engine/prepared_scene.h"
 #include "irradcast/engine/reference_lightmaps.h"
-#include "irradcast/engine/vulkan_backend.h"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
@@ -180,28 +180,16 @@ struct Lightmaps {
   double seconds = 0.0;
 };
 
-// --method reference: the per-texel path tracer.
-Lightmaps reference_method(Bake& b, const PreparedScene& p, const PathTracer& tracer) {
-  const Options& o = b.o;
-  const BackendOptions& bo = b.bo;
-  const World& world = p.world();
-  const RayScene& rays = p.rays();
-  const LightSampler& lights = p.lights();
-  const std::vector<TexelGBuffer>& gbuffers = p.gbuffers();
+// --method reference: the per-texel path tracer on the chosen backend (the device's
+// reference.comp, or Embree).
+Lightmaps reference_method(Bake& b, const PreparedScene& p, const PathTracerOptions& pto) {
+  const auto reference = make_reference(b.bo, p.world(), p.rays(), p.lights(), pto);
+  b.report["reference_backend"] = reference->describe();
   Lightmaps out;
-  std::vector<Lightmap>& maps = out.maps;
-  json& report = b.report;
-  ReferenceLightmapStats lm_stats;
-  // The per-texel path tracer on the chosen backend: the device's reference.comp, or Embree.
-  BackendChoice choice = make_backend(bo, world, rays, lights);
-  report["reference_backend"] = choice.backend->describe();
-  if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get()))
-    maps = vulkan->reference_lightmaps(gbuffers, o.lightmap_spp, o.engine.bounces, o.engine.seed,
-                                       &lm_stats);
-  else
-    maps = reference_lightmaps(world, tracer, gbuffers, o.lightmap_spp, &lm_stats);
-  out.rays = lm_stats.rays;
-  out.seconds = lm_stats.seconds;
+  ReferenceLightmapStats stats;
+  out.maps = reference->lightmaps(p.gbuffers(), b.o.lightmap_spp, &stats);
+  out.rays = stats.rays;
+  out.seconds = stats.seconds;
   b.timings["lightmaps"] = b.sw.lap();
   return out;
 }
@@ -327,30 +315,13 @@ ImageRGB compose_view(Bake& b, const PreparedScene& p, const std::vector<Lightma
 }
 
 // --reference: the same view with the reference path tracer.
-ImageRGB render_reference(Bake& b, const PreparedScene& p, const PathTracer& tracer,
+ImageRGB render_reference(Bake& b, const PreparedScene& p, const PathTracerOptions& pto,
                           const CameraPose& camera) {
   const Options& o = b.o;
-  const BackendOptions& bo = b.bo;
-  const World& world = p.world();
-  const RayScene& rays = p.rays();
-  const LightSampler& lights = p.lights();
-  json& report = b.report;
-  PathTracer::RenderStats rs;
-  ImageRGB ref;
-  BackendChoice choice = make_backend(bo, world, rays, lights);
-  report["reference_view_backend"] = choice.backend->describe();
-  if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get())) {
-    ReferenceLightmapStats vs;
-    ref = vulkan->render_reference(camera, o.width, o.height, o.reference_spp, o.engine.bounces,
-                                   o.engine.seed, &vs);
-    rs.rays = vs.rays;
-    rs.seconds = vs.seconds;
-  } else {
-    Progress progress("reference", static_cast<std::uint64_t>(o.reference_spp), "spp");
-    ref = tracer.render(
-        camera, o.width, o.height, o.reference_spp, [&](int, int) { progress.advance(1); }, &rs);
-    progress.finish();
-  }
+  const auto reference = make_reference(b.bo, p.world(), p.rays(), p.lights(), pto);
+  b.report["reference_view_backend"] = reference->describe();
+  ReferenceLightmapStats rs;
+  ImageRGB ref = reference->render(camera, o.width, o.height, o.reference_spp, &rs);
   b.timings["reference"] = b.sw.lap();
   b.add_rays("reference", rs.rays, rs.seconds);
   return ref;
@@ -438,14 +409,11 @@ int run(const Options& o) {
   PathTracerOptions pto;
   pto.indirect_bounces = o.engine.bounces;
   pto.seed = o.engine.seed;
-  PathTracer tracer(p.world(), p.rays(), p.lights(), pto);
-  const Lightmaps lm =
-      o.method == "reference" ? reference_method(b, p, tracer) : engine_method(b, p);
+  const Lightmaps lm = o.method == "reference" ? reference_method(b, p, pto) : engine_method(b, p);
   b.add_rays("lightmaps", lm.rays, lm.seconds);
   json lightmaps = write_lightmaps(b, p, lm.maps);
   const ImageRGB view = compose_view(b, p, lm.maps, camera, tm);
-  if (o.reference_spp > 0)
-    compare_with_reference(b, view, render_reference(b, p, tracer, camera), tm);
+  if (o.reference_spp > 0) compare_with_reference(b, view, render_reference(b, p, pto, camera), tm);
   b.timings["total"] = b.total.lap();
   write_report(b, p, view, tm, std::move(lightmaps));
   return 0;

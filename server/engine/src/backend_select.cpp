@@ -1,9 +1,12 @@
+// The choice of backend (backend_select.h): the engine's TraceBackend and the reference path
+// tracer's ReferenceRenderer, by the same rule.
 #include "irradcast/engine/backend_select.h"
 
-#include "irradcast/engine/embree_backend.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
+#include "irradcast/engine/embree_backend.h"
 #include "irradcast/engine/vulkan_backend.h"
+#include "reference_renderers.h"
 
 namespace irradcast {
 
@@ -31,17 +34,21 @@ BackendKind parse_backend(const std::string& name) {
   throw Error("unknown backend '" + name + "' (expected auto, vulkan or embree)");
 }
 
-BackendChoice make_backend(const BackendOptions& options, const World& world, const RayScene& rays,
-                           const LightSampler& lights) {
-  BackendChoice c;
+namespace {
+
+// The device the options pick: a Vulkan backend, or null for Embree; `reason` says which and
+// why. Logs the choice.
+std::unique_ptr<VulkanBackend> choose_vulkan(const BackendOptions& options, const World& world,
+                                             const RayScene& rays, const LightSampler& lights,
+                                             std::string& reason) {
+  std::unique_ptr<VulkanBackend> v;
   VulkanContextOptions vo;
   vo.device = options.vulkan_device;
   vo.validation = options.vulkan_validation;
   if (options.kind == BackendKind::Vulkan) {
     try {
-      auto v = std::make_unique<VulkanBackend>(world, rays, lights, vo);
-      c.reason = v->describe() + " (--backend vulkan)";
-      c.backend = std::move(v);
+      v = std::make_unique<VulkanBackend>(world, rays, lights, vo);
+      reason = v->describe() + " (--backend vulkan)";
     } catch (const Error& e) {
       throw Error(std::string("--backend vulkan: ") + e.what());
     }
@@ -57,20 +64,37 @@ BackendChoice make_backend(const BackendOptions& options, const World& world, co
             "Embree on the same cores; --backend vulkan uses them)";
       } else {
         vo.device = chosen;
-        auto v = std::make_unique<VulkanBackend>(world, rays, lights, vo);
-        c.reason = v->describe() + " (--backend auto)";
-        c.backend = std::move(v);
+        v = std::make_unique<VulkanBackend>(world, rays, lights, vo);
+        reason = v->describe() + " (--backend auto)";
       }
     } catch (const std::exception& e) {  // Error, or bad_alloc on a huge scene
       why = e.what();
     }
-    if (!c.backend) c.reason = "embree (--backend auto: " + why + ")";
+    if (!v) reason = "embree (--backend auto: " + why + ")";
   } else {
-    c.reason = "embree (--backend embree)";
+    reason = "embree (--backend embree)";
   }
+  log::info("engine", "backend: " + reason);
+  return v;
+}
+
+}  // namespace
+
+BackendChoice make_backend(const BackendOptions& options, const World& world, const RayScene& rays,
+                           const LightSampler& lights) {
+  BackendChoice c;
+  c.backend = choose_vulkan(options, world, rays, lights, c.reason);
   if (!c.backend) c.backend = std::make_unique<EmbreeBackend>(rays, lights);
-  log::info("engine", "backend: " + c.reason);
   return c;
+}
+
+std::unique_ptr<ReferenceRenderer> make_reference(const BackendOptions& options, const World& world,
+                                                  const RayScene& rays, const LightSampler& lights,
+                                                  const PathTracerOptions& tracer) {
+  std::string reason;
+  std::unique_ptr<VulkanBackend> v = choose_vulkan(options, world, rays, lights, reason);
+  if (v) return std::make_unique<VulkanReference>(std::move(v), tracer);
+  return std::make_unique<CpuReference>(world, rays, lights, tracer);
 }
 
 }  // namespace irradcast

@@ -72,6 +72,143 @@ bool overlaps_texel(const glm::dvec2* c, int x, int y) {
 
 constexpr int kBand = 16;  // rows per parallel band
 
+// Corners of triangle t in texel units.
+void corners(const ObjectLightmap& lm, std::size_t t, glm::dvec2* c) {
+  for (int j = 0; j < 3; ++j) c[j] = glm::dvec2(lm.corner_uv[3 * t + j]);
+}
+
+// Rows [y0, y1] triangle t covers; false when it covers none (or is NaN).
+bool row_range(const ObjectLightmap& lm, int height, std::size_t t, int& y0, int& y1) {
+  glm::dvec2 c[3];
+  corners(lm, t, c);
+  double lo = std::min({c[0].y, c[1].y, c[2].y}), hi = std::max({c[0].y, c[1].y, c[2].y});
+  if (!(lo <= hi)) return false;  // NaN
+  y0 = static_cast<int>(std::clamp(std::floor(lo), 0.0, height - 1.0));
+  y1 = static_cast<int>(std::clamp(std::floor(hi), 0.0, height - 1.0));
+  return hi >= 0.0 && lo < height;
+}
+
+// Triangles binned into bands of kBand rows (a triangle goes to every band it touches): band b
+// holds triangles[start[b] .. start[b + 1]).
+struct Bands {
+  std::vector<std::size_t> start;
+  std::vector<std::uint32_t> triangles;
+};
+
+Bands bin_triangles(const ObjectLightmap& lm, int height, std::size_t n) {
+  const int bands = (height + kBand - 1) / kBand;
+  Bands out;
+  std::vector<std::size_t>& bstart = out.start;
+  bstart.assign(static_cast<std::size_t>(bands) + 1, 0);
+  for (std::size_t t = 0; t < n; ++t) {
+    int y0, y1;
+    if (!row_range(lm, height, t, y0, y1)) continue;
+    for (int b = y0 / kBand; b <= y1 / kBand; ++b) ++bstart[b + 1];
+  }
+  for (int b = 0; b < bands; ++b) bstart[b + 1] += bstart[b];
+  std::vector<std::size_t> bfill(bstart.begin(), bstart.end() - 1);
+  out.triangles.resize(bstart.back());
+  for (std::size_t t = 0; t < n; ++t) {
+    int y0, y1;
+    if (!row_range(lm, height, t, y0, y1)) continue;
+    for (int b = y0 / kBand; b <= y1 / kBand; ++b)
+      out.triangles[bfill[b]++] = static_cast<std::uint32_t>(t);
+  }
+  return out;
+}
+
+// Per texel while rasterising: barycentrics of its sample and its distance to the triangle.
+struct Samples {
+  std::vector<glm::vec2> bary;
+  std::vector<float> dist;
+};
+
+// Triangle t (corners c) over rows [band_y0, band_y1]: texels whose centre it covers, and
+// texels it only overlaps where no nearer triangle does (conservative).
+void rasterize_triangle(const glm::dvec2* c, std::uint32_t t, int band_y0, int band_y1,
+                        TexelGBuffer& g, Samples& s) {
+  double area = cross2(c[1] - c[0], c[2] - c[0]);
+  if (area == 0.0) return;  // no footprint: it keeps its centroid texel (keep_centroids)
+  double lx = std::min({c[0].x, c[1].x, c[2].x}), hx = std::max({c[0].x, c[1].x, c[2].x});
+  double ly = std::min({c[0].y, c[1].y, c[2].y}), hy = std::max({c[0].y, c[1].y, c[2].y});
+  if (!(lx <= hx) || hx < 0.0 || lx >= g.width) return;
+  int x0 = static_cast<int>(std::clamp(std::floor(lx), 0.0, g.width - 1.0));
+  int x1 = static_cast<int>(std::clamp(std::floor(hx), 0.0, g.width - 1.0));
+  int y0 = std::max(band_y0, static_cast<int>(std::clamp(std::floor(ly), 0.0, g.height - 1.0)));
+  int y1 = std::min(band_y1, static_cast<int>(std::clamp(std::floor(hy), 0.0, g.height - 1.0)));
+  for (int y = y0; y <= y1; ++y) {
+    for (int x = x0; x <= x1; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
+      if (g.kind[i] == TexelKind::Covered) continue;
+      glm::dvec2 p(x + 0.5, y + 0.5);
+      double u = cross2(p - c[0], c[2] - c[0]) / area;
+      double v = cross2(c[1] - c[0], p - c[0]) / area;
+      if (u >= 0.0 && v >= 0.0 && u + v <= 1.0) {
+        g.kind[i] = TexelKind::Covered;
+        g.triangle[i] = static_cast<std::int32_t>(t);
+        s.bary[i] = glm::vec2(static_cast<float>(u), static_cast<float>(v));
+        s.dist[i] = 0.0f;
+        continue;
+      }
+      if (!overlaps_texel(c, x, y)) continue;
+      glm::vec2 uv;
+      auto d = static_cast<float>(closest_on_triangle(c, p, uv));
+      if (d < s.dist[i] || g.kind[i] == TexelKind::Empty) {
+        g.kind[i] = TexelKind::Conservative;
+        g.triangle[i] = static_cast<std::int32_t>(t);
+        s.bary[i] = uv;
+        s.dist[i] = d;
+      }
+    }
+  }
+}
+
+// Every triangle keeps at least the texel of its centroid.
+void keep_centroids(const ObjectLightmap& lm, std::size_t n, TexelGBuffer& g, Samples& s) {
+  for (std::size_t t = 0; t < n; ++t) {
+    glm::dvec2 c[3];
+    corners(lm, t, c);
+    glm::dvec2 m = (c[0] + c[1] + c[2]) / 3.0;
+    if (!(m.x >= 0.0 && m.y >= 0.0 && m.x < g.width && m.y < g.height)) continue;
+    int x = std::min(g.width - 1, static_cast<int>(m.x));
+    int y = std::min(g.height - 1, static_cast<int>(m.y));
+    const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
+    if (g.kind[i] != TexelKind::Empty) continue;
+    glm::vec2 uv;
+    closest_on_triangle(c, glm::dvec2(x + 0.5, y + 0.5), uv);
+    g.kind[i] = TexelKind::Conservative;
+    g.triangle[i] = static_cast<std::int32_t>(t);
+    s.bary[i] = uv;
+  }
+}
+
+// Surface attributes of every valid texel, its sample pulled `inset` toward the centroid.
+void fill_attributes(const World& world, std::size_t oi, float inset, const Samples& s,
+                     TexelGBuffer& g) {
+  const WorldObject& wo = world.objects[oi];
+  tbb::parallel_for(0, g.height, [&](int y) {
+    for (int x = 0; x < g.width; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
+      if (g.kind[i] == TexelKind::Empty) continue;
+      auto t = static_cast<std::uint32_t>(g.triangle[i]);
+      float u = s.bary[i].x, v = s.bary[i].y;
+      // Pull the sample a hair toward the triangle's centroid: points exactly on an edge (chart
+      // borders put texel centres there) lie in the plane of the neighbouring face too, and rays
+      // leaving them would hit that face at t = 0.
+      glm::vec3 p = wo.position(t, u, v);
+      float to_centroid = glm::length(wo.position(t, 1.0f / 3.0f, 1.0f / 3.0f) - p);
+      if (to_centroid > 0.0f) {
+        float k = std::min(0.5f, inset / to_centroid);
+        u += k * (1.0f / 3.0f - u);
+        v += k * (1.0f / 3.0f - v);
+      }
+      g.position[i] = wo.position(t, u, v);
+      g.normal[i] = wo.shading_normal(t, u, v);
+      g.albedo[i] = world.albedo(static_cast<int>(oi), t, u, v);
+    }
+  });
+}
+
 TexelGBuffer rasterize_object(const World& world, std::size_t oi, const ObjectLightmap& lm) {
   // Inset of sample points into their triangle: a quarter texel, and at least twice the ray
   // offset RayScene uses (1e-4 of the scene size). Off the edge, a sample neither lies in the
@@ -89,124 +226,20 @@ TexelGBuffer rasterize_object(const World& world, std::size_t oi, const ObjectLi
   g.triangle.assign(size, -1);
   g.kind.assign(size, TexelKind::Empty);
   if (size == 0) return g;
-  const WorldObject& wo = world.objects[oi];
-  const std::size_t n = std::min(wo.triangles().size(), lm.corner_uv.size() / 3);
-  std::vector<glm::vec2> bary(size, glm::vec2(0.0f));
-  std::vector<float> dist(size, std::numeric_limits<float>::infinity());
-
-  auto corners = [&](std::size_t t, glm::dvec2* c) {
-    for (int j = 0; j < 3; ++j) c[j] = glm::dvec2(lm.corner_uv[3 * t + j]);
-  };
-  auto row_range = [&](std::size_t t, int& y0, int& y1) {
-    glm::dvec2 c[3];
-    corners(t, c);
-    double lo = std::min({c[0].y, c[1].y, c[2].y}), hi = std::max({c[0].y, c[1].y, c[2].y});
-    if (!(lo <= hi)) return false;  // NaN
-    y0 = static_cast<int>(std::clamp(std::floor(lo), 0.0, g.height - 1.0));
-    y1 = static_cast<int>(std::clamp(std::floor(hi), 0.0, g.height - 1.0));
-    return hi >= 0.0 && lo < g.height;
-  };
-
-  // Bin triangles into bands of rows (a triangle goes to every band it touches).
-  const int bands = (g.height + kBand - 1) / kBand;
-  std::vector<std::size_t> bstart(static_cast<std::size_t>(bands) + 1, 0);
-  for (std::size_t t = 0; t < n; ++t) {
-    int y0, y1;
-    if (!row_range(t, y0, y1)) continue;
-    for (int b = y0 / kBand; b <= y1 / kBand; ++b) ++bstart[b + 1];
-  }
-  for (int b = 0; b < bands; ++b) bstart[b + 1] += bstart[b];
-  std::vector<std::size_t> bfill(bstart.begin(), bstart.end() - 1);
-  std::vector<std::uint32_t> btris(bstart.back());
-  for (std::size_t t = 0; t < n; ++t) {
-    int y0, y1;
-    if (!row_range(t, y0, y1)) continue;
-    for (int b = y0 / kBand; b <= y1 / kBand; ++b)
-      btris[bfill[b]++] = static_cast<std::uint32_t>(t);
-  }
-
-  tbb::parallel_for(0, bands, [&](int b) {
+  const std::size_t n = std::min(world.objects[oi].triangles().size(), lm.corner_uv.size() / 3);
+  Samples s{std::vector<glm::vec2>(size, glm::vec2(0.0f)),
+            std::vector<float>(size, std::numeric_limits<float>::infinity())};
+  const Bands bands = bin_triangles(lm, g.height, n);
+  tbb::parallel_for(0, static_cast<int>(bands.start.size()) - 1, [&](int b) {
     const int band_y0 = b * kBand, band_y1 = std::min(g.height, band_y0 + kBand) - 1;
-    for (std::size_t k = bstart[b]; k < bstart[b + 1]; ++k) {
-      const std::uint32_t t = btris[k];
+    for (std::size_t k = bands.start[b]; k < bands.start[b + 1]; ++k) {
       glm::dvec2 c[3];
-      corners(t, c);
-      double area = cross2(c[1] - c[0], c[2] - c[0]);
-      if (area == 0.0) continue;  // no footprint: it keeps its centroid texel (below)
-      double lx = std::min({c[0].x, c[1].x, c[2].x}), hx = std::max({c[0].x, c[1].x, c[2].x});
-      double ly = std::min({c[0].y, c[1].y, c[2].y}), hy = std::max({c[0].y, c[1].y, c[2].y});
-      if (!(lx <= hx) || hx < 0.0 || lx >= g.width) continue;
-      int x0 = static_cast<int>(std::clamp(std::floor(lx), 0.0, g.width - 1.0));
-      int x1 = static_cast<int>(std::clamp(std::floor(hx), 0.0, g.width - 1.0));
-      int y0 = std::max(band_y0, static_cast<int>(std::clamp(std::floor(ly), 0.0, g.height - 1.0)));
-      int y1 = std::min(band_y1, static_cast<int>(std::clamp(std::floor(hy), 0.0, g.height - 1.0)));
-      for (int y = y0; y <= y1; ++y) {
-        for (int x = x0; x <= x1; ++x) {
-          const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
-          if (g.kind[i] == TexelKind::Covered) continue;
-          glm::dvec2 p(x + 0.5, y + 0.5);
-          double u = cross2(p - c[0], c[2] - c[0]) / area;
-          double v = cross2(c[1] - c[0], p - c[0]) / area;
-          if (u >= 0.0 && v >= 0.0 && u + v <= 1.0) {
-            g.kind[i] = TexelKind::Covered;
-            g.triangle[i] = static_cast<std::int32_t>(t);
-            bary[i] = glm::vec2(static_cast<float>(u), static_cast<float>(v));
-            dist[i] = 0.0f;
-            continue;
-          }
-          if (!overlaps_texel(c, x, y)) continue;
-          glm::vec2 uv;
-          auto d = static_cast<float>(closest_on_triangle(c, p, uv));
-          if (d < dist[i] || g.kind[i] == TexelKind::Empty) {
-            g.kind[i] = TexelKind::Conservative;
-            g.triangle[i] = static_cast<std::int32_t>(t);
-            bary[i] = uv;
-            dist[i] = d;
-          }
-        }
-      }
+      corners(lm, bands.triangles[k], c);
+      rasterize_triangle(c, bands.triangles[k], band_y0, band_y1, g, s);
     }
   });
-
-  // Every triangle keeps at least the texel of its centroid.
-  for (std::size_t t = 0; t < n; ++t) {
-    glm::dvec2 c[3];
-    corners(t, c);
-    glm::dvec2 m = (c[0] + c[1] + c[2]) / 3.0;
-    if (!(m.x >= 0.0 && m.y >= 0.0 && m.x < g.width && m.y < g.height)) continue;
-    int x = std::min(g.width - 1, static_cast<int>(m.x));
-    int y = std::min(g.height - 1, static_cast<int>(m.y));
-    const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
-    if (g.kind[i] != TexelKind::Empty) continue;
-    glm::vec2 uv;
-    closest_on_triangle(c, glm::dvec2(x + 0.5, y + 0.5), uv);
-    g.kind[i] = TexelKind::Conservative;
-    g.triangle[i] = static_cast<std::int32_t>(t);
-    bary[i] = uv;
-  }
-
-  // Surface attributes of every valid texel.
-  tbb::parallel_for(0, g.height, [&](int y) {
-    for (int x = 0; x < g.width; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
-      if (g.kind[i] == TexelKind::Empty) continue;
-      auto t = static_cast<std::uint32_t>(g.triangle[i]);
-      float u = bary[i].x, v = bary[i].y;
-      // Pull the sample a hair toward the triangle's centroid: points exactly on an edge (chart
-      // borders put texel centres there) lie in the plane of the neighbouring face too, and rays
-      // leaving them would hit that face at t = 0.
-      glm::vec3 p = wo.position(t, u, v);
-      float to_centroid = glm::length(wo.position(t, 1.0f / 3.0f, 1.0f / 3.0f) - p);
-      if (to_centroid > 0.0f) {
-        float s = std::min(0.5f, inset / to_centroid);
-        u += s * (1.0f / 3.0f - u);
-        v += s * (1.0f / 3.0f - v);
-      }
-      g.position[i] = wo.position(t, u, v);
-      g.normal[i] = wo.shading_normal(t, u, v);
-      g.albedo[i] = world.albedo(static_cast<int>(oi), t, u, v);
-    }
-  });
+  keep_centroids(lm, n, g, s);
+  fill_attributes(world, oi, inset, s, g);
   return g;
 }
 

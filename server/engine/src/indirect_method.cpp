@@ -1,5 +1,8 @@
+// The factory of the indirect methods (indirect_method.h).
 #include "irradcast/engine/indirect_method.h"
 
+#include "cells_method.h"
+#include "irradcast/common/error.h"
 #include "irradcast/engine/irradiance_cache.h"
 #include "irradcast/engine/vpl_method.h"
 
@@ -7,16 +10,14 @@ namespace irradcast {
 
 std::unique_ptr<IndirectMethod> make_indirect_method(const EngineParams& params, const World& world,
                                                      const RayScene& rays,
-                                                     const LightSampler& lights) {
-  switch (params.method) {
-    case Method::Cells:
-      return nullptr;
-    case Method::Vpl:
-      return std::make_unique<VplMethod>(params, world, rays, lights);
-    case Method::IrradianceCache:
-      return std::make_unique<IrradianceCache>(params, world, rays);
-  }
-  return nullptr;
+                                                     const LightSampler* lights,
+                                                     TraceBackend& backend) {
+  if (params.method == Method::Cells)
+    return std::make_unique<CellsMethod>(params, world, rays, backend);
+  if (!lights) throw Error("engine: method " + method_name(params.method) + " needs the lights");
+  if (params.method == Method::Vpl)
+    return std::make_unique<VplMethod>(params, world, rays, *lights);
+  return std::make_unique<IrradianceCache>(params, world, rays);
 }
 
 }  // namespace irradcast

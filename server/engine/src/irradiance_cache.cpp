@@ -9,7 +9,6 @@
 #include <cmath>
 #include <numeric>
 
-#include "irradcast/engine/engine.h"
 #include "irradcast/common/sampling.h"
 
 namespace irradcast {
@@ -17,11 +16,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 constexpr float kMiss = 3.4e38f;
-
-float distance_to(const Bounds& b, glm::vec3 p) {
-  const glm::vec3 d = glm::max(glm::max(b.lo - p, p - b.hi), glm::vec3(0.0f));
-  return glm::length(d);
-}
 
 }  // namespace
 
@@ -261,8 +255,8 @@ PassResult IrradianceCache::prepare(const PassInput& in) {
   return r;
 }
 
-PassResult IrradianceCache::bounce(const PassInput& in, const RadianceField& prev,
-                                   std::vector<glm::vec3>& out) {
+BounceResult IrradianceCache::bounce(const PassInput& in, const RadianceField& prev,
+                                     std::vector<glm::vec3>& out) {
   const auto start = Clock::now();
   PassResult r;
   out.assign(in.texels.size(), glm::vec3(0.0f));
@@ -299,18 +293,20 @@ PassResult IrradianceCache::bounce(const PassInput& in, const RadianceField& pre
     out[i] = wsum > 0.0f ? glm::max(sum / wsum, glm::vec3(0.0f)) : glm::vec3(0.0f);
   });
   r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  return r;
+  return {{}, r};
 }
 
-void IrradianceCache::scene_changed(const SceneChange& change) {
-  if (!change.geometry) return;  // lights and albedo: the records stay where they are
+void IrradianceCache::scene_changed(const SceneChange& change, const Lap& lap) {
+  if (change.geometry) drop_records(change);  // lights and albedo: the records stay put
+  lap(name());
+}
+
+void IrradianceCache::drop_records(const SceneChange& change) {
   // Records within their radius of a changed region: their surroundings (and so R) changed, or
   // they sit on a moved object. The rest keep their place; the next prepare() covers the gaps.
   std::vector<IrradianceRecord> kept;
   for (const IrradianceRecord& r : records_) {
-    bool near = false;
-    for (const Bounds& b : change.regions)
-      if (distance_to(b, r.position) < std::max(1.0f, params_.ic_accuracy) * r.radius) near = true;
+    const bool near = change.distance(r.position) < std::max(1.0f, params_.ic_accuracy) * r.radius;
     if (!near) kept.push_back(r);
   }
   records_ = std::move(kept);

@@ -8,9 +8,8 @@
 #include <chrono>
 #include <cmath>
 
-#include "irradcast/engine/engine.h"
-#include "irradcast/engine/halton.h"
 #include "irradcast/common/sampling.h"
+#include "irradcast/engine/halton.h"
 
 namespace irradcast {
 namespace {
@@ -231,13 +230,13 @@ void VplMethod::build_texel_map(const PassInput& in) {
   map_generation_ = in.generation;
 }
 
-PassResult VplMethod::bounce(const PassInput& in, const RadianceField& /*prev*/,
-                             std::vector<glm::vec3>& out) {
+BounceResult VplMethod::bounce(const PassInput& in, const RadianceField& /*prev*/,
+                               std::vector<glm::vec3>& out) {
   const auto start = Clock::now();
   out.assign(in.texels.size(), glm::vec3(0.0f));
   PassResult r;
   const int k = static_cast<int>(in.bounce);
-  if (k < 1 || k > depth_) return r;
+  if (k < 1 || k > depth_) return {{}, r};
   const std::size_t paths = starts_.size();
   const auto sets = static_cast<std::size_t>(params_.vpl_sets);
   const int n = params_.vpl_interleave;
@@ -328,10 +327,10 @@ PassResult VplMethod::bounce(const PassInput& in, const RadianceField& /*prev*/,
   });
   r.rays = rays.load();
   r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  return r;
+  return {{}, r};
 }
 
-void VplMethod::scene_changed(const SceneChange& change) {
+void VplMethod::scene_changed(const SceneChange& change, const Lap& lap) {
   replaced_ = 0;
   build_emitters();
   const std::size_t paths = starts_.size();
@@ -380,6 +379,7 @@ void VplMethod::scene_changed(const SceneChange& change) {
       parent = v.position + rays_->epsilon() * v.normal;
     }
   });
+  lap(name());
 }
 
 std::size_t VplMethod::invalid() const {

@@ -1,4 +1,5 @@
-// Which TraceBackend runs the engine's passes (--backend auto|vulkan|embree).
+// Which TraceBackend runs the engine's passes, and where the reference path tracer runs
+// (--backend auto|vulkan|embree).
 //   vulkan: the Vulkan compute backend, or a clear error when it cannot start.
 //   embree: the CPU backend.
 //   auto:   Vulkan on a GPU when one opens; otherwise Embree, with the reason logged. A Vulkan
@@ -12,6 +13,8 @@
 
 #include "irradcast/common/lights.h"
 #include "irradcast/common/ray_scene.h"
+#include "irradcast/engine/path_tracer.h"
+#include "irradcast/engine/reference.h"
 #include "irradcast/engine/trace_backend.h"
 #include "irradcast/engine/vulkan_device.h"
 
@@ -42,5 +45,12 @@ struct BackendChoice {
 // irradcast::Error when kind is Vulkan and no Vulkan device can be opened.
 BackendChoice make_backend(const BackendOptions& options, const World& world, const RayScene& rays,
                            const LightSampler& lights);
+
+// The reference path tracer on the device make_backend would pick: reference.comp on the
+// Vulkan backend, or PathTracer on the CPU with `tracer`'s bounces and seed (logs the choice
+// like make_backend). `world`, `rays` and `lights` must outlive it.
+std::unique_ptr<ReferenceRenderer> make_reference(const BackendOptions& options, const World& world,
+                                                  const RayScene& rays, const LightSampler& lights,
+                                                  const PathTracerOptions& tracer);
 
 }  // namespace irradcast

@@ -1,7 +1,8 @@
 // The GI engine (seed 001, chapter 3): the scene's irradiance in scene space, computed into the
-// per-object lightmaps by a direct pass and K indirect bounces, each bounce a probe gather and a
-// radiance-cell scatter with a tracing range. Progressive: every update() adds one more estimate
-// to running per-texel means, so quality improves for as long as it runs.
+// per-object lightmaps by a direct pass on the trace backend and K indirect bounces of the
+// indirect method (by default radiance cells: a probe gather and a scatter with a tracing
+// range). Progressive: every update() adds one more estimate to running per-texel means, so
+// quality improves for as long as it runs.
 #pragma once
 
 #include <cstddef>
@@ -11,13 +12,14 @@
 #include <vector>
 
 #include "irradcast/common/atlas.h"
+#include "irradcast/common/lightmap.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/world.h"
 #include "irradcast/engine/engine_params.h"
 #include "irradcast/engine/gbuffer.h"
 #include "irradcast/engine/indirect_method.h"
-#include "irradcast/common/lightmap.h"
-#include "irradcast/common/ray_scene.h"
+#include "irradcast/engine/pass_data.h"
 #include "irradcast/engine/trace_backend.h"
-#include "irradcast/common/world.h"
 
 namespace irradcast {
 
@@ -35,39 +37,19 @@ struct UpdateStats {
   std::uint64_t total_rays() const;
 };
 
-struct ProbeStats {
-  std::size_t probes = 0;
-  std::size_t relocated = 0;  // moved out of or away from geometry
-  std::size_t unusable = 0;   // inside geometry with no free spot in their cell
-};
-
-// What a scene edit changed, for Engine::scene_changed.
-struct SceneChange {
-  bool geometry = false;  // objects moved, shown or hidden: texels, probes and visibility change
-  bool surfaces = false;  // albedo changed somewhere: texel albedo is read from the G-buffers
-  // World-space boxes where it happened: moved objects before and after, changed lights and
-  // emitters. Texels near one (within the tracing range or a cell) are affected.
-  std::vector<Bounds> regions;
-  // Light positions whose direct light changed (a light moved, recoloured or dimmed, an emitter
-  // changed): texels that see one are affected.
-  std::vector<glm::vec3> light_points;
-  // Emitters that did not change (centres): texels whose path to one crosses a region are in a
-  // shadow that moved, so they are affected too.
-  std::vector<glm::vec3> other_lights;
-};
-
 class Engine {
  public:
   // The world, atlas, G-buffers and ray scene must outlive the engine. `rays` serves the
-  // host-side set-up (probe placement and probe visibility); the passes run on `backend`.
-  // Methods other than radiance cells (EngineParams::method) run their bounces on the CPU with
-  // `rays` and need the scene's `lights` (which must outlive the engine too).
+  // host-side set-up (probe placement and probe visibility); the direct pass and the radiance
+  // cells' bounces run on `backend`. Methods other than radiance cells (EngineParams::method)
+  // run their bounces on the CPU with `rays` and need the scene's `lights` (which must outlive
+  // the engine too).
   Engine(const World& world, const Atlas& atlas, const std::vector<TexelGBuffer>& gbuffers,
          const RayScene& rays, std::unique_ptr<TraceBackend> backend, EngineParams params,
          const LightSampler* lights = nullptr);
   ~Engine();
 
-  // One progressive update: direct pass, then per bounce probe gather (biased mode) + scatter.
+  // One progressive update: the direct pass, then the indirect method's bounces.
   // While texels wait for their first estimate since an edit, an update covers the next batch
   // of them (EngineParams::edit_batch, in priority order) instead of every texel.
   UpdateStats update();
@@ -88,12 +70,12 @@ class Engine {
 
   std::uint32_t updates() const { return updates_; }
   const EngineParams& params() const { return params_; }
-  const ProbeGrid& probes() const { return probes_; }
-  const ProbeStats& probe_stats() const { return probe_stats_; }
+  const ProbeGrid& probes() const { return probes_.grid; }
+  const ProbeStats& probe_stats() const { return probes_.stats; }
   std::size_t texel_count() const { return texels_.size(); }
   const TraceBackend& backend() const { return *backend_; }
   // The indirect method's state in one line ("" for radiance cells).
-  std::string method_summary() const { return method_ ? method_->summary() : std::string(); }
+  std::string method_summary() const { return method_->summary(); }
   const IndirectMethod* method() const { return method_.get(); }
 
   // Total irradiance E = E_direct + sum of the bounces, per object, dilated into the gutters.
@@ -108,14 +90,27 @@ class Engine {
   std::vector<Lightmap> standard_error() const;
 
  private:
+  struct Before;  // what the texels had and showed when an edit came (engine.cpp)
+
   void build_texels(const std::vector<TexelGBuffer>& gbuffers);
-  void build_probes();
   void build_dispatch();
   std::vector<Lightmap> to_lightmaps(const std::vector<glm::vec3>& values) const;
-  void place_probes(const std::vector<std::size_t>& probes);
-  void build_probe_weights();
   // Per texel: the total it shows (the blend of the new estimate and its value before an edit).
   std::vector<glm::vec3> shown() const;
+  // update()'s steps: the next batch of texels waiting since an edit (grouped into units), and
+  // after the direct pass of a full update the bounces and the texels' statistics.
+  void next_batch(std::vector<std::uint32_t>& texels, std::vector<std::uint32_t>& offsets);
+  void bounces(PassInput& in, const std::vector<glm::vec3>& direct, UpdateStats& stats);
+  // scene_changed()'s steps: what every texel had before; its old values carried over to the
+  // rebuilt texels (returns each texel's index before, -1 if it was not valid); the priority tier
+  // of each texel; the restart of the statistics and the queue of texels waiting.
+  Before take_before(bool rebuild);
+  std::vector<std::int32_t> carry_over(const Before& before);
+  void carry_over_dilated(const Before& before, const std::vector<std::uint32_t>& missing);
+  std::vector<std::uint8_t> priorities(const SceneChange& change,
+                                       const std::vector<CameraPose>& cameras) const;
+  void restart(const Before& before, const std::vector<std::int32_t>& old_of,
+               const std::vector<std::uint8_t>& tier, const SceneChange& change);
 
   const World* world_;
   const Atlas* atlas_;
@@ -123,21 +118,17 @@ class Engine {
   const RayScene* rays_;
   std::unique_ptr<TraceBackend> backend_;
   EngineParams params_;
-  std::unique_ptr<IndirectMethod> method_;  // null: radiance cells on the backend
+  std::unique_ptr<IndirectMethod> method_;
   SurfaceTexels texels_;
-  ProbeGrid probes_;
-  ProbeStats probe_stats_;
-  std::vector<ProbeWeights> probe_weights_;
+  Probes probes_;  // the grid of cells; placed and weighed by the method that reads probes
   std::vector<std::uint32_t> unit_texels_, unit_offsets_;
   std::uint32_t updates_ = 0;
   std::uint64_t generation_ = 0;  // PassInput::generation
-  // Running means: [0] direct, [k] bounce k; probe radiance per bounce. A texel's means count
-  // samples_[i] samples; before its first sample since an edit they hold its old values.
+  // Running means: [0] direct, [k] bounce k. A texel's means count samples_[i] samples; before
+  // its first sample since an edit they hold its old values.
   std::vector<std::vector<glm::vec3>> mean_;
-  std::vector<std::vector<glm::vec3>> probe_mean_;
   std::vector<std::uint32_t> samples_;         // direct samples since the last restart
   std::vector<std::uint32_t> bounce_samples_;  // indirect samples since the last restart
-  std::uint32_t probe_samples_ = 0;            // every probe is gathered every update
   std::vector<glm::vec3> before_;              // per texel: what it showed when the last edit came
   std::vector<std::uint8_t> restarted_;        // per texel: restarted by the last edit (blends)
   // Texels waiting for their first sample since the last edit, in priority order.

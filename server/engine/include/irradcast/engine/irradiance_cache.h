@@ -22,8 +22,8 @@
 #include <string>
 #include <vector>
 
-#include "irradcast/engine/indirect_method.h"
 #include "irradcast/common/sampling.h"
+#include "irradcast/engine/indirect_method.h"
 
 namespace irradcast {
 
@@ -54,14 +54,16 @@ class IrradianceCache final : public IndirectMethod {
 
   std::string name() const override { return "irradiance-cache"; }
   PassResult prepare(const PassInput& in) override;
-  PassResult bounce(const PassInput& in, const RadianceField& prev,
-                    std::vector<glm::vec3>& out) override;
-  void scene_changed(const SceneChange& change) override;
+  BounceResult bounce(const PassInput& in, const RadianceField& prev,
+                      std::vector<glm::vec3>& out) override;
+  void scene_changed(const SceneChange& change, const Lap& lap) override;
   std::string summary() const override;
 
   const std::vector<IrradianceRecord>& records() const { return records_; }
 
  private:
+  // Drops the records near a changed region (placed again by the next prepare()).
+  void drop_records(const SceneChange& change);
   // Ward weight of record k at (p, n), 0 if it may not contribute (below 1/a or in front).
   float weight(const IrradianceRecord& r, glm::vec3 p, glm::vec3 n) const;
   bool visible(const IrradianceRecord& r, glm::vec3 p, glm::vec3 ng) const;

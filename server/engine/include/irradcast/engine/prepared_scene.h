@@ -23,8 +23,8 @@
 #include "irradcast/common/scene.h"
 #include "irradcast/common/scene_edit.h"
 #include "irradcast/common/world.h"
-#include "irradcast/engine/engine.h"  // SceneChange
 #include "irradcast/engine/gbuffer.h"
+#include "irradcast/engine/pass_data.h"
 
 namespace irradcast {
 

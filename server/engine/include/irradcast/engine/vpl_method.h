@@ -39,9 +39,9 @@ class VplMethod final : public IndirectMethod {
 
   std::string name() const override { return "vpl"; }
   PassResult prepare(const PassInput& in) override;
-  PassResult bounce(const PassInput& in, const RadianceField& prev,
-                    std::vector<glm::vec3>& out) override;
-  void scene_changed(const SceneChange& change) override;
+  BounceResult bounce(const PassInput& in, const RadianceField& prev,
+                      std::vector<glm::vec3>& out) override;
+  void scene_changed(const SceneChange& change, const Lap& lap) override;
   std::string summary() const override;
 
   // The pool: path p's VPL of bounce k (1..K) is vpls()[p * K + k - 1].

@@ -1,0 +1,131 @@
+// The data the engine's passes share (docs/ARCHITECTURE.md): the scene's texels, the grid of
+// radiance cells with one probe each, one pass's input and result, and what a scene edit
+// changed. The engine owns it; the trace backends (trace_backend.h) and the indirect methods
+// (indirect_method.h) read it.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "irradcast/common/atlas.h"
+#include "irradcast/common/lightmap.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/world.h"
+#include "irradcast/engine/engine_params.h"
+
+namespace irradcast {
+
+// Every valid lightmap texel of the scene in one flat array (the global G-buffer), ordered
+// object by object.
+struct SurfaceTexels {
+  std::vector<glm::vec3> position;
+  std::vector<glm::vec3> normal;      // shading normal
+  std::vector<glm::vec3> geo_normal;  // geometric normal, same side as `normal`
+  std::vector<glm::vec3> albedo;
+  std::vector<std::uint32_t> object;  // object index
+  std::vector<std::uint32_t> texel;   // index in that object's lightmap
+  std::vector<std::uint32_t> cell;    // radiance cell containing the texel
+  std::size_t size() const { return position.size(); }
+};
+
+// Up to 8 probes a texel reads for distant light, with weights summing to 1.
+struct ProbeWeights {
+  std::uint32_t probe[8];
+  float weight[8];
+  std::uint8_t count = 0;
+};
+
+// The grid of radiance cells over the scene's bounds, one probe per cell: the engine's work
+// units (EngineParams::dispatch) and, for the cells method, the probes that stand in for light
+// from beyond the tracing range.
+struct ProbeGrid {
+  glm::ivec3 dims{0};
+  glm::vec3 origin{0.0f};            // corner of cell (0,0,0)
+  float cell = 1.0f;                 // cell edge, world units
+  int resolution = 8;                // octahedral map side
+  std::vector<glm::vec3> position;   // one per cell (centre, or relocated)
+  std::vector<std::uint8_t> usable;  // 0: inside geometry and could not be moved
+  std::size_t count() const { return position.size(); }
+  std::size_t texels_per_probe() const { return static_cast<std::size_t>(resolution) * resolution; }
+  int cell_index(glm::vec3 p) const;
+  // The centre of cell i (where its probe stands unless it was relocated).
+  glm::vec3 centre(std::size_t i) const;
+  // The cells over `bounds` (cubes of params.cell_size x the largest extent), every probe at its
+  // cell's centre and usable.
+  static ProbeGrid cells_of(const Bounds& bounds, const EngineParams& params);
+};
+
+// Octahedral mapping of unit directions to [0,1]^2 and back.
+glm::vec2 octahedral_encode(glm::vec3 d);
+glm::vec3 octahedral_decode(glm::vec2 uv);
+
+// The previous bounce's outgoing radiance: albedo / pi * E_prev, read bilinearly at a hit.
+struct RadianceField {
+  const World* world = nullptr;
+  const Atlas* atlas = nullptr;
+  const std::vector<Lightmap>* irradiance = nullptr;  // E_prev per object, dilated
+};
+
+// Outgoing radiance albedo / pi * E_prev at a hit (bilinear in the hit object's lightmap).
+glm::vec3 radiance_at(const RadianceField& f, const Hit& h);
+
+// What one pass reads (the engine builds it per update).
+struct PassInput {
+  const World& world;
+  const Atlas& atlas;
+  const SurfaceTexels& texels;
+  const std::vector<ProbeWeights>& probe_weights;  // per texel (empty in unbiased mode)
+  const ProbeGrid& probes;
+  const EngineParams& params;
+  // Work units in dispatch order: texel index ranges [begin, end) of one cell or one object.
+  const std::vector<std::uint32_t>& unit_texels;   // texel indices grouped by unit
+  const std::vector<std::uint32_t>& unit_offsets;  // size units + 1
+  std::uint32_t update = 0;
+  std::uint32_t bounce = 0;  // 0 for the direct pass, k for the k-th indirect bounce
+  // Changes whenever the texels, units, probes or probe weights change (a scene edit, a batch
+  // of texels): backends that keep copies compare it.
+  std::uint64_t generation = 0;
+};
+
+// What one pass cost.
+struct PassResult {
+  std::uint64_t rays = 0;
+  double seconds = 0.0;
+};
+
+struct ProbeStats {
+  std::size_t probes = 0;
+  std::size_t relocated = 0;  // moved out of or away from geometry
+  std::size_t unusable = 0;   // inside geometry with no free spot in their cell
+};
+
+// The engine's probes: the grid, where each probe stands, and which probes each texel reads.
+// The method that reads probes (cells_method.h) places and weighs them; for the others every
+// probe stays at its cell's centre and `weights` is empty.
+struct Probes {
+  ProbeGrid grid;
+  std::vector<ProbeWeights> weights;  // per texel (empty when no probes are read)
+  ProbeStats stats;
+};
+
+// What a scene edit changed, for Engine::scene_changed.
+struct SceneChange {
+  bool geometry = false;  // objects moved, shown or hidden: texels, probes and visibility change
+  bool surfaces = false;  // albedo changed somewhere: texel albedo is read from the G-buffers
+  // World-space boxes where it happened: moved objects before and after, changed lights and
+  // emitters. Texels near one (within the tracing range or a cell) are affected.
+  std::vector<Bounds> regions;
+  // Light positions whose direct light changed (a light moved, recoloured or dimmed, an emitter
+  // changed): texels that see one are affected.
+  std::vector<glm::vec3> light_points;
+  // Emitters that did not change (centres): texels whose path to one crosses a region are in a
+  // shadow that moved, so they are affected too.
+  std::vector<glm::vec3> other_lights;
+  // Distance from p to the nearest region (0 inside one; +inf without regions).
+  float distance(glm::vec3 p) const;
+};
+
+}  // namespace irradcast

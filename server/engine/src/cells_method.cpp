@@ -1,0 +1,211 @@
+// Radiance cells (cells_method.h): probe placement and relocation, the texels' probe weights,
+// and each bounce's probe gather and scatter on the trace backend.
+#include "cells_method.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "irradcast/common/log.h"
+#include "irradcast/common/sampling.h"
+
+namespace irradcast {
+namespace {
+
+// Unit directions spread evenly over the sphere (spherical Fibonacci).
+std::vector<glm::vec3> sphere_directions(int n) {
+  std::vector<glm::vec3> dirs;
+  const float golden = kPi * (3.0f - std::sqrt(5.0f));
+  for (int i = 0; i < n; ++i) {
+    float z = 1.0f - (2.0f * static_cast<float>(i) + 1.0f) / static_cast<float>(n);
+    float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+    float phi = golden * static_cast<float>(i);
+    dirs.emplace_back(r * std::cos(phi), r * std::sin(phi), z);
+  }
+  return dirs;
+}
+
+struct Spot {
+  float backface = 1.0f;  // fraction of rays that hit the back of a surface
+  float nearest = 0.0f;   // distance to the nearest surface
+};
+
+Spot probe_spot(const RayScene& rays, const World& world, glm::vec3 p,
+                const std::vector<glm::vec3>& dirs) {
+  int back = 0;
+  float nearest = 3.4e38f;
+  for (const glm::vec3& d : dirs) {
+    Ray r;
+    r.origin = p;
+    r.direction = d;
+    Hit h = rays.intersect(r);
+    if (!h.valid()) continue;
+    nearest = std::min(nearest, h.t);
+    if (glm::dot(world.objects[h.object].geometric_normal(h.triangle), d) > 0.0f) ++back;
+  }
+  return {static_cast<float>(back) / static_cast<float>(dirs.size()), nearest};
+}
+
+}  // namespace
+
+CellsMethod::CellsMethod(const EngineParams& params, const World& world, const RayScene& rays,
+                         TraceBackend& backend)
+    : params_(params), world_(&world), rays_(&rays), backend_(&backend) {
+  // Seed 001 section 4.3.2 and our rooms test: probes stand in for everything beyond the range,
+  // so a range much shorter than a cell makes the probes' parallax dominate the error.
+  if (params_.uses_probes() && params_.tracing_range < 0.4f * params_.cell_size)
+    log::warn("engine", "tracing range " + std::to_string(params_.tracing_range) +
+                            " is short for cells of " + std::to_string(params_.cell_size) +
+                            ": expect probe error; use a cell size of at most " +
+                            std::to_string(2.5f * params_.tracing_range));
+  probe_mean_.assign(params_.indirect_bounces + 1, std::vector<glm::vec3>());
+}
+
+void CellsMethod::place_probes(const SurfaceTexels& texels, const SceneChange* change,
+                               Probes& probes, const Lap& lap) {
+  if (!params_.uses_probes()) return;
+  if (!change) {
+    std::vector<std::size_t> all(probes.grid.count());
+    for (std::size_t i = 0; i < all.size(); ++i) all[i] = i;
+    place(all, probes);
+    weigh(texels, probes);
+    return;
+  }
+  if (change->geometry) {
+    // Probes in cells a moved object touches (before or after) are placed again.
+    std::vector<std::size_t> again;
+    const float reach = probes.grid.cell;
+    for (std::size_t p = 0; p < probes.grid.count(); ++p)
+      if (change->distance(probes.grid.centre(p)) <= reach) again.push_back(p);
+    place(again, probes);
+    lap("probes (" + std::to_string(again.size()) + ")");
+  }
+  if (change->geometry || change->surfaces) weigh(texels, probes);
+}
+
+void CellsMethod::place(const std::vector<std::size_t>& which, Probes& probes) const {
+  // Probe placement: a probe inside geometry (many rays see back faces) or hugging a surface
+  // sees the wrong light; move it to the free spot of its cell farthest from any surface.
+  // Always from the cell centre, so a probe placed again after an edit lands where a fresh
+  // start on the edited scene would put it.
+  ProbeGrid& grid = probes.grid;
+  for (std::size_t i : which) {
+    grid.position[i] = grid.centre(i);
+    grid.usable[i] = 1;
+  }
+  if (!params_.relocate_probes) return;
+  const auto dirs = sphere_directions(64);
+  const float too_close = 0.15f * grid.cell;
+  std::vector<std::uint8_t> moved(which.size(), 0);
+  tbb::parallel_for(std::size_t(0), which.size(), [&](std::size_t k) {
+    const std::size_t i = which[k];
+    Spot here = probe_spot(*rays_, *world_, grid.position[i], dirs);
+    if (here.backface < 0.05f && here.nearest >= too_close) return;
+    glm::vec3 centre = grid.position[i];
+    glm::vec3 best = centre;
+    Spot best_spot = here;
+    const int steps = 4;  // candidates on a 9 x 9 x 9 lattice inside the cell
+    for (int z = -steps; z <= steps; ++z)
+      for (int y = -steps; y <= steps; ++y)
+        for (int x = -steps; x <= steps; ++x) {
+          glm::vec3 c = centre + glm::vec3(x, y, z) * (0.45f * grid.cell / steps);
+          Spot s = probe_spot(*rays_, *world_, c, dirs);
+          bool better = s.backface < best_spot.backface - 1e-6f ||
+                        (s.backface <= best_spot.backface + 1e-6f && s.nearest > best_spot.nearest);
+          if (better) {
+            best = c;
+            best_spot = s;
+          }
+        }
+    grid.position[i] = best;
+    moved[k] = best != centre;
+    if (best_spot.backface >= 0.05f) grid.usable[i] = 0;
+  });
+  if (which.size() == grid.count()) probes.stats.relocated = 0;
+  probes.stats.unusable = 0;
+  for (std::size_t i = 0; i < grid.count(); ++i) probes.stats.unusable += grid.usable[i] == 0;
+  for (std::uint8_t m : moved) probes.stats.relocated += m;
+}
+
+void CellsMethod::weigh(const SurfaceTexels& texels, Probes& probes) const {
+  // Probe weights per texel: trilinear over the 8 surrounding probes, keeping only usable probes
+  // the texel can see (a wall between them means the probe sees another room's light).
+  const ProbeGrid& grid = probes.grid;
+  probes.weights.resize(texels.size());
+  tbb::parallel_for(std::size_t(0), texels.size(), [&](std::size_t t) {
+    const glm::vec3 p = texels.position[t];
+    glm::vec3 f = (p - grid.origin) / grid.cell - 0.5f;
+    glm::ivec3 base = glm::ivec3(glm::floor(f));
+    glm::vec3 frac = f - glm::vec3(base);
+    ProbeWeights w;
+    float sum = 0.0f;
+    for (int c = 0; c < 8; ++c) {
+      glm::ivec3 o(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+      glm::ivec3 cell = base + o;
+      if (glm::any(glm::lessThan(cell, glm::ivec3(0))) ||
+          glm::any(glm::greaterThanEqual(cell, grid.dims)))
+        continue;
+      auto index =
+          static_cast<std::uint32_t>((cell.z * grid.dims.y + cell.y) * grid.dims.x + cell.x);
+      if (!grid.usable[index]) continue;
+      glm::vec3 tw = glm::mix(1.0f - frac, frac, glm::vec3(o));
+      float weight = glm::max(tw.x, 0.0f) * glm::max(tw.y, 0.0f) * glm::max(tw.z, 0.0f);
+      glm::vec3 to = grid.position[index] - p;
+      float dist = glm::length(to);
+      if (params_.probe_visibility && dist > 0.0f) {
+        Ray r;
+        r.direction = to / dist;
+        r.origin = rays_->offset(p, texels.geo_normal[t], r.direction);
+        r.tmax = glm::length(grid.position[index] - r.origin);
+        if (rays_->occluded(r)) continue;
+      }
+      weight = std::max(weight, 1e-4f);
+      w.probe[w.count] = index;
+      w.weight[w.count] = weight;
+      ++w.count;
+      sum += weight;
+    }
+    if (w.count == 0) {
+      // No visible usable neighbour: fall back to the texel's own cell probe.
+      w.probe[0] = texels.cell[t];
+      w.weight[0] = 1.0f;
+      w.count = 1;
+      sum = 1.0f;
+    }
+    for (int k = 0; k < w.count; ++k) w.weight[k] /= sum;
+    probes.weights[t] = w;
+  });
+}
+
+PassResult CellsMethod::prepare(const PassInput& /*in*/) {
+  // This update's probe estimates enter the running means with weight 1 / (samples + 1).
+  probe_weight_ = 1.0f / static_cast<float>(probe_samples_ + 1);
+  ++probe_samples_;
+  return {};
+}
+
+BounceResult CellsMethod::bounce(const PassInput& in, const RadianceField& prev,
+                                 std::vector<glm::vec3>& out) {
+  BounceResult r;
+  std::vector<glm::vec3>& mean = probe_mean_[in.bounce];
+  if (params_.uses_probes()) {
+    std::vector<glm::vec3> est;
+    r.probes = backend_->gather_probes(in, prev, est);
+    if (mean.size() != est.size()) mean.assign(est.size(), glm::vec3(0.0f));
+    const float w = probe_weight_;
+    tbb::parallel_for(std::size_t(0), est.size(),
+                      [&](std::size_t i) { mean[i] += (est[i] - mean[i]) * w; });
+  }
+  r.scatter = backend_->scatter(in, prev, mean, out);
+  return r;
+}
+
+void CellsMethod::scene_changed(const SceneChange& /*change*/, const Lap& /*lap*/) {
+  // Probes restart after every edit: each sees much of the scene, they are few, and every
+  // full update gathers all of them (a kept estimate would hold the old light for many
+  // updates, measured on rooms:2).
+  probe_samples_ = 0;
+}
+
+}  // namespace irradcast

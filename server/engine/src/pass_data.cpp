@@ -1,0 +1,76 @@
+// The engine's shared pass data (pass_data.h): the grid of radiance cells (cell lookup, cell
+// centres), the octahedral map of a probe's directions, and where a scene change happened.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "irradcast/engine/pass_data.h"
+
+namespace irradcast {
+
+int ProbeGrid::cell_index(glm::vec3 p) const {
+  glm::ivec3 c = glm::clamp(glm::ivec3(glm::floor((p - origin) / cell)), glm::ivec3(0), dims - 1);
+  return (c.z * dims.y + c.y) * dims.x + c.x;
+}
+
+glm::vec3 ProbeGrid::centre(std::size_t i) const {
+  const glm::ivec3 c(static_cast<int>(i % dims.x), static_cast<int>((i / dims.x) % dims.y),
+                     static_cast<int>(i / (static_cast<std::size_t>(dims.x) * dims.y)));
+  return origin + (glm::vec3(c) + 0.5f) * cell;
+}
+
+ProbeGrid ProbeGrid::cells_of(const Bounds& b, const EngineParams& params) {
+  ProbeGrid g;
+  const float extent = std::max(b.max_extent(), 1e-6f);
+  const int per_axis = static_cast<int>(std::ceil(1.0f / params.cell_size));
+  // Cells are cubes of cell_size x extent; axes shorter than the largest get fewer cells
+  // (seed 001 grids the normalised cube; cells outside the bounds would hold nothing).
+  g.cell = extent / static_cast<float>(per_axis);
+  g.origin = b.lo;
+  glm::vec3 e = b.extent();
+  for (int a = 0; a < 3; ++a)
+    g.dims[a] = std::clamp(static_cast<int>(std::ceil(e[a] / g.cell - 1e-4f)), 1, per_axis);
+  g.resolution = params.probe_resolution;
+  const std::size_t count = static_cast<std::size_t>(g.dims.x) * g.dims.y * g.dims.z;
+  g.position.resize(count);
+  g.usable.assign(count, 1);
+  for (int z = 0; z < g.dims.z; ++z)
+    for (int y = 0; y < g.dims.y; ++y)
+      for (int x = 0; x < g.dims.x; ++x)
+        g.position[(z * g.dims.y + y) * g.dims.x + x] =
+            g.origin + (glm::vec3(x, y, z) + 0.5f) * g.cell;
+  return g;
+}
+
+float SceneChange::distance(glm::vec3 p) const {
+  float nearest = std::numeric_limits<float>::infinity();
+  for (const Bounds& b : regions) {
+    const glm::vec3 d = glm::max(glm::max(b.lo - p, p - b.hi), glm::vec3(0.0f));
+    nearest = std::min(nearest, glm::length(d));
+  }
+  return nearest;
+}
+
+glm::vec2 octahedral_encode(glm::vec3 d) {
+  d /= (std::fabs(d.x) + std::fabs(d.y) + std::fabs(d.z));
+  glm::vec2 e(d.x, d.y);
+  if (d.z < 0.0f) {
+    e = (1.0f - glm::abs(glm::vec2(d.y, d.x))) *
+        glm::vec2(d.x >= 0.0f ? 1.0f : -1.0f, d.y >= 0.0f ? 1.0f : -1.0f);
+  }
+  return 0.5f * e + 0.5f;
+}
+
+glm::vec3 octahedral_decode(glm::vec2 uv) {
+  glm::vec2 e = 2.0f * uv - 1.0f;
+  glm::vec3 d(e.x, e.y, 1.0f - std::fabs(e.x) - std::fabs(e.y));
+  if (d.z < 0.0f) {
+    glm::vec2 xy = (1.0f - glm::abs(glm::vec2(d.y, d.x))) *
+                   glm::vec2(d.x >= 0.0f ? 1.0f : -1.0f, d.y >= 0.0f ? 1.0f : -1.0f);
+    d.x = xy.x;
+    d.y = xy.y;
+  }
+  return glm::normalize(d);
+}
+
+}  // namespace irradcast
