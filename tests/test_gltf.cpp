@@ -21,6 +21,7 @@
 #include "irradcast/common/error.h"
 #include "irradcast/common/gltf.h"
 #include "irradcast/common/scene.h"
+#include "testdata.h"
 
 using namespace irradcast;
 using nlohmann::json;
@@ -28,7 +29,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const std::string kSamples = std::string(IRRADCAST_TESTDATA_DIR) + "/gltf-samples";
+const std::string kSamples = irradcast::test::testdata("gltf-samples");
 
 // A fresh temporary directory per test, removed afterwards.
 class GltfTest : public ::testing::Test {
@@ -339,6 +340,7 @@ TEST_F(GltfTest, GltfBadGlb) {
 // Random corruptions of a valid file must produce errors or scenes, never crashes (run under
 // ASan/UBSan to make this meaningful).
 TEST_F(GltfTest, GltfCorruptedBytesNeverCrash) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/Box/Box.gltf");
   std::string good = path("box.glb");
   save_gltf(s, good);
@@ -623,6 +625,7 @@ std::size_t expected_triangles(const std::string& file) {
 }
 
 TEST(GltfSamples, GltfAllSamplesLoadWithTheirTriangleCounts) {
+  IRRADCAST_NEED_TESTDATA();
   const char* names[] = {"2CylinderEngine",
                          "Box",
                          "BoxInterleaved",
@@ -664,6 +667,7 @@ TEST(GltfSamples, GltfAllSamplesLoadWithTheirTriangleCounts) {
 }
 
 TEST(GltfSamples, GltfCylinderEngine) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/2CylinderEngine/2CylinderEngine.gltf");
   EXPECT_EQ(s.triangle_count(), 121496u);
   EXPECT_EQ(s.meshes.size(), 29u);
@@ -673,6 +677,7 @@ TEST(GltfSamples, GltfCylinderEngine) {
 }
 
 TEST(GltfSamples, GltfBoxAndBoxInterleavedAgree) {
+  IRRADCAST_NEED_TESTDATA();
   Scene box = load_gltf(kSamples + "/Box/Box.gltf");
   Scene inter = load_gltf(kSamples + "/BoxInterleaved/BoxInterleaved.gltf");
   EXPECT_EQ(box.triangle_count(), 12u);
@@ -692,6 +697,7 @@ TEST(GltfSamples, GltfBoxAndBoxInterleavedAgree) {
 }
 
 TEST(GltfSamples, GltfBoxTexturedHasItsTexture) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/BoxTextured/BoxTextured.gltf");
   ASSERT_EQ(s.textures.size(), 1u);
   const Texture& t = s.textures[0];
@@ -713,6 +719,7 @@ TEST(GltfSamples, GltfBoxTexturedHasItsTexture) {
 }
 
 TEST(GltfSamples, GltfCamerasSkipsOrthographicWithWarning) {
+  IRRADCAST_NEED_TESTDATA();
   LoadReport report;
   Scene s = load_gltf(kSamples + "/Cameras/Cameras.gltf", &report);
   ASSERT_EQ(s.cameras.size(), 1u);
@@ -729,6 +736,7 @@ TEST(GltfSamples, GltfCamerasSkipsOrthographicWithWarning) {
 }
 
 TEST(GltfSamples, GltfDuck) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/Duck/Duck.gltf");
   EXPECT_EQ(s.triangle_count(), 4212u);
   ASSERT_EQ(s.textures.size(), 1u);
@@ -739,6 +747,7 @@ TEST(GltfSamples, GltfDuck) {
 }
 
 TEST(GltfSamples, GltfMultiUVTestHasTexcoord1) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/MultiUVTest/MultiUVTest.gltf");
   const Mesh& m = s.meshes.at(0);
   ASSERT_EQ(m.uv1.size(), m.positions.size());
@@ -756,6 +765,7 @@ TEST(GltfSamples, GltfMultiUVTestHasTexcoord1) {
 }
 
 TEST(GltfSamples, GltfSimpleSparseAccessorSubstitutes) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/SimpleSparseAccessor/SimpleSparseAccessor.gltf");
   const Mesh& m = s.meshes.at(0);
   ASSERT_EQ(m.positions.size(), 14u);
@@ -768,6 +778,7 @@ TEST(GltfSamples, GltfSimpleSparseAccessorSubstitutes) {
 }
 
 TEST(GltfSamples, GltfSimpleMeshesInstancesOneMesh) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/SimpleMeshes/SimpleMeshes.gltf");
   auto objects = s.objects();
   ASSERT_EQ(objects.size(), 2u);
@@ -781,6 +792,7 @@ TEST(GltfSamples, GltfSimpleMeshesInstancesOneMesh) {
 }
 
 TEST(GltfSamples, GltfTriangleWithoutIndicesAndOrientation) {
+  IRRADCAST_NEED_TESTDATA();
   Scene t = load_gltf(kSamples + "/TriangleWithoutIndices/TriangleWithoutIndices.gltf");
   ASSERT_EQ(t.meshes.at(0).triangles.size(), 1u);
   EXPECT_EQ(t.meshes[0].triangles[0], glm::uvec3(0, 1, 2));
@@ -1038,6 +1050,7 @@ TEST_F(GltfTest, GltfRoundTripGltfAndGlb) {
 }
 
 TEST_F(GltfTest, GltfRoundTripSamples) {
+  IRRADCAST_NEED_TESTDATA();
   for (const char* name : {"Duck", "MultiUVTest", "2CylinderEngine", "SimpleSparseAccessor"}) {
     SCOPED_TRACE(name);
     Scene original = load_gltf(kSamples + "/" + name + "/" + name + ".gltf");
