@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "engine_options.h"
+#include "params_json.h"
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
@@ -88,9 +89,10 @@ void write_png_tonemapped(const std::string& path, const irradcast::ImageRGB& im
 // --method is the engine's (cells | vpl | irradiance-cache), plus bake's own "reference" (the
 // path tracer per texel); "engine" is the old name of the default.
 void normalize_method(Options& o) {
-  if (o.engine.method == "engine") o.engine.method = "cells";
-  o.method = o.engine.method;
-  if (o.method == "reference") o.engine.method = "cells";
+  std::string& method = o.engine.text.at("method");
+  if (method == "engine") method = "cells";
+  o.method = method;
+  if (o.method == "reference") method = "cells";
   if (o.method != "reference" && o.method != "cells" && o.method != "vpl" &&
       o.method != "irradiance-cache")
     throw Error("unknown --method '" + o.method +
@@ -164,8 +166,8 @@ int run(const Options& o) {
                         " on visible surfaces, " + std::to_string(hidden) + " inside geometry)");
 
   PathTracerOptions pto;
-  pto.indirect_bounces = o.engine.bounces;
-  pto.seed = o.engine.seed;
+  pto.indirect_bounces = ep.indirect_bounces;
+  pto.seed = ep.seed;
   PathTracer tracer(world, rays, lights, pto);
   std::vector<Lightmap> maps;
   std::uint64_t lightmap_rays = 0;
@@ -176,7 +178,7 @@ int run(const Options& o) {
     BackendChoice choice = make_backend(bo, world, rays, lights);
     report["reference_backend"] = choice.backend->describe();
     if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get()))
-      maps = vulkan->reference_lightmaps(gbuffers, o.lightmap_spp, o.engine.bounces, o.engine.seed,
+      maps = vulkan->reference_lightmaps(gbuffers, o.lightmap_spp, ep.indirect_bounces, ep.seed,
                                          &lm_stats);
     else
       maps = reference_lightmaps(world, tracer, gbuffers, o.lightmap_spp, &lm_stats);
@@ -194,12 +196,12 @@ int run(const Options& o) {
                             " unusable)");
     Progress progress("engine", static_cast<std::uint64_t>(o.updates), "updates");
     PassTiming direct;
-    std::vector<PassTiming> probes(o.engine.bounces), scatter(o.engine.bounces);
+    std::vector<PassTiming> probes(ep.indirect_bounces), scatter(ep.indirect_bounces);
     for (int u = 0; u < o.updates; ++u) {
       UpdateStats us = engine.update();
       direct.seconds += us.direct.seconds;
       direct.rays += us.direct.rays;
-      for (int b = 0; b < o.engine.bounces; ++b) {
+      for (int b = 0; b < ep.indirect_bounces; ++b) {
         probes[b].seconds += us.probes[b].seconds;
         probes[b].rays += us.probes[b].rays;
         scatter[b].seconds += us.scatter[b].seconds;
@@ -221,25 +223,18 @@ int run(const Options& o) {
                   {"rays_per_s", t.rays / std::max(1e-9, t.seconds)}};
     };
     json passes = json::array({pass("direct", direct)});
-    for (int b = 0; b < o.engine.bounces; ++b) {
+    for (int b = 0; b < ep.indirect_bounces; ++b) {
       if (!ep.unbiased()) passes.push_back(pass("probes_" + std::to_string(b + 1), probes[b]));
       passes.push_back(pass("scatter_" + std::to_string(b + 1), scatter[b]));
     }
-    report["engine"] = {
-        {"backend", engine.backend().describe()},
-        {"updates", engine.updates()},
-        {"texels", engine.texel_count()},
-        {"cell_size", ep.cell_size},
-        {"tracing_range", ep.unbiased() ? json("inf") : json(ep.tracing_range)},
-        {"direct_samples", ep.direct_samples},
-        {"indirect_samples", ep.indirect_samples},
-        {"indirect_bounces", ep.indirect_bounces},
-        {"probe_resolution", ep.probe_resolution},
-        {"dispatch", o.engine.dispatch},
-        {"distant_point", o.engine.distant_point},
-        {"probes", {{"count", ps.probes}, {"relocated", ps.relocated}, {"unusable", ps.unusable}}},
-        {"mean_relative_error", engine.mean_relative_error()},
-        {"passes", passes}};
+    report["engine"] = tools::params_json(ep);  // every parameter, by name
+    report["engine"].update(
+        {{"backend", engine.backend().describe()},
+         {"updates", engine.updates()},
+         {"texels", engine.texel_count()},
+         {"probes", {{"count", ps.probes}, {"relocated", ps.relocated}, {"unusable", ps.unusable}}},
+         {"mean_relative_error", engine.mean_relative_error()},
+         {"passes", passes}});
   }
 
   json lightmaps = json::array();
@@ -278,8 +273,8 @@ int run(const Options& o) {
     report["reference_view_backend"] = choice.backend->describe();
     if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get())) {
       ReferenceLightmapStats vs;
-      ref = vulkan->render_reference(camera, o.width, o.height, o.reference_spp, o.engine.bounces,
-                                     o.engine.seed, &vs);
+      ref = vulkan->render_reference(camera, o.width, o.height, o.reference_spp,
+                                     ep.indirect_bounces, ep.seed, &vs);
       rs.rays = vs.rays;
       rs.seconds = vs.seconds;
     } else {
@@ -323,11 +318,11 @@ int run(const Options& o) {
       {"exposure_ev", std::log2(exposure_scale(view, tm))},
       {"width", o.width},
       {"height", o.height},
-      {"bounces", {{"direct", 1}, {"indirect", o.engine.bounces}}},
+      {"bounces", {{"direct", 1}, {"indirect", ep.indirect_bounces}}},
       {"lightmap_spp", o.lightmap_spp},
       {"texels_per_scene", o.engine.texels_per_scene},
       {"max_lightmap_size", o.engine.max_lightmap_size},
-      {"seed", o.engine.seed},
+      {"seed", ep.seed},
       {"threads",
        o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency())},
       {"method", o.method}};
