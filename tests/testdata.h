@@ -30,13 +30,13 @@ inline bool testdata_required() {
 
 }  // namespace irradcast::test
 
-#define IRRADCAST_NEED_TESTDATA()                                                             \
-  do {                                                                                        \
-    const std::string testdata_dir_ = ::irradcast::test::testdata_dir();                      \
-    if (!std::filesystem::is_directory(testdata_dir_)) {                                      \
-      if (::irradcast::test::testdata_required())                                             \
+#define IRRADCAST_NEED_TESTDATA()                                                              \
+  do {                                                                                         \
+    const std::string testdata_dir_ = ::irradcast::test::testdata_dir();                       \
+    if (!std::filesystem::is_directory(testdata_dir_)) {                                       \
+      if (::irradcast::test::testdata_required())                                              \
         FAIL() << "no sample data at " << testdata_dir_ << " (IRRADCAST_TESTDATA_REQUIRED=1)"; \
-      GTEST_SKIP() << "no sample data at " << testdata_dir_                                   \
-                   << " (set IRRADCAST_TESTDATA to the directory holding gltf-samples/)";     \
-    }                                                                                         \
+      GTEST_SKIP() << "no sample data at " << testdata_dir_                                    \
+                   << " (set IRRADCAST_TESTDATA to the directory holding gltf-samples/)";      \
+    }                                                                                          \
   } while (0)
