@@ -83,7 +83,10 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
     const EngineParams& e = options_.engine;
     // Every engine parameter (engine_params.inc) changes the published lightmaps.
     std::string key = package_->hash + "|" + engine_params_key(e);
-    auto add = [&](double v) { key += "|" + std::to_string(v); };
+    auto add = [&](double v) {
+      key += '|';  // not "|" + ...: GCC 12 -O3 -Werror=restrict (GCC bug 105329)
+      key += std::to_string(v);
+    };
     for (double v : {static_cast<double>(options_.atlas.texels_per_scene),
                      static_cast<double>(options_.atlas.max_lightmap_size),
                      static_cast<double>(options_.tiles.tile_size),
