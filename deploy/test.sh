@@ -5,6 +5,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash deploy/install-deps.sh
+# The sample data (glTF files) some tests read: ../shared/testdata unless IRRADCAST_TESTDATA
+# says otherwise. Where it is absent those tests skip, naming the path (tests/testdata.h).
+export IRRADCAST_TESTDATA=${IRRADCAST_TESTDATA:-$(cd .. && pwd)/shared/testdata}
+[ -d "$IRRADCAST_TESTDATA" ] || echo "test.sh: no sample data at $IRRADCAST_TESTDATA: the tests that read it will skip"
 # After each step: wall seconds so far, then `times`: the CPU time (user system) of this shell,
 # then of everything it ran so far (the compilers and tests).
 step() { echo "test.sh: $1 done at ${SECONDS} s; CPU (user system) of the shell, then of its commands:"; times; }

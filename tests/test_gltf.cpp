@@ -22,6 +22,7 @@
 #include "irradcast/common/error.h"
 #include "irradcast/common/gltf.h"
 #include "irradcast/common/scene.h"
+#include "testdata.h"
 
 using namespace irradcast;
 using nlohmann::json;
@@ -29,7 +30,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const std::string kSamples = std::string(IRRADCAST_TESTDATA_DIR) + "/gltf-samples";
+const std::string kSamples = irradcast::test::testdata("gltf-samples");
 
 // A fresh temporary directory per test, removed afterwards.
 class GltfTest : public test::ScratchDirTest {
@@ -308,6 +309,7 @@ TEST_F(GltfTest, GltfBadGlb) {
 // Random corruptions of a valid file must produce errors or scenes, never crashes (run under
 // ASan/UBSan to make this meaningful).
 TEST_F(GltfTest, GltfCorruptedBytesNeverCrash) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/Box/Box.gltf");
   std::string good = path("box.glb");
   save_gltf(s, good);
@@ -592,6 +594,7 @@ std::size_t expected_triangles(const std::string& file) {
 }
 
 TEST(GltfSamples, GltfAllSamplesLoadWithTheirTriangleCounts) {
+  IRRADCAST_NEED_TESTDATA();
   const char* names[] = {"2CylinderEngine",
                          "Box",
                          "BoxInterleaved",
@@ -633,6 +636,7 @@ TEST(GltfSamples, GltfAllSamplesLoadWithTheirTriangleCounts) {
 }
 
 TEST(GltfSamples, GltfCylinderEngine) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/2CylinderEngine/2CylinderEngine.gltf");
   EXPECT_EQ(s.triangle_count(), 121496u);
   EXPECT_EQ(s.meshes.size(), 29u);
@@ -642,6 +646,7 @@ TEST(GltfSamples, GltfCylinderEngine) {
 }
 
 TEST(GltfSamples, GltfBoxAndBoxInterleavedAgree) {
+  IRRADCAST_NEED_TESTDATA();
   Scene box = load_gltf(kSamples + "/Box/Box.gltf");
   Scene inter = load_gltf(kSamples + "/BoxInterleaved/BoxInterleaved.gltf");
   EXPECT_EQ(box.triangle_count(), 12u);
@@ -661,6 +666,7 @@ TEST(GltfSamples, GltfBoxAndBoxInterleavedAgree) {
 }
 
 TEST(GltfSamples, GltfBoxTexturedHasItsTexture) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/BoxTextured/BoxTextured.gltf");
   ASSERT_EQ(s.textures.size(), 1u);
   const Texture& t = s.textures[0];
@@ -682,6 +688,7 @@ TEST(GltfSamples, GltfBoxTexturedHasItsTexture) {
 }
 
 TEST(GltfSamples, GltfCamerasSkipsOrthographicWithWarning) {
+  IRRADCAST_NEED_TESTDATA();
   LoadReport report;
   Scene s = load_gltf(kSamples + "/Cameras/Cameras.gltf", &report);
   ASSERT_EQ(s.cameras.size(), 1u);
@@ -698,6 +705,7 @@ TEST(GltfSamples, GltfCamerasSkipsOrthographicWithWarning) {
 }
 
 TEST(GltfSamples, GltfDuck) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/Duck/Duck.gltf");
   EXPECT_EQ(s.triangle_count(), 4212u);
   ASSERT_EQ(s.textures.size(), 1u);
@@ -708,6 +716,7 @@ TEST(GltfSamples, GltfDuck) {
 }
 
 TEST(GltfSamples, GltfMultiUVTestHasTexcoord1) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/MultiUVTest/MultiUVTest.gltf");
   const Mesh& m = s.meshes.at(0);
   ASSERT_EQ(m.uv1.size(), m.positions.size());
@@ -725,6 +734,7 @@ TEST(GltfSamples, GltfMultiUVTestHasTexcoord1) {
 }
 
 TEST(GltfSamples, GltfSimpleSparseAccessorSubstitutes) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/SimpleSparseAccessor/SimpleSparseAccessor.gltf");
   const Mesh& m = s.meshes.at(0);
   ASSERT_EQ(m.positions.size(), 14u);
@@ -737,6 +747,7 @@ TEST(GltfSamples, GltfSimpleSparseAccessorSubstitutes) {
 }
 
 TEST(GltfSamples, GltfSimpleMeshesInstancesOneMesh) {
+  IRRADCAST_NEED_TESTDATA();
   Scene s = load_gltf(kSamples + "/SimpleMeshes/SimpleMeshes.gltf");
   auto objects = s.objects();
   ASSERT_EQ(objects.size(), 2u);
@@ -750,6 +761,7 @@ TEST(GltfSamples, GltfSimpleMeshesInstancesOneMesh) {
 }
 
 TEST(GltfSamples, GltfTriangleWithoutIndicesAndOrientation) {
+  IRRADCAST_NEED_TESTDATA();
   Scene t = load_gltf(kSamples + "/TriangleWithoutIndices/TriangleWithoutIndices.gltf");
   ASSERT_EQ(t.meshes.at(0).triangles.size(), 1u);
   EXPECT_EQ(t.meshes[0].triangles[0], glm::uvec3(0, 1, 2));
@@ -1007,6 +1019,7 @@ TEST_F(GltfTest, GltfRoundTripGltfAndGlb) {
 }
 
 TEST_F(GltfTest, GltfRoundTripSamples) {
+  IRRADCAST_NEED_TESTDATA();
   for (const char* name : {"Duck", "MultiUVTest", "2CylinderEngine", "SimpleSparseAccessor"}) {
     SCOPED_TRACE(name);
     Scene original = load_gltf(kSamples + "/" + name + "/" + name + ".gltf");

@@ -10,6 +10,7 @@
 #include "irradcast/common/sampling.h"
 #include "irradcast/common/world.h"
 #include "scene_builders.h"
+#include "testdata.h"
 
 using namespace irradcast;
 
@@ -71,8 +72,8 @@ TEST(GpuBvh, AgreesWithEmbreeOnRooms) {
 }
 
 TEST(GpuBvh, AgreesWithEmbreeOnTheLargeGltfSample) {
-  Scene scene =
-      load_scene(IRRADCAST_TESTDATA_DIR "/gltf-samples/2CylinderEngine/2CylinderEngine.gltf");
+  IRRADCAST_NEED_TESTDATA();
+  Scene scene = load_scene(test::testdata("gltf-samples/2CylinderEngine/2CylinderEngine.gltf"));
   EXPECT_GT(agreement(World::build(scene), 20000), 0.999);
 }
 

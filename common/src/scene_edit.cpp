@@ -355,7 +355,9 @@ EditOp op_from_json(const Json& j, const std::string& where) {
   if (t.is_string())
     op.target = t.get<std::string>();
   else if (t.is_number_unsigned())
-    op.target = "#" + std::to_string(t.get<unsigned>());
+    // Appended rather than `"#" + std::to_string(...)`: GCC 12 at -O3 sees an overlap in the
+    // inlined insert at 0 of that form (-Werror=restrict, GCC bug 105329).
+    op.target = std::string("#").append(std::to_string(t.get<unsigned>()));
   else
     throw Error(where + ": \"" + key + "\" must be a name or an index");
   switch (op.kind) {

@@ -32,6 +32,7 @@
 #include "irradcast/engine/path_tracer.h"
 #include "irradcast/engine/prepared_scene.h"
 #include "irradcast/engine/reference_lightmaps.h"
+#include "params_json.h"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
@@ -88,9 +89,10 @@ void write_png_tonemapped(const std::string& path, const ImageRGB& image,
 // --method is the engine's (cells | vpl | irradiance-cache), plus bake's own "reference" (the
 // path tracer per texel); "engine" is the old name of the default.
 void normalize_method(Options& o) {
-  if (o.engine.method == "engine") o.engine.method = "cells";
-  o.method = o.engine.method;
-  if (o.method == "reference") o.engine.method = "cells";
+  std::string& method = o.engine.text.at("method");
+  if (method == "engine") method = "cells";
+  o.method = method;
+  if (o.method == "reference") method = "cells";
   if (o.method != "reference" && o.method != "cells" && o.method != "vpl" &&
       o.method != "irradiance-cache")
     throw Error("unknown --method '" + o.method +
@@ -225,25 +227,18 @@ struct PassTotals {
   std::vector<PassTiming> probes, scatter;
 };
 
-// The engine's report: its parameters, probes, convergence and passes.
+// The engine's report: every parameter by name, then its probes, convergence and passes.
 json engine_report(const Bake& b, const Engine& engine, const PassTotals& passes) {
-  const EngineParams& ep = b.ep;
   const ProbeStats& ps = engine.probe_stats();
-  return {
-      {"backend", engine.backend().describe()},
-      {"updates", engine.updates()},
-      {"texels", engine.texel_count()},
-      {"cell_size", ep.cell_size},
-      {"tracing_range", ep.unbiased() ? json("inf") : json(ep.tracing_range)},
-      {"direct_samples", ep.direct_samples},
-      {"indirect_samples", ep.indirect_samples},
-      {"indirect_bounces", ep.indirect_bounces},
-      {"probe_resolution", ep.probe_resolution},
-      {"dispatch", b.o.engine.dispatch},
-      {"distant_point", b.o.engine.distant_point},
-      {"probes", {{"count", ps.probes}, {"relocated", ps.relocated}, {"unusable", ps.unusable}}},
-      {"mean_relative_error", engine.mean_relative_error()},
-      {"passes", passes.to_json(ep.unbiased())}};
+  json report = tools::params_json(b.ep);
+  report.update(
+      {{"backend", engine.backend().describe()},
+       {"updates", engine.updates()},
+       {"texels", engine.texel_count()},
+       {"probes", {{"count", ps.probes}, {"relocated", ps.relocated}, {"unusable", ps.unusable}}},
+       {"mean_relative_error", engine.mean_relative_error()},
+       {"passes", passes.to_json(b.ep.unbiased())}});
+  return report;
 }
 
 // The engine's methods (cells, vpl, irradiance-cache): --updates progressive updates.
@@ -259,7 +254,7 @@ Lightmaps engine_method(Bake& b, const PreparedScene& p) {
                           " moved out of geometry, " + std::to_string(ps.unusable) + " unusable)");
   Lightmaps out;
   Progress progress("engine", static_cast<std::uint64_t>(o.updates), "updates");
-  PassTotals passes(o.engine.bounces);
+  PassTotals passes(b.ep.indirect_bounces);
   for (int u = 0; u < o.updates; ++u) {
     UpdateStats us = engine.update();
     passes.add(us);
@@ -368,11 +363,11 @@ void write_report(Bake& b, const PreparedScene& p, const ImageRGB& view, const T
       {"exposure_ev", std::log2(exposure_scale(view, tm))},
       {"width", o.width},
       {"height", o.height},
-      {"bounces", {{"direct", 1}, {"indirect", o.engine.bounces}}},
+      {"bounces", {{"direct", 1}, {"indirect", b.ep.indirect_bounces}}},
       {"lightmap_spp", o.lightmap_spp},
       {"texels_per_scene", o.engine.texels_per_scene},
       {"max_lightmap_size", o.engine.max_lightmap_size},
-      {"seed", o.engine.seed},
+      {"seed", b.ep.seed},
       {"threads",
        o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency())},
       {"method", o.method}};
@@ -407,8 +402,8 @@ int run(const Options& o) {
   if (!o.camera.empty()) camera = parse_camera(o.camera, camera);
 
   PathTracerOptions pto;
-  pto.indirect_bounces = o.engine.bounces;
-  pto.seed = o.engine.seed;
+  pto.indirect_bounces = b.ep.indirect_bounces;
+  pto.seed = b.ep.seed;
   const Lightmaps lm = o.method == "reference" ? reference_method(b, p, pto) : engine_method(b, p);
   b.add_rays("lightmaps", lm.rays, lm.seconds);
   json lightmaps = write_lightmaps(b, p, lm.maps);

@@ -1,86 +1,187 @@
+// EngineParams' checks and texts, all driven by the list in engine_params.inc.
 #include "irradcast/engine/engine_params.h"
 
+#include <charconv>
 #include <cmath>
+#include <stdexcept>
+#include <type_traits>
 
 #include "irradcast/common/error.h"
 
 namespace irradcast {
 
+namespace {
+
+constexpr const char* kMethodNames[] = {"cells", "vpl", "irradiance-cache"};
+constexpr const char* kDispatchNames[] = {"cell", "object"};
+constexpr const char* kDistantPointNames[] = {"project", "fixed"};
+
+// The shortest text that reads back as exactly `v` (std::to_chars' guarantee).
+template <class T>
+std::string shortest(T v) {
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
+}
+
+template <class E>
+E parse_choice(const char* what, const std::string& text) {
+  const std::span<const char* const> names = choice_names(E{});
+  for (std::size_t i = 0; i < names.size(); ++i)
+    if (text == names[i]) return static_cast<E>(i);
+  std::string expected;
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    if (i > 0) expected += i + 1 == names.size() ? " or " : ", ";
+    expected += names[i];
+  }
+  throw Error("unknown " + std::string(what) + " '" + text + "' (expected " + expected + ")");
+}
+
+float parse_distance(const char* what, double lo, const std::string& text) {
+  if (text == "inf") return std::numeric_limits<float>::infinity();
+  try {
+    std::size_t used = 0;
+    float v = std::stof(text, &used);
+    if (used != text.size() || !(v >= lo)) throw std::invalid_argument(text);
+    return v;
+  } catch (const std::exception&) {
+    throw Error(std::string(what) + " '" + text + "' must be a number >= " + shortest(lo) +
+                " or inf");
+  }
+}
+
+bool in_range(const ParamSpec& s, double v) {
+  switch (s.kind) {
+    case ParamKind::Int:
+    case ParamKind::IntShown:
+    case ParamKind::Real:
+      return v >= s.lo && v <= s.hi;
+    case ParamKind::Positive:
+      return v > s.lo && v <= s.hi;
+    case ParamKind::Distance:
+      return v >= s.lo;
+    default:  // Seed: any value
+      return true;
+  }
+}
+
+std::string range_text(const ParamSpec& s) {
+  const std::string lo = shortest(s.lo), hi = shortest(s.hi);
+  switch (s.kind) {
+    case ParamKind::Real:
+      return "in [" + lo + ", " + hi + "]";
+    case ParamKind::Positive:
+      return "in (" + lo + ", " + hi + "]";
+    case ParamKind::Distance:
+      return ">= " + lo + " or inf";
+    default:  // Int, IntShown
+      return s.hi == kNoLimit ? ">= " + lo : "in " + lo + ".." + hi;
+  }
+}
+
+// Throws unless `v` is within `s`'s range (ParamKind).
+template <class T>
+void check_param(const ParamSpec& s, T v) {
+  if constexpr (std::is_enum_v<T>) {
+    if (static_cast<std::size_t>(v) >= choice_names(v).size())
+      throw Error(std::string(s.name) + " has no value " + std::to_string(static_cast<int>(v)));
+  } else if constexpr (!std::is_same_v<T, bool>) {
+    if (!in_range(s, static_cast<double>(v)))
+      throw Error(std::string(s.name) + " must be " + range_text(s));
+  }
+}
+
+}  // namespace
+
 void EngineParams::validate() const {
-  if (!(cell_size > 0.0f && cell_size <= 1.0f))
-    throw Error("cell_size must be in (0, 1] (a fraction of the scene size)");
-  if (!(tracing_range >= 0.0f)) throw Error("tracing_range must be >= 0 or inf");
-  if (direct_samples < 1 || direct_samples > 4096) throw Error("direct_samples must be in 1..4096");
-  if (indirect_samples < 1 || indirect_samples > 4096)
-    throw Error("indirect_samples must be in 1..4096");
-  if (indirect_bounces < 0 || indirect_bounces > 16)
-    throw Error("indirect_bounces must be in 0..16");
-  if (probe_resolution < 2 || probe_resolution > 64)
-    throw Error("probe_resolution must be in 2..64");
-  if (!(edit_blend >= 0.0f && edit_blend <= 64.0f))
-    throw Error("edit_blend must be in [0, 64] (updates; 0 = no blending)");
-  if (edit_keep < 0 || edit_keep > 1 << 20) throw Error("edit_keep must be in 0..2^20");
-  if (!(edit_batch > 0.0f && edit_batch <= 1.0f))
-    throw Error("edit_batch must be in (0, 1] (a fraction of the texels)");
-  if (vpl_paths < 1 || vpl_paths > 1 << 20) throw Error("vpl_paths must be in 1..2^20");
-  if (vpl_sets < 1 || vpl_sets > 1024) throw Error("vpl_sets must be in 1..1024");
-  if (vpl_interleave < 1 || vpl_interleave > 16) throw Error("vpl_interleave must be in 1..16");
+  for_each_param(*this, [](const ParamSpec& s, const auto& v) { check_param(s, v); });
+  // What one parameter's range cannot say.
   if (static_cast<long>(vpl_sets) * vpl_interleave * vpl_interleave > vpl_paths)
     throw Error(
         "vpl_paths must be at least vpl_sets x vpl_interleave^2 (every texel's subset "
         "needs a path)");
-  if (!(vpl_clamp >= 0.0f && vpl_clamp <= 1.0f))
-    throw Error("vpl_clamp must be in [0, 1] (a fraction of the scene size; 0 = no clamping)");
-  if (vpl_replace < 0) throw Error("vpl_replace must be >= 0 (0 = no cap)");
-  if (!(ic_accuracy > 0.0f && ic_accuracy <= 4.0f)) throw Error("ic_accuracy must be in (0, 4]");
-  if (ic_rays < 2 || ic_rays > 64) throw Error("ic_rays must be in 2..64");
-  if (!(ic_min_radius > 0.0f && ic_min_radius <= ic_max_radius && ic_max_radius <= 1.0f))
+  if (!(ic_min_radius <= ic_max_radius))
     throw Error("ic radii must satisfy 0 < ic_min_radius <= ic_max_radius <= 1");
   if (std::ceil(1.0f / cell_size) > 256.0f)
     throw Error("cell_size is too small (over 256 cells per axis)");
 }
 
+std::string param_text(float v) {
+  return v == std::numeric_limits<float>::infinity() ? "inf" : shortest(v);
+}
+std::string param_text(int v) {
+  return std::to_string(v);
+}
+std::string param_text(std::uint64_t v) {
+  return std::to_string(v);
+}
+std::string param_text(bool v) {
+  return v ? "true" : "false";
+}
+std::string param_text(Method v) {
+  return method_name(v);
+}
+std::string param_text(Dispatch v) {
+  return choice_names(v)[static_cast<std::size_t>(v)];
+}
+std::string param_text(DistantPoint v) {
+  return choice_names(v)[static_cast<std::size_t>(v)];
+}
+
+std::span<const char* const> choice_names(Method) {
+  return kMethodNames;
+}
+std::span<const char* const> choice_names(Dispatch) {
+  return kDispatchNames;
+}
+std::span<const char* const> choice_names(DistantPoint) {
+  return kDistantPointNames;
+}
+
+void parse_param(const ParamSpec& s, const std::string& text, Method& v) {
+  v = parse_choice<Method>(s.name, text);
+}
+void parse_param(const ParamSpec& s, const std::string& text, Dispatch& v) {
+  v = parse_choice<Dispatch>(s.name, text);
+}
+void parse_param(const ParamSpec& s, const std::string& text, DistantPoint& v) {
+  v = parse_choice<DistantPoint>(s.name, text);
+}
+void parse_param(const ParamSpec& s, const std::string& text, float& v) {
+  v = parse_distance(s.name, s.lo, text);
+}
+
+std::string engine_params_key(const EngineParams& p) {
+  std::string key;
+  for_each_param(p, [&](const ParamSpec& s, const auto& v) {
+    if (!key.empty()) key += '|';
+    key += s.name;
+    key += '=';
+    key += param_text(v);
+  });
+  return key;
+}
+
 Dispatch parse_dispatch(const std::string& name) {
-  if (name == "cell") return Dispatch::PerCell;
-  if (name == "object") return Dispatch::PerObject;
-  throw Error("unknown dispatch '" + name + "' (expected cell or object)");
+  return parse_choice<Dispatch>("dispatch", name);
 }
 
 DistantPoint parse_distant_point(const std::string& name) {
-  if (name == "project") return DistantPoint::BoundsProjection;
-  if (name == "fixed") return DistantPoint::FixedDistance;
-  throw Error("unknown distant point mode '" + name + "' (expected project or fixed)");
+  return parse_choice<DistantPoint>("distant point mode", name);
 }
 
 Method parse_method(const std::string& name) {
-  if (name == "cells") return Method::Cells;
-  if (name == "vpl") return Method::Vpl;
-  if (name == "irradiance-cache") return Method::IrradianceCache;
-  throw Error("unknown method '" + name + "' (expected cells, vpl or irradiance-cache)");
+  return parse_choice<Method>("method", name);
 }
 
 std::string method_name(Method m) {
-  switch (m) {
-    case Method::Cells:
-      return "cells";
-    case Method::Vpl:
-      return "vpl";
-    case Method::IrradianceCache:
-      return "irradiance-cache";
-  }
-  return "?";
+  const auto names = choice_names(m);
+  const auto i = static_cast<std::size_t>(m);
+  return i < names.size() ? names[i] : "?";
 }
 
 float parse_tracing_range(const std::string& text) {
-  if (text == "inf") return std::numeric_limits<float>::infinity();
-  try {
-    std::size_t used = 0;
-    float v = std::stof(text, &used);
-    if (used != text.size() || !(v >= 0.0f)) throw std::invalid_argument(text);
-    return v;
-  } catch (const std::exception&) {
-    throw Error("tracing range '" + text + "' must be a number >= 0 or inf");
-  }
+  return parse_distance("tracing range", 0.0, text);
 }
 
 }  // namespace irradcast

@@ -211,10 +211,15 @@ std::vector<VulkanDeviceInfo> list_vulkan_devices() {
 }
 
 std::string describe(const VulkanDeviceInfo& d) {
-  std::string s =
-      "[" + std::to_string(d.index) + "] " + d.name + " (" + d.type + ", Vulkan " + d.api_version;
+  // Appended piece by piece: GCC 12 at -O3 sees an overlap in `"[" + std::to_string(...)`
+  // (-Werror=restrict, GCC bug 105329).
+  std::string s = "[";
+  s += std::to_string(d.index);
+  s += "] " + d.name + " (" + d.type + ", Vulkan " + d.api_version;
   if (!d.driver.empty()) s += ", " + d.driver;
-  s += ", " + std::to_string(d.device_memory >> 20) + " MiB device-local";
+  s += ", ";
+  s += std::to_string(d.device_memory >> 20);
+  s += " MiB device-local";
   s += d.compute ? ", compute)" : ", NO compute queue)";
   return s;
 }

@@ -66,30 +66,13 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
   validation_scene_ = p.scene();
   {
     const EngineParams& e = options_.engine;
-    std::string key = package_->hash;
-    auto add = [&](double v) { key += "|" + std::to_string(v); };
-    for (double v : {static_cast<double>(e.cell_size),
-                     static_cast<double>(e.tracing_range),
-                     static_cast<double>(e.direct_samples),
-                     static_cast<double>(e.indirect_samples),
-                     static_cast<double>(e.indirect_bounces),
-                     static_cast<double>(e.probe_resolution),
-                     static_cast<double>(e.dispatch),
-                     static_cast<double>(e.distant_point),
-                     static_cast<double>(e.relocate_probes),
-                     static_cast<double>(e.probe_visibility),
-                     static_cast<double>(e.seed),
-                     static_cast<double>(e.method),
-                     static_cast<double>(e.vpl_paths),
-                     static_cast<double>(e.vpl_sets),
-                     static_cast<double>(e.vpl_interleave),
-                     static_cast<double>(e.vpl_clamp),
-                     static_cast<double>(e.vpl_replace),
-                     static_cast<double>(e.ic_accuracy),
-                     static_cast<double>(e.ic_rays),
-                     static_cast<double>(e.ic_min_radius),
-                     static_cast<double>(e.ic_max_radius),
-                     static_cast<double>(options_.atlas.texels_per_scene),
+    // Every engine parameter (engine_params.inc) changes the published lightmaps.
+    std::string key = package_->hash + "|" + engine_params_key(e);
+    auto add = [&](double v) {
+      key += '|';  // not "|" + ...: GCC 12 -O3 -Werror=restrict (GCC bug 105329)
+      key += std::to_string(v);
+    };
+    for (double v : {static_cast<double>(options_.atlas.texels_per_scene),
                      static_cast<double>(options_.atlas.max_lightmap_size),
                      static_cast<double>(options_.tiles.tile_size),
                      static_cast<double>(options_.tiles.change_threshold),

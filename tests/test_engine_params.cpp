@@ -1,0 +1,196 @@
+// The engine parameters' one list (engine_params.inc): every parameter reaches the command line,
+// the bake report's JSON, validate() and the tile epoch, and a change of any of them, the edit
+// parameters included, gives the published tiles another epoch.
+#include <gtest/gtest.h>
+
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <iterator>
+#include <limits>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "engine_options.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/engine/engine_params.h"
+#include "irradcast/service/engine_host.h"
+#include "params_json.h"
+
+using namespace irradcast;
+
+namespace {
+
+constexpr std::size_t kCount = std::size(kEngineParamSpecs);
+
+// EngineParams' number of fields, counted by brace-initialising it with ever more values: no
+// member can be declared outside engine_params.inc without this count telling.
+struct AnyValue {
+  template <class T>
+  operator T() const;
+};
+template <class T, class... Values>
+constexpr std::size_t field_count() {
+  if constexpr (requires { T{Values{}..., AnyValue{}}; })
+    return field_count<T, Values..., AnyValue>();
+  else
+    return sizeof...(Values);
+}
+static_assert(field_count<EngineParams>() == kCount,
+              "every EngineParams member must be declared in engine_params.inc");
+
+// Gives `v` another valid value and returns it as the command line spells it ("" for a flag).
+template <class T>
+std::string change(const ParamSpec& s, T& v) {
+  if constexpr (std::is_same_v<T, bool>) {
+    v = !v;
+    return "";
+  } else if constexpr (std::is_enum_v<T>) {
+    v = static_cast<T>((static_cast<std::size_t>(v) + 1) % choice_names(v).size());
+    return param_text(v);
+  } else if constexpr (std::is_same_v<T, float>) {
+    v = s.kind == ParamKind::Distance ? std::numeric_limits<float>::infinity() : v * 0.5f;
+    return param_text(v);
+  } else if constexpr (std::is_same_v<T, std::uint64_t>) {
+    v = (std::uint64_t{1} << 60) + 1;  // not exact as a double
+    return param_text(v);
+  } else {
+    v = v + 1;
+    return param_text(v);
+  }
+}
+
+// The defaults with parameter `i` changed; `text` gets the new value's command-line text.
+EngineParams with_changed(std::size_t i, std::string* text) {
+  EngineParams p;
+  std::size_t k = 0;
+  for_each_param(p, [&](const ParamSpec& s, auto& v) {
+    if (k++ == i) *text = change(s, v);
+  });
+  return p;
+}
+
+// What the command line makes of `args` (after the program name).
+EngineParams parse(std::vector<std::string> args) {
+  tools::EngineOptions options;
+  CLI::App app;
+  options.add_to(app);
+  std::reverse(args.begin(), args.end());  // CLI11 takes them last first
+  app.parse(args);
+  return options.params();
+}
+
+std::string first_flag(const ParamSpec& s) {
+  const std::string flags = s.flags;
+  return flags.substr(0, flags.find(','));
+}
+
+}  // namespace
+
+TEST(EngineParams, DefaultsAreValidAndTheListNamesEachMemberOnce) {
+  EXPECT_NO_THROW(EngineParams{}.validate());
+  EXPECT_EQ(parse({}), EngineParams{});
+  for (std::size_t i = 0; i < kCount; ++i)
+    for (std::size_t j = i + 1; j < kCount; ++j) {
+      EXPECT_STRNE(kEngineParamSpecs[i].name, kEngineParamSpecs[j].name);
+      EXPECT_NE(first_flag(kEngineParamSpecs[i]), first_flag(kEngineParamSpecs[j]));
+    }
+}
+
+// The next parameter added to engine_params.inc cannot be forgotten by the command line, the
+// report or the tile epoch: each of them sees a change of every one.
+TEST(EngineParams, EveryParameterReachesTheCommandLineTheReportAndTheEpochKey) {
+  const EngineParams defaults;
+  const nlohmann::json default_json = tools::params_json(defaults);
+  EXPECT_EQ(default_json.size(), kCount);
+  const std::string default_key = engine_params_key(defaults);
+  for (std::size_t i = 0; i < kCount; ++i) {
+    const ParamSpec& s = kEngineParamSpecs[i];
+    SCOPED_TRACE(s.name);
+    std::string text;
+    const EngineParams changed = with_changed(i, &text);
+    ASSERT_NE(changed, defaults);
+    EXPECT_NO_THROW(changed.validate());
+    // The command line: the flag sets exactly this parameter, and --help shows its text.
+    std::vector<std::string> args = {first_flag(s)};
+    if (!text.empty()) args.push_back(text);
+    EXPECT_EQ(parse(args), changed) << first_flag(s) << " " << text;
+    tools::EngineOptions options;
+    CLI::App app;
+    options.add_to(app);
+    ASSERT_NE(app.get_option_no_throw(first_flag(s)), nullptr);
+    EXPECT_EQ(app.get_option(first_flag(s))->get_description(), s.help);
+    // The report: this key and no other changes.
+    const nlohmann::json j = tools::params_json(changed);
+    ASSERT_EQ(j.size(), kCount);
+    for (const auto& [key, value] : j.items())
+      if (key == s.name)
+        EXPECT_NE(value, default_json.at(key));
+      else
+        EXPECT_EQ(value, default_json.at(key)) << key;
+    // The tile epoch's key.
+    EXPECT_NE(engine_params_key(changed), default_key);
+  }
+}
+
+TEST(EngineParams, ValidateRefusesEveryParameterOutsideItsRangeByName) {
+  for (std::size_t i = 0; i < kCount; ++i) {
+    const ParamSpec& s = kEngineParamSpecs[i];
+    if (s.kind == ParamKind::Choice || s.kind == ParamKind::Off || s.kind == ParamKind::Seed)
+      continue;
+    SCOPED_TRACE(s.name);
+    // Just below the range, and just above it where it has an end.
+    std::vector<double> bad = {s.kind == ParamKind::Positive ? s.lo : s.lo - 1};
+    if (s.hi != kNoLimit) bad.push_back(s.hi + 1);
+    for (double value : bad) {
+      EngineParams p;
+      std::size_t k = 0;
+      for_each_param(p, [&](const ParamSpec&, auto& v) {
+        if constexpr (std::is_arithmetic_v<std::remove_reference_t<decltype(v)>>)
+          if (k == i) v = static_cast<std::remove_reference_t<decltype(v)>>(value);
+        ++k;
+      });
+      try {
+        p.validate();
+        ADD_FAILURE() << value << " accepted";
+      } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find(s.name), std::string::npos) << e.what();
+      }
+    }
+  }
+  // What a choice's text cannot name is refused with the parameter's name.
+  EXPECT_THROW(parse({"--dispatch", "triangle"}), Error);
+  EXPECT_THROW(parse({"--tracing-range", "far"}), Error);
+  EXPECT_THROW(parse({"--bounces", "17"}), CLI::ValidationError);  // shown in --help
+}
+
+TEST(EngineParams, EpochKeyHoldsEveryBitOfTheSeed) {
+  EngineParams a, b;
+  a.seed = std::uint64_t{1} << 60;
+  b.seed = a.seed + 1;
+  EXPECT_NE(engine_params_key(a), engine_params_key(b));
+}
+
+// The edit parameters change the lightmaps published after an edit, so a server restarted with
+// another value must not let a client keep its tiles (they were left out of the epoch once).
+TEST(EngineParams, EditParametersChangeTheTileEpoch) {
+  Progress::set_enabled(false);
+  log::set_level(log::Level::Warn);
+  auto epoch = [](void (*change)(EngineParams&)) {
+    EngineHostOptions o;
+    o.atlas.texels_per_scene = 32.0f;
+    o.backend.kind = BackendKind::Embree;
+    o.engine_nice = 0;
+    change(o.engine);
+    return EngineHost(make_cornell_box(), "cornell", o).tile_epoch();
+  };
+  const std::uint64_t defaults = epoch([](EngineParams&) {});
+  EXPECT_EQ(epoch([](EngineParams&) {}), defaults);
+  EXPECT_NE(epoch([](EngineParams& p) { p.edit_blend = 2.0f; }), defaults);
+  EXPECT_NE(epoch([](EngineParams& p) { p.edit_batch = 1.0f; }), defaults);
+  EXPECT_NE(epoch([](EngineParams& p) { p.edit_keep = 0; }), defaults);
+}
