@@ -35,7 +35,6 @@ struct View {
   CameraPose pose;
 };
 
-
 // Eight fixed, varied viewpoints per built-in scene, all looking at lit surfaces (the first is
 // the scene's own camera). Other scenes get the default camera and views around the bounds.
 std::vector<View> make_views(const std::string& spec, const Scene& scene, const World& world);

@@ -326,8 +326,6 @@ void plot_views(const SceneResult& r, const Options& o) {
   std::printf("wrote %s\n", png.c_str());
 }
 
-}
-
 }  // namespace
 
 json report_scenes(const std::vector<SceneResult>& results, const Options& o) {

@@ -117,7 +117,6 @@ Err error_of(const ImageRGB& img, const Reference& ref) {
   return e;
 }
 
-
 double kstar_of(double server, double client, double pt) {
   if (!(server < kInf) || !(pt < kInf)) return kInf;
   if (!(pt > client)) return kInf;
@@ -175,7 +174,6 @@ ImageRGB weighted_mean(const std::vector<std::pair<const ImageRGB*, double>>& pa
   return out;
 }
 
-
 // 2 significant digits, rounded up (so that a level derived from the engine's floor stays
 // reachable) or to nearest.
 double round2(double v, bool up) {
@@ -208,17 +206,17 @@ Reference make_reference(const SceneContext& c, const SceneResult& r, std::size_
   key << "crossover-ref-v1|" << spec << "|" << r.triangles << "|" << world.bounds.lo.x << ","
       << world.bounds.lo.y << "," << world.bounds.lo.z << "," << world.bounds.hi.x << ","
       << world.bounds.hi.y << "," << world.bounds.hi.z << "|" << p.eye.x << "," << p.eye.y << ","
-      << p.eye.z << "|" << p.forward.x << "," << p.forward.y << "," << p.forward.z << "|"
-      << p.up.x << "," << p.up.y << "," << p.up.z << "|" << p.yfov << "|" << o.width << "x"
-      << o.height << "|" << o.ref_spp << "|" << c.pto.indirect_bounces;
+      << p.eye.z << "|" << p.forward.x << "," << p.forward.y << "," << p.forward.z << "|" << p.up.x
+      << "," << p.up.y << "," << p.up.z << "|" << p.yfov << "|" << o.width << "x" << o.height << "|"
+      << o.ref_spp << "|" << c.pto.indirect_bounces;
   char hex[17];
   std::snprintf(hex, sizeof(hex), "%016llx", static_cast<unsigned long long>(fnv1a(key.str())));
   ImageRGB half[2];
   Reference ref;
   ref.cached = true;
   for (int h = 0; h < 2; ++h) {
-    fs::path file = fs::path(o.cache) / ("ref_" + file_key(spec) + "_v" + std::to_string(v) +
-                                         "_" + hex + (h ? "_b.exr" : "_a.exr"));
+    fs::path file = fs::path(o.cache) / ("ref_" + file_key(spec) + "_v" + std::to_string(v) + "_" +
+                                         hex + (h ? "_b.exr" : "_a.exr"));
     if (fs::exists(file)) {
       half[h] = read_exr(file.string());
       if (half[h].width == o.width && half[h].height == o.height) continue;
@@ -382,8 +380,8 @@ PtImages run_path_tracer(const SceneContext& c, SceneResult& r, std::size_t v,
   std::fprintf(stderr,
                "[%s] path tracer view %zu/%zu (%s): %d spp, %.2f CPU s, error %.4f (1 spp: "
                "%.4f)\n",
-               c.spec.c_str(), v + 1, r.views.size(), r.views[v].name.c_str(), last.spp,
-               last.cpu_s, last.err.get(o.corrected), r.pt[v].front().err.get(o.corrected));
+               c.spec.c_str(), v + 1, r.views.size(), r.views[v].name.c_str(), last.spp, last.cpu_s,
+               last.err.get(o.corrected), r.pt[v].front().err.get(o.corrected));
   return images;
 }
 
@@ -492,8 +490,7 @@ SceneResult run_scene(const std::string& spec, const Options& o) {
   }
   r.pt.resize(nv);
   std::vector<PtImages> pt_images(nv);
-  for (std::size_t v = 0; v < nv; ++v)
-    pt_images[v] = run_path_tracer(c, r, v, checkpoints, lowest);
+  for (std::size_t v = 0; v < nv; ++v) pt_images[v] = run_path_tracer(c, r, v, checkpoints, lowest);
   for (double e : r.targets) r.rows.push_back(crossover_row(o, r, e));
   pick_picture(o, engine_images, pt_images, r);
   return r;
