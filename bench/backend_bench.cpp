@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_scene.h"
 #include "bench_util.h"
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/builtin.h"
@@ -88,27 +89,8 @@ struct Options {
   int updates = 4, warmup = 1, threads = 0, vulkan_device = -1, reference_spp = 16;
 };
 
-// A scene set up as the bake tool does it.
-struct SceneSetup {
-  Scene scene;
-  World world;
-  RayScene rays;
-  LightSampler lights;
-  Atlas atlas;
-  std::vector<TexelGBuffer> gbuffers;
-
-  SceneSetup(const std::string& spec, float texels_per_scene)
-      : scene(load_scene(spec)), world(World::build(scene)), rays(world), lights(world) {
-    AtlasOptions ao;
-    ao.texels_per_scene = texels_per_scene;
-    atlas = build_atlas(world, ao);
-    gbuffers = rasterize_gbuffer(world, atlas);
-    mark_hidden_texels(rays, gbuffers);
-  }
-};
-
 // One engine per backend, set up and warmed up, then o.updates updates interleaved.
-std::vector<BackendRun> run_backends(const Options& o, const SceneSetup& s,
+std::vector<BackendRun> run_backends(const Options& o, const BenchScene& s,
                                      const std::vector<std::string>& backends,
                                      const EngineParams& params, std::size_t& texels) {
   std::vector<BackendRun> runs;
@@ -205,7 +187,7 @@ void add_to_chart(const std::string& spec, const std::vector<BackendRun>& runs,
 }
 
 // The reference path tracer's lightmaps on each backend (set-up not timed).
-json run_references(const std::string& spec, const Options& o, const SceneSetup& s,
+json run_references(const std::string& spec, const Options& o, const BenchScene& s,
                     const std::vector<std::string>& backends, int bounces) {
   json out;
   const int reference_spp = o.reference_spp;
@@ -255,7 +237,7 @@ int run(Options o) {
   std::printf("\n");
 
   for (const std::string& spec : split_list(o.scenes_text)) {
-    const SceneSetup s(spec, o.texels_per_scene);
+    const BenchScene s(load_scene(spec), BenchScene::density(o.texels_per_scene));
     EngineParams params;
     params.tracing_range = o.range;
     std::size_t texels = 0;
@@ -299,10 +281,5 @@ int main(int argc, char** argv) {
   app.add_option("--out", o.out, "directory for the JSON and the PNG chart");
   app.add_option("--json", o.json_path, "JSON results file (default OUT/backend.json)");
   CLI11_PARSE(app, argc, argv);
-  try {
-    return run(o);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "irradcast-bench-backend: %s\n", e.what());
-    return 1;
-  }
+  return irradcast::bench::run_guarded("irradcast-bench-backend: ", [&] { return run(o); });
 }

@@ -24,6 +24,7 @@
 #include <thread>
 #include <vector>
 
+#include "bench_scene.h"
 #include "bench_util.h"
 #include "irradcast/client/camera_path.h"
 #include "irradcast/client/client_passes.h"
@@ -90,23 +91,10 @@ double rms_relative(const ImageRGB& a, const ImageRGB& b) {
 }
 
 // The scene and the lightmaps the client passes read: o.updates engine updates.
-struct ClientScene {
-  Scene scene;
-  World world;
-  RayScene rays;
-  LightSampler lights;
-  Atlas atlas;
-  std::vector<TexelGBuffer> gbuffers;
+struct ClientScene : irradcast::bench::BenchScene {
   std::vector<Lightmap> lightmaps;
 
-  explicit ClientScene(const Options& o)
-      : scene(load_scene(o.scene, 1.0f, o.scene_root)),
-        world(World::build(scene)),
-        rays(world),
-        lights(world),
-        atlas(build_atlas(world)),
-        gbuffers(rasterize_gbuffer(world, atlas)) {
-    mark_hidden_texels(rays, gbuffers);
+  explicit ClientScene(const Options& o) : BenchScene(load_scene(o.scene, 1.0f, o.scene_root)) {
     std::fprintf(stderr, "[client] %s: %d engine updates for the lightmaps ...\n", o.scene.c_str(),
                  o.updates);
     Engine engine(world, atlas, gbuffers, rays, std::make_unique<EmbreeBackend>(rays, lights),
@@ -356,10 +344,5 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
-  try {
-    return run(o);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "irradcast-bench-client: error: %s\n", e.what());
-    return 1;
-  }
+  return irradcast::bench::run_guarded("irradcast-bench-client: error: ", [&] { return run(o); });
 }

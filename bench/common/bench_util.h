@@ -7,6 +7,8 @@
 #include <time.h>
 
 #include <chrono>
+#include <cstdio>
+#include <exception>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -60,6 +62,18 @@ std::vector<int> parse_ints(const std::string& text);
 std::unique_ptr<tbb::global_control> limit_threads(int threads);
 // TBB's current worker limit.
 int tbb_threads();
+
+// Runs body() and returns its exit status; an exception is printed to stderr as prefix + what()
+// and a newline, and gives 1.
+template <typename Body>
+int run_guarded(const char* prefix, Body&& body) {
+  try {
+    return body();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s%s\n", prefix, e.what());
+    return 1;
+  }
+}
 
 // Writes j, indented by `indent`, and a newline to path.
 void write_json(const std::string& path, const nlohmann::json& j, int indent = 2);

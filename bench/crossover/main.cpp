@@ -143,10 +143,6 @@ int main(int argc, char** argv) {
   o.height = std::max(1, o.width * 3 / 4);
   o.corrected = cli.metric == "corrected";
   for (const std::string& item : split_list(cli.targets_text)) o.targets.push_back(std::stod(item));
-  try {
-    return run(cli);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "irradcast-bench-crossover: error: %s\n", e.what());
-    return 1;
-  }
+  return irradcast::bench::run_guarded("irradcast-bench-crossover: error: ",
+                                       [&] { return run(cli); });
 }

@@ -1,4 +1,4 @@
-// irradcast-bench-engine's parts, shared by its files: the scene set-up, the pass benchmark
+// irradcast-bench-engine's parts, shared by its files: the pass benchmark
 // (passes.cpp: engine passes vs RayScene vs raw Embree on the same rays) and the scaling
 // benchmark (scaling.cpp: full-update time against texel count). main.cpp holds the options and
 // the pass report; what the bench measures is described there.
@@ -10,32 +10,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "irradcast/common/atlas.h"
-#include "irradcast/common/lights.h"
-#include "irradcast/common/ray_scene.h"
-#include "irradcast/common/world.h"
-#include "irradcast/engine/gbuffer.h"
-#include "irradcast/engine/texel_validity.h"
+#include "bench_scene.h"
 
 namespace irradcast::bench {
-
-// Scene set-up, as the bake tool and the engine tests do it.
-struct Setup {
-  Setup(Scene s, float texels_per_scene)
-      : scene(std::move(s)), world(World::build(scene)), rays(world), lights(world) {
-    AtlasOptions ao;
-    ao.texels_per_scene = texels_per_scene;
-    atlas = build_atlas(world, ao);
-    gbuffers = rasterize_gbuffer(world, atlas);
-    mark_hidden_texels(rays, gbuffers);
-  }
-  Scene scene;
-  World world;
-  RayScene rays;
-  LightSampler lights;
-  Atlas atlas;
-  std::vector<TexelGBuffer> gbuffers;
-};
 
 // ---------------------------------------------------------------------------------------------
 // 1. Pass throughput (passes.cpp).

@@ -199,10 +199,5 @@ int main(int argc, char** argv) {
   app.add_flag("--skip-passes", o.skip_passes, "skip the pass-vs-Embree benchmark");
   app.add_flag("--skip-scaling", o.skip_scaling, "skip the update-vs-texels benchmark");
   CLI11_PARSE(app, argc, argv);
-  try {
-    return run(o);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "error: %s\n", e.what());
-    return 1;
-  }
+  return irradcast::bench::run_guarded("error: ", [&] { return run(o); });
 }

@@ -119,10 +119,7 @@ Capture capture_probes(const PassInput& in) {
     if (!g.usable[pi]) continue;
     Rng rng = texel_rng(in.params, pi, in.update, kProbe, in.bounce);
     for (std::size_t t = 0; t < per; ++t) {
-      glm::vec2 jitter = rng.next_2d();
-      glm::vec2 uv((static_cast<float>(t % res) + jitter.x) / res,
-                   (static_cast<float>(t / res) + jitter.y) / res);
-      c.rays.push_back({g.position[pi], 0.0f, octahedral_decode(uv), 3.4e38f});
+      c.rays.push_back({g.position[pi], 0.0f, probe_direction(t, res, rng.next_2d()), 3.4e38f});
       c.owner.push_back(static_cast<std::uint32_t>(pi * per + t));
     }
   }
@@ -423,7 +420,7 @@ json pass_json(const PassMeasure& m) {
 std::vector<PassRow> bench_passes(const std::string& spec, float texels_per_scene,
                                   const MeasureOptions& mo, json& out) {
   auto t0 = Clock::now();
-  Setup s(load_scene(spec), texels_per_scene);
+  BenchScene s(load_scene(spec), BenchScene::density(texels_per_scene));
   auto backend = std::make_unique<BenchBackend>(s.rays, s.lights, mo);
   BenchBackend* bench = backend.get();
   Engine engine(s.world, s.atlas, s.gbuffers, s.rays, std::move(backend), EngineParams{});

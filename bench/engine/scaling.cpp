@@ -41,7 +41,7 @@ struct CaseSpec {
 
 std::vector<ScalePoint> bench_updates(const std::vector<CaseSpec>& specs, int updates) {
   struct Case {
-    std::unique_ptr<Setup> setup;
+    std::unique_ptr<BenchScene> setup;
     std::unique_ptr<Engine> engine;
     std::vector<double> direct, probes, scatter;
   };
@@ -60,8 +60,9 @@ std::vector<ScalePoint> bench_updates(const std::vector<CaseSpec>& specs, int up
     Scene scene = make_rooms(ro);
     float extent = World::build(scene).bounds.max_extent();
     pt.texels_per_scene = pt.density * extent;
-    c.setup = std::make_unique<Setup>(std::move(scene), pt.texels_per_scene);
-    const Setup& s = *c.setup;
+    c.setup =
+        std::make_unique<BenchScene>(std::move(scene), BenchScene::density(pt.texels_per_scene));
+    const BenchScene& s = *c.setup;
     c.engine =
         std::make_unique<Engine>(s.world, s.atlas, s.gbuffers, s.rays,
                                  std::make_unique<EmbreeBackend>(s.rays, s.lights), EngineParams{});

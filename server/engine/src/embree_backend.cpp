@@ -43,6 +43,12 @@ glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d) {
   return p + std::max(t, 0.0f) * d;
 }
 
+glm::vec3 probe_direction(std::size_t t, int res, glm::vec2 jitter) {
+  glm::vec2 uv((static_cast<float>(t % res) + jitter.x) / res,
+               (static_cast<float>(t / res) + jitter.y) / res);
+  return octahedral_decode(uv);
+}
+
 int pick_probe(const ProbeWeights& w, float u) {
   float acc = 0.0f;
   for (int k = 0; k + 1 < w.count; ++k) {
@@ -132,12 +138,9 @@ PassResult EmbreeBackend::gather_probes(const PassInput& in, const RadianceField
                         if (!g.usable[pi]) continue;
                         Rng rng = texel_rng(in.params, pi, in.update, kProbe, in.bounce);
                         for (std::size_t t = 0; t < per; ++t) {
-                          glm::vec2 jitter = rng.next_2d();
-                          glm::vec2 uv((static_cast<float>(t % res) + jitter.x) / res,
-                                       (static_cast<float>(t / res) + jitter.y) / res);
                           Ray ray;
                           ray.origin = g.position[pi];
-                          ray.direction = octahedral_decode(uv);
+                          ray.direction = probe_direction(t, res, rng.next_2d());
                           Hit h = rays_->intersect(ray);
                           ++local;
                           if (h.valid()) out[pi * per + t] = radiance_at(prev, h);

@@ -23,6 +23,8 @@ glm::vec3 sample_probe(const std::vector<glm::vec3>& radiance, std::size_t probe
                        glm::vec3 dir);
 // Where a ray leaving p along d leaves the scene's bounds (slightly enlarged).
 glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d);
+// The direction of a probe's gather ray for octahedral texel t (res x res), jittered.
+glm::vec3 probe_direction(std::size_t t, int res, glm::vec2 jitter);
 // One of a texel's probes, chosen with probability equal to its weight (u uniform in [0, 1)).
 int pick_probe(const ProbeWeights& w, float u);
 
