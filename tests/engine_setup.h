@@ -1,45 +1,49 @@
-// A scene with everything the engine needs (world, Embree rays, lights, atlas, G-buffers), at a
-// low lightmap density so tests stay fast; engines on either backend. Shared by the engine and
-// Vulkan backend tests.
+// A prepared scene (world, Embree rays, lights, atlas, G-buffers: PreparedScene) at a low
+// lightmap density so tests stay fast, with references to its parts by name; engines on either
+// backend. Shared by the engine and Vulkan backend tests.
 #pragma once
 
 #include <memory>
 #include <vector>
 
-#include "irradcast/common/atlas.h"
+#include "irradcast/common/progress.h"
 #include "irradcast/engine/embree_backend.h"
 #include "irradcast/engine/engine.h"
-#include "irradcast/engine/gbuffer.h"
-#include "irradcast/common/lights.h"
-#include "irradcast/common/progress.h"
-#include "irradcast/common/ray_scene.h"
-#include "irradcast/engine/texel_validity.h"
-#include "irradcast/common/world.h"
+#include "irradcast/engine/prepared_scene.h"
 
 namespace irradcast::test {
 
+inline PreparedScene prepare_for_test(Scene s, float texels_per_scene) {
+  Progress::set_enabled(false);
+  PreparedSceneOptions po;
+  po.atlas.texels_per_scene = texels_per_scene;
+  return PreparedScene::build(std::move(s), po);
+}
+
 struct EngineSetup {
   EngineSetup(Scene s, float texels_per_scene)
-      : scene(std::move(s)), world(World::build(scene)), rays(world), lights(world) {
-    Progress::set_enabled(false);
-    AtlasOptions ao;
-    ao.texels_per_scene = texels_per_scene;
-    atlas = build_atlas(world, ao);
-    gbuffers = rasterize_gbuffer(world, atlas);
-    hidden = mark_hidden_texels(rays, gbuffers);
-  }
+      : prepared(prepare_for_test(std::move(s), texels_per_scene)),
+        scene(prepared.scene()),
+        world(prepared.world()),
+        rays(prepared.rays()),
+        lights(prepared.lights()),
+        atlas(prepared.atlas()),
+        gbuffers(prepared.gbuffers()),
+        hidden(prepared.hidden_texels()) {}
   // An engine on `backend`, or on Embree when none is given.
   std::unique_ptr<Engine> engine(EngineParams p,
                                  std::unique_ptr<TraceBackend> backend = nullptr) const {
     if (!backend) backend = std::make_unique<EmbreeBackend>(rays, lights);
     return std::make_unique<Engine>(world, atlas, gbuffers, rays, std::move(backend), p, &lights);
   }
-  Scene scene;
-  World world;
-  RayScene rays;
-  LightSampler lights;
-  Atlas atlas;
-  std::vector<TexelGBuffer> gbuffers;
+  PreparedScene prepared;
+  // The prepared scene's parts (they live as long as `prepared`).
+  const Scene& scene;
+  const World& world;
+  const RayScene& rays;
+  const LightSampler& lights;
+  const Atlas& atlas;
+  const std::vector<TexelGBuffer>& gbuffers;
   std::size_t hidden = 0;
 };
 

@@ -12,14 +12,13 @@
 
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/builtin.h"
-#include "irradcast/engine/embree_backend.h"
-#include "irradcast/engine/engine.h"
 #include "irradcast/common/error.h"
-#include "irradcast/wire/frame.h"
-#include "irradcast/engine/gbuffer.h"
 #include "irradcast/common/lights.h"
 #include "irradcast/common/progress.h"
-#include "irradcast/engine/texel_validity.h"
+#include "irradcast/engine/embree_backend.h"
+#include "irradcast/engine/engine.h"
+#include "irradcast/engine/prepared_scene.h"
+#include "irradcast/wire/frame.h"
 #include "irradcast/wire/tile_codec.h"
 
 using namespace irradcast;
@@ -351,18 +350,12 @@ TEST(TileCodec, TileChangedComparesTheRmsChangeWithTheTilesLevelPlusAFloor) {
 // delta between two consecutive updates. Reported as test properties.
 TEST(TileCodec, BytesPerTexelOfARealLightmap) {
   Progress::set_enabled(false);
-  const Scene scene = make_cornell_box();
-  const World world = World::build(scene);
-  const RayScene rays(world);
-  const LightSampler lights(world);
-  AtlasOptions ao;
-  ao.texels_per_scene = 128.0f;
-  const Atlas atlas = build_atlas(world, ao);
-  std::vector<TexelGBuffer> gbuffers = rasterize_gbuffer(world, atlas);
-  mark_hidden_texels(rays, gbuffers);
+  PreparedSceneOptions po;
+  po.atlas.texels_per_scene = 128.0f;
+  const PreparedScene p = PreparedScene::build(make_cornell_box(), po);
   EngineParams params;
-  Engine engine(world, atlas, gbuffers, rays, std::make_unique<EmbreeBackend>(rays, lights),
-                params);
+  Engine engine(p.world(), p.atlas(), p.gbuffers(), p.rays(),
+                std::make_unique<EmbreeBackend>(p.rays(), p.lights()), params);
   for (int u = 0; u < 8; ++u) engine.update();
   const std::vector<Lightmap> maps = engine.lightmaps();
   engine.update();

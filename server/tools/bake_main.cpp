@@ -18,27 +18,27 @@
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
 #include "irradcast/common/compositor.h"
-#include "irradcast/engine/engine.h"
 #include "irradcast/common/error.h"
-#include "irradcast/engine/gbuffer.h"
 #include "irradcast/common/gltf.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/lights.h"
 #include "irradcast/common/log.h"
-#include "irradcast/engine/path_tracer.h"
 #include "irradcast/common/progress.h"
 #include "irradcast/common/ray_scene.h"
-#include "irradcast/engine/reference_lightmaps.h"
-#include "irradcast/engine/texel_validity.h"
 #include "irradcast/common/tonemap.h"
-#include "irradcast/engine/vulkan_backend.h"
 #include "irradcast/common/world.h"
+#include "irradcast/engine/engine.h"
+#include "irradcast/engine/path_tracer.h"
+#include "irradcast/engine/prepared_scene.h"
+#include "irradcast/engine/reference_lightmaps.h"
+#include "irradcast/engine/vulkan_backend.h"
 
 namespace fs = std::filesystem;
-using irradcast::Error;
 using json = nlohmann::json;
 
 namespace {
+
+using namespace irradcast;
 
 struct Options {
   std::string scene = "cornell";
@@ -53,7 +53,7 @@ struct Options {
   std::string method = "cells";
   int updates = 8;
   int lightmap_spp = 64;
-  irradcast::tools::EngineOptions engine;
+  tools::EngineOptions engine;
   std::string tonemap = "reinhard";
   std::string exposure = "auto";
   int threads = 0;
@@ -80,9 +80,9 @@ std::string file_safe(const std::string& name) {
   return s.empty() ? "object" : s;
 }
 
-void write_png_tonemapped(const std::string& path, const irradcast::ImageRGB& image,
-                          const irradcast::ToneMapOptions& tm) {
-  irradcast::write_png(path, image.width, image.height, irradcast::tonemap_srgb8(image, tm));
+void write_png_tonemapped(const std::string& path, const ImageRGB& image,
+                          const ToneMapOptions& tm) {
+  write_png(path, image.width, image.height, tonemap_srgb8(image, tm));
 }
 
 // --method is the engine's (cells | vpl | irradiance-cache), plus bake's own "reference" (the
@@ -97,10 +97,7 @@ void normalize_method(Options& o) {
                 "' (expected cells, vpl, irradiance-cache or reference)");
 }
 
-int run(const Options& o) {
-  using namespace irradcast;
-  log::set_level(log::parse_level(o.log_level));
-  Progress::set_enabled(!o.quiet);
+ToneMapOptions tone_map_options(const Options& o) {
   ToneMapOptions tm;
   tm.op = parse_tone_operator(o.tonemap);
   if (o.exposure != "auto") {
@@ -113,107 +110,116 @@ int run(const Options& o) {
       throw Error("--exposure must be 'auto' or a number of stops, not '" + o.exposure + "'");
     }
   }
-  const EngineParams ep = o.engine.params();
-  const BackendOptions bo = o.engine.backend_options();
-  std::unique_ptr<tbb::global_control> threads;
-  if (o.threads > 0)
-    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
-                                                    static_cast<std::size_t>(o.threads));
+  return tm;
+}
 
+// One bake: the options, the engine's parameters from them, and what the steps add to the
+// report (steps time themselves with `sw`).
+struct Bake {
+  explicit Bake(const Options& options)
+      : o(options), ep(options.engine.params()), bo(options.engine.backend_options()) {}
+  const Options& o;
+  const EngineParams ep;
+  const BackendOptions bo;
   json report;
   json timings;
+  json rays = json::object();        // rays traced per step
+  json rays_per_s = json::object();  // and their rate
   Stopwatch total, sw;
 
-  Scene scene = load_scene(o.scene, o.detail, o.scene_root);
-  timings["load"] = sw.lap();
-  const std::vector<Object> objects = scene.objects();
-  log::info("bake", "scene '" + o.scene + "': " + std::to_string(objects.size()) + " objects, " +
-                        std::to_string(scene.triangle_count()) + " triangles");
+  void add_rays(const std::string& step, std::uint64_t n, double seconds) {
+    rays[step] = n;
+    rays_per_s[step] = n / std::max(1e-9, seconds);
+  }
+};
+
+// Loads the scene and, with --export-gltf, exports it. Returns false when there is nothing
+// more to do (export only).
+bool load(Bake& b, Scene& scene) {
+  const Options& o = b.o;
+  scene = load_scene(o.scene, o.detail, o.scene_root);
+  b.timings["load"] = b.sw.lap();
+  log::info("bake", "scene '" + o.scene + "': " + std::to_string(scene.objects().size()) +
+                        " objects, " + std::to_string(scene.triangle_count()) + " triangles");
   if (!o.export_gltf.empty()) {
     save_gltf(scene, o.export_gltf);
     log::info("bake", "exported the scene to " + o.export_gltf);
-    timings["export"] = sw.lap();
+    b.timings["export"] = b.sw.lap();
   }
   if (o.out.empty()) {
-    if (!o.export_gltf.empty()) return 0;  // export only
+    if (!o.export_gltf.empty()) return false;  // export only
     throw Error("--out DIR is required (or --export-gltf FILE alone)");
   }
   std::error_code ec;
   fs::create_directories(fs::path(o.out) / "lightmaps", ec);
   if (ec) throw Error(o.out + ": cannot create the output directory: " + ec.message());
+  return true;
+}
 
-  World world = World::build(scene);
-  if (world.objects.empty()) throw Error(o.scene + ": the scene has no triangles to light");
-  CameraPose camera = default_camera(scene, world);
-  if (!o.camera.empty()) camera = parse_camera(o.camera, camera);
-  RayScene rays(world);
-  LightSampler lights(world);
-  timings["bvh"] = sw.lap();
-  if (lights.empty()) log::warn("bake", "the scene has no lights: every image will be black");
+PreparedScene prepare(Bake& b, Scene scene) {
+  PreparedSceneOptions po;
+  po.atlas = b.o.engine.atlas();
+  po.name = b.o.scene;
+  PreparedScene p = PreparedScene::build(std::move(scene), po);
+  b.timings["bvh"] = p.timings().bvh;
+  b.timings["atlas"] = p.timings().atlas;
+  b.timings["gbuffer"] = p.timings().gbuffers;
+  b.sw.lap();
+  if (p.lights().empty()) log::warn("bake", "the scene has no lights: every image will be black");
+  log::info("bake", std::to_string(p.atlas().objects.size()) + " lightmaps, " +
+                        std::to_string(p.atlas().texel_count()) + " texels (" +
+                        std::to_string(p.valid_texels()) + " on visible surfaces, " +
+                        std::to_string(p.hidden_texels()) + " inside geometry)");
+  return p;
+}
 
-  const AtlasOptions ao = o.engine.atlas();
-  Atlas atlas = build_atlas(world, ao);
-  timings["atlas"] = sw.lap();
-  std::vector<TexelGBuffer> gbuffers = rasterize_gbuffer(world, atlas);
-  const std::size_t hidden = mark_hidden_texels(rays, gbuffers);
-  timings["gbuffer"] = sw.lap();
-  std::uint64_t valid = 0;
-  for (const auto& g : gbuffers) valid += g.valid_count();
-  log::info("bake", std::to_string(atlas.objects.size()) + " lightmaps, " +
-                        std::to_string(atlas.texel_count()) + " texels (" + std::to_string(valid) +
-                        " on visible surfaces, " + std::to_string(hidden) + " inside geometry)");
-
-  PathTracerOptions pto;
-  pto.indirect_bounces = o.engine.bounces;
-  pto.seed = o.engine.seed;
-  PathTracer tracer(world, rays, lights, pto);
+// Lightmaps and the rays and seconds spent on them.
+struct Lightmaps {
   std::vector<Lightmap> maps;
-  std::uint64_t lightmap_rays = 0;
-  double lightmap_seconds = 0.0;
-  if (o.method == "reference") {
-    ReferenceLightmapStats lm_stats;
-    // The per-texel path tracer on the chosen backend: the device's reference.comp, or Embree.
-    BackendChoice choice = make_backend(bo, world, rays, lights);
-    report["reference_backend"] = choice.backend->describe();
-    if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get()))
-      maps = vulkan->reference_lightmaps(gbuffers, o.lightmap_spp, o.engine.bounces, o.engine.seed,
-                                         &lm_stats);
-    else
-      maps = reference_lightmaps(world, tracer, gbuffers, o.lightmap_spp, &lm_stats);
-    lightmap_rays = lm_stats.rays;
-    lightmap_seconds = lm_stats.seconds;
-    timings["lightmaps"] = sw.lap();
-  } else {
-    Engine engine(world, atlas, gbuffers, rays, make_backend(bo, world, rays, lights).backend, ep,
-                  &lights);
-    timings["engine_setup"] = sw.lap();
-    const ProbeStats& ps = engine.probe_stats();
-    if (ep.uses_probes())
-      log::info("bake", std::to_string(ps.probes) + " probes (" + std::to_string(ps.relocated) +
-                            " moved out of geometry, " + std::to_string(ps.unusable) +
-                            " unusable)");
-    Progress progress("engine", static_cast<std::uint64_t>(o.updates), "updates");
-    PassTiming direct;
-    std::vector<PassTiming> probes(o.engine.bounces), scatter(o.engine.bounces);
-    for (int u = 0; u < o.updates; ++u) {
-      UpdateStats us = engine.update();
-      direct.seconds += us.direct.seconds;
-      direct.rays += us.direct.rays;
-      for (int b = 0; b < o.engine.bounces; ++b) {
-        probes[b].seconds += us.probes[b].seconds;
-        probes[b].rays += us.probes[b].rays;
-        scatter[b].seconds += us.scatter[b].seconds;
-        scatter[b].rays += us.scatter[b].rays;
-      }
-      lightmap_rays += us.total_rays();
-      lightmap_seconds += us.total_seconds;
-      progress.advance(1);
+  std::uint64_t rays = 0;
+  double seconds = 0.0;
+};
+
+// --method reference: the per-texel path tracer.
+Lightmaps reference_method(Bake& b, const PreparedScene& p, const PathTracer& tracer) {
+  const Options& o = b.o;
+  const BackendOptions& bo = b.bo;
+  const World& world = p.world();
+  const RayScene& rays = p.rays();
+  const LightSampler& lights = p.lights();
+  const std::vector<TexelGBuffer>& gbuffers = p.gbuffers();
+  Lightmaps out;
+  std::vector<Lightmap>& maps = out.maps;
+  json& report = b.report;
+  ReferenceLightmapStats lm_stats;
+  // The per-texel path tracer on the chosen backend: the device's reference.comp, or Embree.
+  BackendChoice choice = make_backend(bo, world, rays, lights);
+  report["reference_backend"] = choice.backend->describe();
+  if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get()))
+    maps = vulkan->reference_lightmaps(gbuffers, o.lightmap_spp, o.engine.bounces, o.engine.seed,
+                                       &lm_stats);
+  else
+    maps = reference_lightmaps(world, tracer, gbuffers, o.lightmap_spp, &lm_stats);
+  out.rays = lm_stats.rays;
+  out.seconds = lm_stats.seconds;
+  b.timings["lightmaps"] = b.sw.lap();
+  return out;
+}
+
+// The time and rays of each engine pass, summed over the updates.
+struct PassTotals {
+  explicit PassTotals(int bounces) : probes(bounces), scatter(bounces) {}
+  void add(const UpdateStats& us) {
+    direct.seconds += us.direct.seconds;
+    direct.rays += us.direct.rays;
+    for (std::size_t b = 0; b < probes.size(); ++b) {
+      probes[b].seconds += us.probes[b].seconds;
+      probes[b].rays += us.probes[b].rays;
+      scatter[b].seconds += us.scatter[b].seconds;
+      scatter[b].rays += us.scatter[b].rays;
     }
-    progress.finish();
-    if (!engine.method_summary().empty())
-      log::info("bake", method_name(ep.method) + ": " + engine.method_summary());
-    maps = engine.lightmaps();
-    timings["lightmaps"] = sw.lap();
+  }
+  json to_json(bool unbiased) const {
     auto pass = [](const std::string& name, const PassTiming& t) {
       return json{{"pass", name},
                   {"seconds", t.seconds},
@@ -221,27 +227,70 @@ int run(const Options& o) {
                   {"rays_per_s", t.rays / std::max(1e-9, t.seconds)}};
     };
     json passes = json::array({pass("direct", direct)});
-    for (int b = 0; b < o.engine.bounces; ++b) {
-      if (!ep.unbiased()) passes.push_back(pass("probes_" + std::to_string(b + 1), probes[b]));
+    for (std::size_t b = 0; b < probes.size(); ++b) {
+      if (!unbiased) passes.push_back(pass("probes_" + std::to_string(b + 1), probes[b]));
       passes.push_back(pass("scatter_" + std::to_string(b + 1), scatter[b]));
     }
-    report["engine"] = {
-        {"backend", engine.backend().describe()},
-        {"updates", engine.updates()},
-        {"texels", engine.texel_count()},
-        {"cell_size", ep.cell_size},
-        {"tracing_range", ep.unbiased() ? json("inf") : json(ep.tracing_range)},
-        {"direct_samples", ep.direct_samples},
-        {"indirect_samples", ep.indirect_samples},
-        {"indirect_bounces", ep.indirect_bounces},
-        {"probe_resolution", ep.probe_resolution},
-        {"dispatch", o.engine.dispatch},
-        {"distant_point", o.engine.distant_point},
-        {"probes", {{"count", ps.probes}, {"relocated", ps.relocated}, {"unusable", ps.unusable}}},
-        {"mean_relative_error", engine.mean_relative_error()},
-        {"passes", passes}};
+    return passes;
   }
+  PassTiming direct;
+  std::vector<PassTiming> probes, scatter;
+};
 
+// The engine's report: its parameters, probes, convergence and passes.
+json engine_report(const Bake& b, const Engine& engine, const PassTotals& passes) {
+  const EngineParams& ep = b.ep;
+  const ProbeStats& ps = engine.probe_stats();
+  return {
+      {"backend", engine.backend().describe()},
+      {"updates", engine.updates()},
+      {"texels", engine.texel_count()},
+      {"cell_size", ep.cell_size},
+      {"tracing_range", ep.unbiased() ? json("inf") : json(ep.tracing_range)},
+      {"direct_samples", ep.direct_samples},
+      {"indirect_samples", ep.indirect_samples},
+      {"indirect_bounces", ep.indirect_bounces},
+      {"probe_resolution", ep.probe_resolution},
+      {"dispatch", b.o.engine.dispatch},
+      {"distant_point", b.o.engine.distant_point},
+      {"probes", {{"count", ps.probes}, {"relocated", ps.relocated}, {"unusable", ps.unusable}}},
+      {"mean_relative_error", engine.mean_relative_error()},
+      {"passes", passes.to_json(ep.unbiased())}};
+}
+
+// The engine's methods (cells, vpl, irradiance-cache): --updates progressive updates.
+Lightmaps engine_method(Bake& b, const PreparedScene& p) {
+  const Options& o = b.o;
+  const EngineParams& ep = b.ep;
+  Engine engine(p.world(), p.atlas(), p.gbuffers(), p.rays(),
+                make_backend(b.bo, p.world(), p.rays(), p.lights()).backend, ep, &p.lights());
+  b.timings["engine_setup"] = b.sw.lap();
+  const ProbeStats& ps = engine.probe_stats();
+  if (ep.uses_probes())
+    log::info("bake", std::to_string(ps.probes) + " probes (" + std::to_string(ps.relocated) +
+                          " moved out of geometry, " + std::to_string(ps.unusable) + " unusable)");
+  Lightmaps out;
+  Progress progress("engine", static_cast<std::uint64_t>(o.updates), "updates");
+  PassTotals passes(o.engine.bounces);
+  for (int u = 0; u < o.updates; ++u) {
+    UpdateStats us = engine.update();
+    passes.add(us);
+    out.rays += us.total_rays();
+    out.seconds += us.total_seconds;
+    progress.advance(1);
+  }
+  progress.finish();
+  if (!engine.method_summary().empty())
+    log::info("bake", method_name(ep.method) + ": " + engine.method_summary());
+  out.maps = engine.lightmaps();
+  b.timings["lightmaps"] = b.sw.lap();
+  b.report["engine"] = engine_report(b, engine, passes);
+  return out;
+}
+
+// Writes DIR/lightmaps/*.exr; returns their entries for the report.
+json write_lightmaps(Bake& b, const PreparedScene& p, const std::vector<Lightmap>& maps) {
+  const std::vector<Object> objects = p.scene().objects();
   json lightmaps = json::array();
   for (std::size_t i = 0; i < maps.size(); ++i) {
     const std::string& object_name = objects[i].name;
@@ -250,75 +299,100 @@ int run(const Options& o) {
     img.width = maps[i].width;
     img.height = maps[i].height;
     img.pixels = maps[i].texels;
-    write_exr((fs::path(o.out) / "lightmaps" / name).string(), img);
+    write_exr((fs::path(b.o.out) / "lightmaps" / name).string(), img);
     lightmaps.push_back({{"file", "lightmaps/" + name},
                          {"object", object_name},
                          {"width", maps[i].width},
                          {"height", maps[i].height},
-                         {"charts", atlas.objects[i].chart_count},
-                         {"from_texcoord1", atlas.objects[i].from_file_uv1},
-                         {"valid_texels", gbuffers[i].valid_count()}});
+                         {"charts", p.atlas().objects[i].chart_count},
+                         {"from_texcoord1", p.atlas().objects[i].from_file_uv1},
+                         {"valid_texels", p.gbuffers()[i].valid_count()}});
   }
-  timings["write_lightmaps"] = sw.lap();
+  b.timings["write_lightmaps"] = b.sw.lap();
+  return lightmaps;
+}
 
+// Composes the view from the lightmaps and writes view.exr and view.png.
+ImageRGB compose_view(Bake& b, const PreparedScene& p, const std::vector<Lightmap>& maps,
+                      const CameraPose& camera, const ToneMapOptions& tm) {
+  const Options& o = b.o;
   ComposeStats cs;
-  ImageRGB view = compose(world, rays, atlas, maps, camera, o.width, o.height, &cs);
-  timings["compose"] = sw.lap();
+  ImageRGB view = compose(p.world(), p.rays(), p.atlas(), maps, camera, o.width, o.height, &cs);
+  b.timings["compose"] = b.sw.lap();
   write_exr((fs::path(o.out) / "view.exr").string(), view);
   write_png_tonemapped((fs::path(o.out) / "view.png").string(), view, tm);
   log::info("bake", "wrote " + (fs::path(o.out) / "view.exr").string() + " and view.png");
+  b.add_rays("compose", cs.rays, cs.seconds);
+  return view;
+}
 
-  json rays_json = {{"lightmaps", lightmap_rays}, {"compose", cs.rays}};
-  json rate = {{"lightmaps", lightmap_rays / std::max(1e-9, lightmap_seconds)},
-               {"compose", cs.rays / std::max(1e-9, cs.seconds)}};
-  if (o.reference_spp > 0) {
-    PathTracer::RenderStats rs;
-    ImageRGB ref;
-    BackendChoice choice = make_backend(bo, world, rays, lights);
-    report["reference_view_backend"] = choice.backend->describe();
-    if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get())) {
-      ReferenceLightmapStats vs;
-      ref = vulkan->render_reference(camera, o.width, o.height, o.reference_spp, o.engine.bounces,
-                                     o.engine.seed, &vs);
-      rs.rays = vs.rays;
-      rs.seconds = vs.seconds;
-    } else {
-      Progress progress("reference", static_cast<std::uint64_t>(o.reference_spp), "spp");
-      ref = tracer.render(
-          camera, o.width, o.height, o.reference_spp, [&](int, int) { progress.advance(1); }, &rs);
-      progress.finish();
-    }
-    timings["reference"] = sw.lap();
-    write_exr((fs::path(o.out) / "reference.exr").string(), ref);
-    // The reference uses the view's exposure so the two PNGs compare by eye.
-    ToneMapOptions ref_tm = tm;
-    ref_tm.auto_exposure = false;
-    ref_tm.exposure_ev = std::log2(exposure_scale(view, tm));
-    write_png_tonemapped((fs::path(o.out) / "reference.png").string(), ref, ref_tm);
-    // view | reference side by side, both at the view's exposure.
-    ImageRGB pair(2 * o.width, o.height);
-    for (int y = 0; y < o.height; ++y)
-      for (int x = 0; x < o.width; ++x) {
-        pair.at(x, y) = view.at(x, y);
-        pair.at(o.width + x, y) = ref.at(x, y);
-      }
-    write_png_tonemapped((fs::path(o.out) / "view_vs_reference.png").string(), pair, ref_tm);
-    ImageError err = compare(view, ref);
-    report["error"] = {
-        {"rmse", err.rmse}, {"rel_mse", err.rel_mse}, {"reference_spp", o.reference_spp}};
-    rays_json["reference"] = rs.rays;
-    rate["reference"] = rs.rays / std::max(1e-9, rs.seconds);
-    log::info("bake", "view vs reference: RMSE " + std::to_string(err.rmse) + ", relative MSE " +
-                          std::to_string(err.rel_mse));
+// --reference: the same view with the reference path tracer.
+ImageRGB render_reference(Bake& b, const PreparedScene& p, const PathTracer& tracer,
+                          const CameraPose& camera) {
+  const Options& o = b.o;
+  const BackendOptions& bo = b.bo;
+  const World& world = p.world();
+  const RayScene& rays = p.rays();
+  const LightSampler& lights = p.lights();
+  json& report = b.report;
+  PathTracer::RenderStats rs;
+  ImageRGB ref;
+  BackendChoice choice = make_backend(bo, world, rays, lights);
+  report["reference_view_backend"] = choice.backend->describe();
+  if (auto* vulkan = dynamic_cast<VulkanBackend*>(choice.backend.get())) {
+    ReferenceLightmapStats vs;
+    ref = vulkan->render_reference(camera, o.width, o.height, o.reference_spp, o.engine.bounces,
+                                   o.engine.seed, &vs);
+    rs.rays = vs.rays;
+    rs.seconds = vs.seconds;
+  } else {
+    Progress progress("reference", static_cast<std::uint64_t>(o.reference_spp), "spp");
+    ref = tracer.render(
+        camera, o.width, o.height, o.reference_spp, [&](int, int) { progress.advance(1); }, &rs);
+    progress.finish();
   }
-  timings["total"] = total.lap();
+  b.timings["reference"] = b.sw.lap();
+  b.add_rays("reference", rs.rays, rs.seconds);
+  return ref;
+}
 
+// Writes reference.exr, reference.png and view_vs_reference.png (both at the view's exposure)
+// and reports the error between the view and the reference.
+void compare_with_reference(Bake& b, const ImageRGB& view, const ImageRGB& ref,
+                            const ToneMapOptions& tm) {
+  const Options& o = b.o;
+  write_exr((fs::path(o.out) / "reference.exr").string(), ref);
+  // The reference uses the view's exposure so the two PNGs compare by eye.
+  ToneMapOptions ref_tm = tm;
+  ref_tm.auto_exposure = false;
+  ref_tm.exposure_ev = std::log2(exposure_scale(view, tm));
+  write_png_tonemapped((fs::path(o.out) / "reference.png").string(), ref, ref_tm);
+  // view | reference side by side, both at the view's exposure.
+  ImageRGB pair(2 * o.width, o.height);
+  for (int y = 0; y < o.height; ++y)
+    for (int x = 0; x < o.width; ++x) {
+      pair.at(x, y) = view.at(x, y);
+      pair.at(o.width + x, y) = ref.at(x, y);
+    }
+  write_png_tonemapped((fs::path(o.out) / "view_vs_reference.png").string(), pair, ref_tm);
+  ImageError err = compare(view, ref);
+  b.report["error"] = {
+      {"rmse", err.rmse}, {"rel_mse", err.rel_mse}, {"reference_spp", o.reference_spp}};
+  log::info("bake", "view vs reference: RMSE " + std::to_string(err.rmse) + ", relative MSE " +
+                        std::to_string(err.rel_mse));
+}
+
+// Writes DIR/report.json: the scene, settings, atlas, timings and rays.
+void write_report(Bake& b, const PreparedScene& p, const ImageRGB& view, const ToneMapOptions& tm,
+                  json lightmaps) {
+  const Options& o = b.o;
+  json& report = b.report;
   report["scene"] = {{"spec", o.scene},
-                     {"name", scene.name},
-                     {"objects", world.objects.size()},
-                     {"triangles", scene.triangle_count()},
-                     {"emissive_triangles", lights.emissive_triangles().size()},
-                     {"punctual_lights", world.lights.size()}};
+                     {"name", p.scene().name},
+                     {"objects", p.world().objects.size()},
+                     {"triangles", p.scene().triangle_count()},
+                     {"emissive_triangles", p.lights().emissive_triangles().size()},
+                     {"punctual_lights", p.world().lights.size()}};
   report["settings"] = {
       {"exposure_ev", std::log2(exposure_scale(view, tm))},
       {"width", o.width},
@@ -331,19 +405,49 @@ int run(const Options& o) {
       {"threads",
        o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency())},
       {"method", o.method}};
-  report["atlas"] = {{"texels", atlas.texel_count()},
-                     {"valid_texels", valid},
-                     {"hidden_texels", hidden},
-                     {"lightmaps", lightmaps}};
-  report["timings_s"] = timings;
-  report["rays"] = rays_json;
-  report["rays_per_s"] = rate;
+  report["atlas"] = {{"texels", p.atlas().texel_count()},
+                     {"valid_texels", p.valid_texels()},
+                     {"hidden_texels", p.hidden_texels()},
+                     {"lightmaps", std::move(lightmaps)}};
+  report["timings_s"] = b.timings;
+  report["rays"] = b.rays;
+  report["rays_per_s"] = b.rays_per_s;
   std::string report_path = (fs::path(o.out) / "report.json").string();
   std::ofstream f(report_path);
   f << report.dump(2) << "\n";
   if (!f) throw Error(report_path + ": cannot write the report");
   log::info("bake", "wrote " + report_path + " (total " +
-                        std::to_string(timings["total"].get<double>()) + " s)");
+                        std::to_string(b.timings["total"].get<double>()) + " s)");
+}
+
+int run(const Options& o) {
+  log::set_level(log::parse_level(o.log_level));
+  Progress::set_enabled(!o.quiet);
+  const ToneMapOptions tm = tone_map_options(o);
+  Bake b(o);
+  std::unique_ptr<tbb::global_control> threads;
+  if (o.threads > 0)
+    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                    static_cast<std::size_t>(o.threads));
+  Scene scene;
+  if (!load(b, scene)) return 0;
+  const PreparedScene p = prepare(b, std::move(scene));
+  CameraPose camera = default_camera(p.scene(), p.world());
+  if (!o.camera.empty()) camera = parse_camera(o.camera, camera);
+
+  PathTracerOptions pto;
+  pto.indirect_bounces = o.engine.bounces;
+  pto.seed = o.engine.seed;
+  PathTracer tracer(p.world(), p.rays(), p.lights(), pto);
+  const Lightmaps lm =
+      o.method == "reference" ? reference_method(b, p, tracer) : engine_method(b, p);
+  b.add_rays("lightmaps", lm.rays, lm.seconds);
+  json lightmaps = write_lightmaps(b, p, lm.maps);
+  const ImageRGB view = compose_view(b, p, lm.maps, camera, tm);
+  if (o.reference_spp > 0)
+    compare_with_reference(b, view, render_reference(b, p, tracer, camera), tm);
+  b.timings["total"] = b.total.lap();
+  write_report(b, p, view, tm, std::move(lightmaps));
   return 0;
 }
 

@@ -3,22 +3,15 @@
 #include <algorithm>
 #include <chrono>
 
-#include "irradcast/engine/embree_backend.h"
-#include "irradcast/engine/engine.h"
 #include "irradcast/common/error.h"
-#include "irradcast/engine/gbuffer.h"
-#include "irradcast/common/lights.h"
+#include "irradcast/common/lap_timer.h"
 #include "irradcast/common/log.h"
-#include "irradcast/common/ray_scene.h"
-#include "irradcast/engine/texel_validity.h"
+#include "irradcast/engine/engine.h"
 #include "irradcast/service/thread_priority.h"
 
 namespace irradcast {
 
 struct EngineHost::Impl {
-  std::unique_ptr<RayScene> rays;
-  std::unique_ptr<LightSampler> lights;
-  std::vector<TexelGBuffer> gbuffers;
   std::unique_ptr<Engine> engine;
 };
 
@@ -31,16 +24,20 @@ std::uint64_t digest64(const std::string& key) {
   return v;
 }
 
-Bounds object_box(const WorldObject& o) {
-  Bounds b;
-  for (const glm::vec3& p : o.positions) b.extend(p);
-  return b;
-}
-
-bool emits(const World& w, const WorldObject& o) {
-  for (std::uint32_t t = 0; t < o.triangles().size(); ++t)
-    if (w.material(o.object, t).is_emissive()) return true;
-  return false;
+// The scene as the engine needs it, with an editable ray scene. Validates the parameters first.
+PreparedScene prepare(Scene scene, const std::string& scene_id, const EngineHostOptions& options) {
+  options.engine.validate();
+  // Zero-area and non-finite triangles break the BVH builders and rays (the tools drop them at
+  // load already; a scene built in code may still have them).
+  drop_degenerate_triangles(scene, scene_id);
+  PreparedSceneOptions po;
+  po.atlas = options.atlas;
+  po.editable = true;  // the two-level BVH that an edit updates incrementally
+  po.name = scene_id;
+  PreparedScene prepared = PreparedScene::build(std::move(scene), po);
+  if (prepared.lights().empty())
+    log::warn("engine", scene_id + " has no lights: every tile will be black");
+  return prepared;
 }
 
 std::uint64_t now_us() {
@@ -51,34 +48,22 @@ std::uint64_t now_us() {
 }  // namespace
 
 EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions options)
-    : scene_(std::move(scene)),
-      scene_id_(std::move(scene_id)),
+    : scene_id_(std::move(scene_id)),
       options_(options),
+      prepared_(prepare(std::move(scene), scene_id_, options_)),
       impl_(std::make_unique<Impl>()) {
-  options_.engine.validate();
-  // Zero-area and non-finite triangles break the BVH builders and rays (the tools drop them at
-  // load already; a scene built in code may still have them).
-  drop_degenerate_triangles(scene_, scene_id_);
-  world_ = World::build(scene_);
-  if (world_.objects.empty()) throw Error(scene_id_ + ": the scene has no triangles to light");
-  // Editable: the two-level BVH that an edit updates incrementally.
-  impl_->rays = std::make_unique<RayScene>(world_, /*editable=*/true);
-  impl_->lights = std::make_unique<LightSampler>(world_);
-  if (impl_->lights->empty())
-    log::warn("engine", scene_id_ + " has no lights: every tile will be black");
-  atlas_ = build_atlas(world_, options_.atlas);
-  impl_->gbuffers = rasterize_gbuffer(world_, atlas_);
-  mark_hidden_texels(*impl_->rays, impl_->gbuffers);
-  BackendChoice backend = make_backend(options_.backend, world_, *impl_->rays, *impl_->lights);
+  const PreparedScene& p = prepared_;
+  BackendChoice backend = make_backend(options_.backend, p.world(), p.rays(), p.lights());
   backend_ = backend.reason;
   impl_->engine =
-      std::make_unique<Engine>(world_, atlas_, impl_->gbuffers, *impl_->rays,
-                               std::move(backend.backend), options_.engine, impl_->lights.get());
+      std::make_unique<Engine>(p.world(), p.atlas(), p.gbuffers(), p.rays(),
+                               std::move(backend.backend), options_.engine, &p.lights());
   std::vector<std::pair<int, int>> sizes;
-  for (const ObjectLightmap& o : atlas_.objects) sizes.emplace_back(o.width, o.height);
+  for (const ObjectLightmap& o : p.atlas().objects) sizes.emplace_back(o.width, o.height);
   tiles_ = std::make_unique<TileStore>(sizes, options_.tiles);
-  package_ = std::make_shared<const wire::ScenePackage>(wire::make_scene_package(scene_, atlas_));
-  validation_scene_ = scene_;
+  package_ =
+      std::make_shared<const wire::ScenePackage>(wire::make_scene_package(p.scene(), p.atlas()));
+  validation_scene_ = p.scene();
   {
     const EngineParams& e = options_.engine;
     std::string key = package_->hash;
@@ -119,7 +104,7 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
   stats_.texels = impl_->engine->texel_count();
   stats_.tiles = tiles_->tile_count();
   log::info("engine", scene_id_ + ": method " + method_name(options_.engine.method) + ", " +
-                          std::to_string(atlas_.objects.size()) + " lightmaps, " +
+                          std::to_string(p.atlas().objects.size()) + " lightmaps, " +
                           std::to_string(impl_->engine->texel_count()) + " texels, " +
                           std::to_string(tiles_->tile_count()) + " tiles, scene package " +
                           std::to_string(package_->bytes.size()) + " bytes");
@@ -178,161 +163,54 @@ std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
   return revision;
 }
 
-void EngineHost::apply_edits() {
-  std::deque<std::pair<std::uint64_t, SceneEdit>> edits;
-  std::vector<CameraPose> cameras;
+EngineHost::QueuedEdits EngineHost::take_queued_edits() {
+  std::deque<std::pair<std::uint64_t, SceneEdit>> pending;
+  QueuedEdits q;
   {
     std::lock_guard lock(mutex_);
-    edits.swap(pending_edits_);
-    for (const auto& [id, pose] : cameras_) cameras.push_back(pose);
+    pending.swap(pending_edits_);
+    for (const auto& [id, pose] : cameras_) q.cameras.push_back(pose);
   }
-  if (edits.empty()) return;
-  const auto began = std::chrono::steady_clock::now();
-  // Boxes and emitters before, to tell the engine where things were.
-  std::vector<Bounds> boxes_before;
-  std::vector<bool> emitted_before;
-  for (const WorldObject& o : world_.objects) {
-    boxes_before.push_back(object_box(o));
-    emitted_before.push_back(o.visible && emits(world_, o));
+  for (auto& [revision, edit] : pending) {
+    q.revisions.push_back(revision);
+    q.edits.push_back(std::move(edit));
   }
-  const std::vector<WorldLight> lights_before = world_.lights;
+  return q;
+}
 
-  EditEffect effect;
+void EngineHost::apply_edits() {
+  QueuedEdits queued = take_queued_edits();
+  if (queued.edits.empty()) return;
+  const auto began = std::chrono::steady_clock::now();
+  // Validated when submitted against the scene as loaded; against the edited scene an edit can
+  // still fail (a transform pushed out of range by many edits): not applied, not sent.
+  EditReport report;
+  const SceneChange change = prepared_.apply(queued.edits, &report);
+  for (std::size_t i = 0; i < report.edits.size(); ++i)
+    if (!report.edits[i].applied)
+      log::error("engine", std::string("edit ") + std::to_string(queued.revisions[i]) +
+                               " could not be applied: " + report.edits[i].error);
+  if (report.applied == 0) return;
+  LapTimer lap(report.timings);
+  impl_->engine->scene_changed(change, queued.cameras);
+  lap.lap("engine (" + impl_->engine->change_timings() + ")");
+  publish_edits(queued, report, lap, began);
+}
+
+void EngineHost::publish_edits(QueuedEdits& queued, const EditReport& report, LapTimer& lap,
+                               std::chrono::steady_clock::time_point began) {
   std::vector<AppliedEdit> applied;
-  for (auto& [revision, edit] : edits) {
-    try {
-      EditEffect e = apply_edit(scene_, edit);
-      effect.nodes.insert(effect.nodes.end(), e.nodes.begin(), e.nodes.end());
-      effect.lights.insert(effect.lights.end(), e.lights.begin(), e.lights.end());
-      effect.materials.insert(effect.materials.end(), e.materials.begin(), e.materials.end());
-    } catch (const std::exception& ex) {
-      // Validated when submitted against the scene as loaded; against the edited scene it can
-      // still fail (a transform pushed out of range by many edits). Not applied, not sent.
-      log::error("engine", std::string("edit ") + std::to_string(revision) +
-                               " could not be applied: " + ex.what());
-      continue;
-    }
+  for (std::size_t i = 0; i < queued.edits.size(); ++i) {
+    if (!report.edits[i].applied) continue;
     AppliedEdit a;
-    a.edit = std::move(edit);
-    a.revision = revision;
+    a.edit = std::move(queued.edits[i]);
+    a.revision = queued.revisions[i];
     applied.push_back(std::move(a));
   }
-  if (applied.empty()) return;
-
-  // World, ray scene (refit + top level), lights, G-buffers.
-  std::string timings;
-  auto lap_start = std::chrono::steady_clock::now();
-  auto lap = [&](const std::string& what) {
-    const auto now = std::chrono::steady_clock::now();
-    timings += (timings.empty() ? "" : ", ") + what + " " +
-               std::to_string(
-                   static_cast<int>(1e3 * std::chrono::duration<double>(now - lap_start).count())) +
-               " ms";
-    lap_start = now;
-  };
-  const std::vector<int> moved = world_.update(scene_);
-  lap("world");
-  impl_->rays->update(moved);
-  lap("ray scene");
-  *impl_->lights = LightSampler(world_);
-  const bool geometry = !moved.empty();
-  const bool surfaces = !effect.materials.empty();
-  if (geometry || surfaces) {
-    // G-buffers again for what moved, what uses a changed material, and what lies near a moved
-    // object (its texels may have been buried in it, or be now): hidden texels are marked
-    // again on exactly those.
-    std::vector<std::uint8_t> which(world_.objects.size(), 0);
-    std::vector<Bounds> near;
-    for (int o : moved) {
-      which[static_cast<std::size_t>(o)] = 1;
-      near.push_back(boxes_before[static_cast<std::size_t>(o)]);
-      near.push_back(object_box(world_.objects[static_cast<std::size_t>(o)]));
-    }
-    std::vector<bool> changed_material(scene_.materials.size(), false);
-    for (int m : effect.materials) changed_material[static_cast<std::size_t>(m)] = true;
-    const float margin = 0.02f * world_.bounds.max_extent();
-    for (std::size_t o = 0; o < world_.objects.size(); ++o) {
-      const WorldObject& obj = world_.objects[o];
-      for (std::uint32_t m : obj.source->triangle_material)
-        if (m < changed_material.size() && changed_material[m]) {
-          which[o] = 1;
-          break;
-        }
-      const Bounds box = object_box(obj);
-      for (const Bounds& b : near)
-        if (glm::all(glm::lessThanEqual(box.lo, b.hi + margin)) &&
-            glm::all(glm::lessThanEqual(b.lo - margin, box.hi)))
-          which[o] = 1;
-    }
-    rasterize_gbuffer(world_, atlas_, impl_->gbuffers, which);
-    mark_hidden_texels(*impl_->rays, impl_->gbuffers, which);
-  }
-  lap("lights and G-buffers");
-
-  SceneChange change;
-  change.geometry = geometry;
-  change.surfaces = surfaces;
-  std::vector<bool> is_moved(world_.objects.size(), false);
-  for (int o : moved) {
-    is_moved[static_cast<std::size_t>(o)] = true;
-    change.regions.push_back(boxes_before[static_cast<std::size_t>(o)]);
-    if (world_.objects[static_cast<std::size_t>(o)].visible)
-      change.regions.push_back(object_box(world_.objects[static_cast<std::size_t>(o)]));
-  }
-  // Emitters whose light changed: moved or shown/hidden ones, ones whose material changed.
-  std::vector<bool> material_changed(scene_.materials.size(), false);
-  for (int m : effect.materials) material_changed[static_cast<std::size_t>(m)] = true;
-  for (std::size_t o = 0; o < world_.objects.size(); ++o) {
-    const WorldObject& obj = world_.objects[o];
-    bool uses_changed = false;
-    for (std::uint32_t t = 0; t < obj.triangles().size() && !uses_changed; ++t) {
-      const std::uint32_t m =
-          t < obj.source->triangle_material.size() ? obj.source->triangle_material[t] : ~0u;
-      uses_changed = m < material_changed.size() && material_changed[m];
-    }
-    const bool emits_now = obj.visible && emits(world_, obj);
-    if (uses_changed && !is_moved[o]) change.regions.push_back(object_box(obj));
-    if ((emitted_before[o] || emits_now) && (is_moved[o] || uses_changed)) {
-      if (emitted_before[o]) change.light_points.push_back(boxes_before[o].center());
-      if (emits_now) change.light_points.push_back(object_box(obj).center());
-    } else if (emits_now) {
-      change.other_lights.push_back(object_box(obj).center());
-    }
-  }
-  // Punctual lights, matched by their node: the old and new positions of those that moved,
-  // changed or were shown or hidden; the others are unchanged emitters.
-  std::vector<bool> light_changed(scene_.lights.size(), false);
-  for (int l : effect.lights) light_changed[static_cast<std::size_t>(l)] = true;
-  auto before_of = [&](int node) -> const WorldLight* {
-    for (const WorldLight& l : lights_before)
-      if (l.node == node) return &l;
-    return nullptr;
-  };
-  for (const WorldLight& l : world_.lights) {
-    const WorldLight* old = before_of(l.node);
-    const bool changed = !old || old->position != l.position || old->direction != l.direction ||
-                         light_changed[static_cast<std::size_t>(
-                             scene_.nodes[static_cast<std::size_t>(l.node)].light)];
-    if (changed) {
-      change.light_points.push_back(l.position);
-      if (old) change.light_points.push_back(old->position);
-    } else {
-      change.other_lights.push_back(l.position);
-    }
-  }
-  for (const WorldLight& old : lights_before) {  // lights hidden by the edit
-    bool still = false;
-    for (const WorldLight& l : world_.lights) still = still || l.node == old.node;
-    if (!still) change.light_points.push_back(old.position);
-  }
-  lap("regions");
-  impl_->engine->scene_changed(change, cameras);
-  lap("engine (" + impl_->engine->change_timings() + ")");
-
   const std::uint64_t revision = applied.back().revision;
   auto package = std::make_shared<const wire::ScenePackage>(
-      wire::make_scene_package(scene_, atlas_, revision));
-  lap("package");
+      wire::make_scene_package(prepared_.scene(), prepared_.atlas(), revision));
+  lap.lap("package");
   std::uint64_t epoch = 0;
   {
     std::lock_guard lock(mutex_);
@@ -356,12 +234,12 @@ void EngineHost::apply_edits() {
     listener = edit_listener_;
   }
   log::info("engine", "applied edit " + std::to_string(revision) + " (" +
-                          std::to_string(moved.size()) + " objects moved or shown/hidden, " +
-                          std::to_string(effect.lights.size()) + " lights, " +
-                          std::to_string(effect.materials.size()) + " materials) in " +
+                          std::to_string(report.moved) + " objects moved or shown/hidden, " +
+                          std::to_string(report.lights) + " lights, " +
+                          std::to_string(report.materials) + " materials) in " +
                           std::to_string(static_cast<int>(ms)) + " ms; " +
                           std::to_string(impl_->engine->stale_texels()) + " texels to refresh");
-  log::info("engine", "edit " + std::to_string(revision) + " took: " + timings);
+  log::info("engine", "edit " + std::to_string(revision) + " took: " + lap.text());
   const std::uint64_t at = now_us();
   for (AppliedEdit& a : applied) {
     a.package = package;

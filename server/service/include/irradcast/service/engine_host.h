@@ -1,7 +1,7 @@
-// The engine as a service: owns a scene and everything the engine needs (world, ray scene,
-// atlas, G-buffers, the engine itself), runs progressive updates on its own thread, and
-// publishes each update's lightmaps to a TileStore. The network server reads the tile store and
-// the stats; it never touches the engine.
+// The engine as a service: owns a prepared scene (the scene, world, ray scene, atlas, G-buffers:
+// PreparedScene) and the engine on it, applies scene edits to both, runs progressive updates on
+// its own thread, and publishes each update's lightmaps to a TileStore. The network server reads
+// the tile store and the stats; it never touches the engine.
 #pragma once
 
 #include <atomic>
@@ -19,16 +19,18 @@
 #include <vector>
 
 #include "irradcast/common/atlas.h"
-#include "irradcast/engine/backend_select.h"
-#include "irradcast/engine/engine_params.h"
 #include "irradcast/common/scene.h"
 #include "irradcast/common/scene_edit.h"
-#include "irradcast/wire/scene_package.h"
-#include "irradcast/service/tile_store.h"
 #include "irradcast/common/world.h"
+#include "irradcast/engine/backend_select.h"
+#include "irradcast/engine/engine_params.h"
+#include "irradcast/engine/prepared_scene.h"
+#include "irradcast/service/tile_store.h"
+#include "irradcast/wire/scene_package.h"
 
 namespace irradcast {
 
+class LapTimer;
 struct UpdateStats;
 
 // An edit the engine thread has applied (EngineHost::set_edit_listener).
@@ -131,9 +133,9 @@ class EngineHost {
   // The scene, world and atlas: the engine thread changes the scene and world when it applies
   // an edit, so other threads must not read them while the engine runs (tests read them
   // between step() calls).
-  const Scene& scene() const { return scene_; }
-  const World& world() const { return world_; }
-  const Atlas& atlas() const { return atlas_; }
+  const Scene& scene() const { return prepared_.scene(); }
+  const World& world() const { return prepared_.world(); }
+  const Atlas& atlas() const { return prepared_.atlas(); }
   // The indirect method's state in one line ("" for radiance cells); engine thread or stopped.
   std::string method_summary() const;
   // The scene package at the current revision (a new one after every edit). Any thread.
@@ -153,19 +155,28 @@ class EngineHost {
 
  private:
   struct Impl;
+  // Edits taken from the queue, and the viewers' cameras at that time.
+  struct QueuedEdits {
+    std::vector<std::uint64_t> revisions;
+    std::vector<SceneEdit> edits;
+    std::vector<CameraPose> cameras;
+  };
   void run();
   void do_update();
-  void apply_edits();                        // engine thread: applies the queued edits
+  void apply_edits();  // engine thread: applies the queued edits
+  QueuedEdits take_queued_edits();
+  // After the prepared scene and the engine took the applied edits: the new scene package and
+  // tile epoch, the stats, the log and the edit listener.
+  void publish_edits(QueuedEdits& queued, const EditReport& report, LapTimer& lap,
+                     std::chrono::steady_clock::time_point began);
   void record_passes(const UpdateStats& u);  // with mutex_ held
   static constexpr std::size_t kMaxUpdateEnds = 1u << 16;
 
-  Scene scene_;
   std::string scene_id_;
   std::string backend_;
   std::string backend_name_;
   EngineHostOptions options_;
-  World world_;
-  Atlas atlas_;
+  PreparedScene prepared_;  // the scene, world, ray scene, lights, atlas, G-buffers
   std::shared_ptr<const wire::ScenePackage> package_;  // guarded by mutex_
   std::uint64_t tile_epoch_ = 0;                       // guarded by mutex_
   // submit_edit: the scene as the accepted edits will leave it (validation_mutex_).
