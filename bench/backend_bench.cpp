@@ -90,7 +90,7 @@ struct Options {
 };
 
 // One engine per backend, set up and warmed up, then o.updates updates interleaved.
-std::vector<BackendRun> run_backends(const Options& o, const BenchScene& s,
+std::vector<BackendRun> run_backends(const Options& o, const PreparedScene& s,
                                      const std::vector<std::string>& backends,
                                      const EngineParams& params, std::size_t& texels) {
   std::vector<BackendRun> runs;
@@ -100,11 +100,11 @@ std::vector<BackendRun> run_backends(const Options& o, const BenchScene& s,
     bo.kind = parse_backend(b);
     bo.vulkan_device = o.vulkan_device;
     const auto start = Clock::now();
-    BackendChoice choice = make_backend(bo, s.world, s.rays, s.lights);
+    BackendChoice choice = make_backend(bo, s.world(), s.rays(), s.lights());
     BackendRun run;
     run.name = choice.backend->name();
     run.describe = choice.backend->describe();
-    engines.push_back(std::make_unique<Engine>(s.world, s.atlas, s.gbuffers, s.rays,
+    engines.push_back(std::make_unique<Engine>(s.world(), s.atlas(), s.gbuffers(), s.rays(),
                                                std::move(choice.backend), params));
     for (int u = 0; u < o.warmup; ++u) engines.back()->update();
     run.setup_seconds = seconds_since(start);
@@ -187,7 +187,7 @@ void add_to_chart(const std::string& spec, const std::vector<BackendRun>& runs,
 }
 
 // The reference path tracer's lightmaps on each backend (set-up not timed).
-json run_references(const std::string& spec, const Options& o, const BenchScene& s,
+json run_references(const std::string& spec, const Options& o, const PreparedScene& s,
                     const std::vector<std::string>& backends, int bounces) {
   json out;
   const int reference_spp = o.reference_spp;
@@ -197,13 +197,13 @@ json run_references(const std::string& spec, const Options& o, const BenchScene&
     if (parse_backend(b) == BackendKind::Vulkan) {
       VulkanContextOptions vo;
       vo.device = o.vulkan_device;
-      VulkanBackend v(s.world, s.rays, s.lights, vo);
+      VulkanBackend v(s.world(), s.rays(), s.lights(), vo);
       device = v.describe();
-      v.reference_lightmaps(s.gbuffers, 1, bounces, 2);  // warm-up: shader compilation
-      v.reference_lightmaps(s.gbuffers, reference_spp, bounces, 1, &st);
+      v.reference_lightmaps(s.gbuffers(), 1, bounces, 2);  // warm-up: shader compilation
+      v.reference_lightmaps(s.gbuffers(), reference_spp, bounces, 1, &st);
     } else {
-      PathTracer tracer(s.world, s.rays, s.lights, PathTracerOptions{bounces, true, 1});
-      reference_lightmaps(s.world, tracer, s.gbuffers, reference_spp, &st);
+      PathTracer tracer(s.world(), s.rays(), s.lights(), PathTracerOptions{bounces, true, 1});
+      reference_lightmaps(s.world(), tracer, s.gbuffers(), reference_spp, &st);
     }
     std::printf("%-10s reference lightmaps %-8s %d spp: %.2f s, %.2f Mrays/s\n", spec.c_str(),
                 b.c_str(), reference_spp, st.seconds, st.rays / st.seconds / 1e6);
@@ -237,7 +237,7 @@ int run(Options o) {
   std::printf("\n");
 
   for (const std::string& spec : split_list(o.scenes_text)) {
-    const BenchScene s(load_scene(spec), BenchScene::density(o.texels_per_scene));
+    const PreparedScene s = prepare(load_scene(spec), density(o.texels_per_scene));
     EngineParams params;
     params.tracing_range = o.range;
     std::size_t texels = 0;

@@ -91,14 +91,17 @@ double rms_relative(const ImageRGB& a, const ImageRGB& b) {
 }
 
 // The scene and the lightmaps the client passes read: o.updates engine updates.
-struct ClientScene : irradcast::bench::BenchScene {
+struct ClientScene {
+  PreparedScene prepared;
   std::vector<Lightmap> lightmaps;
 
-  explicit ClientScene(const Options& o) : BenchScene(load_scene(o.scene, 1.0f, o.scene_root)) {
+  explicit ClientScene(const Options& o)
+      : prepared(irradcast::bench::prepare(load_scene(o.scene, 1.0f, o.scene_root))) {
     std::fprintf(stderr, "[client] %s: %d engine updates for the lightmaps ...\n", o.scene.c_str(),
                  o.updates);
-    Engine engine(world, atlas, gbuffers, rays, std::make_unique<EmbreeBackend>(rays, lights),
-                  EngineParams{});
+    const RayScene& rays = prepared.rays();
+    Engine engine(prepared.world(), prepared.atlas(), prepared.gbuffers(), rays,
+                  std::make_unique<EmbreeBackend>(rays, prepared.lights()), EngineParams{});
     for (int u = 0; u < o.updates; ++u) engine.update();
     lightmaps = engine.lightmaps();
   }
@@ -110,9 +113,9 @@ using Runs = std::vector<std::vector<Totals>>;  // per repeat, per configuration
 // vs the from-scratch SSAO frame of the first repeat.
 Runs measure(const Options& o, const ClientScene& cs, const CameraPath& path,
              const ClientPassOptions (&opts)[kConfigs], std::vector<double>& rms_per_frame) {
-  const World& world = cs.world;
-  const RayScene& rays = cs.rays;
-  const Atlas& atlas = cs.atlas;
+  const World& world = cs.prepared.world();
+  const RayScene& rays = cs.prepared.rays();
+  const Atlas& atlas = cs.prepared.atlas();
   const std::vector<Lightmap>& lightmaps = cs.lightmaps;
   Runs runs(static_cast<std::size_t>(o.repeat), std::vector<Totals>(kConfigs));
   rms_per_frame.assign(static_cast<std::size_t>(o.frames), 0.0);
@@ -239,13 +242,13 @@ void plot_frames(const Options& o, const Totals (&best)[kConfigs], int threads) 
 // The pair at the scene's own camera, one exposure for both (the plain frame's), and the SSAO
 // visibility (o.images).
 void write_images(const Options& o, const ClientScene& cs, const ClientPassOptions& ssao) {
-  const World& world = cs.world;
-  const RayScene& rays = cs.rays;
-  const Atlas& atlas = cs.atlas;
+  const World& world = cs.prepared.world();
+  const RayScene& rays = cs.prepared.rays();
+  const Atlas& atlas = cs.prepared.atlas();
   const std::vector<Lightmap>& lightmaps = cs.lightmaps;
 
   fs::create_directories(o.images);
-  const CameraPose cam = default_camera(cs.scene, world);
+  const CameraPose cam = default_camera(cs.prepared.scene(), world);
   ImageRGB plain = compose(world, rays, atlas, lightmaps, cam, o.width, o.height);
   ClientPasses ssao_passes(ssao);
   ImageRGB with = ssao_passes.compose(world, rays, atlas, lightmaps, cam, o.width, o.height);
@@ -273,7 +276,7 @@ int run(const Options& o) {
   const int threads =
       o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency());
   const ClientScene cs(o);
-  const World& world = cs.world;
+  const World& world = cs.prepared.world();
   CameraPath path = o.path == "orbit" ? CameraPath::orbit(world.bounds, o.path_period, 0.0)
                     : o.path == "random-walk"
                         ? CameraPath::random_walk(world.bounds, 1)

@@ -420,10 +420,10 @@ json pass_json(const PassMeasure& m) {
 std::vector<PassRow> bench_passes(const std::string& spec, float texels_per_scene,
                                   const MeasureOptions& mo, json& out) {
   auto t0 = Clock::now();
-  BenchScene s(load_scene(spec), BenchScene::density(texels_per_scene));
-  auto backend = std::make_unique<BenchBackend>(s.rays, s.lights, mo);
+  const PreparedScene s = prepare(load_scene(spec), density(texels_per_scene));
+  auto backend = std::make_unique<BenchBackend>(s.rays(), s.lights(), mo);
   BenchBackend* bench = backend.get();
-  Engine engine(s.world, s.atlas, s.gbuffers, s.rays, std::move(backend), EngineParams{});
+  Engine engine(s.world(), s.atlas(), s.gbuffers(), s.rays(), std::move(backend), EngineParams{});
   const double setup_s = seconds_since(t0);
   engine.update();  // warm-up: caches, TBB threads, probe radiance
   bench->measuring = true;
@@ -457,11 +457,11 @@ std::vector<PassRow> bench_passes(const std::string& spec, float texels_per_scen
   out.push_back({{"scene", spec},
                  {"texels_per_scene", texels_per_scene},
                  {"texels", engine.texel_count()},
-                 {"atlas_texels", s.atlas.texel_count()},
+                 {"atlas_texels", s.atlas().texel_count()},
                  {"triangles",
                   [&] {
                     std::size_t n = 0;
-                    for (const auto& o : s.world.objects) n += o.triangles().size();
+                    for (const auto& o : s.world().objects) n += o.triangles().size();
                     return n;
                   }()},
                  {"probes", engine.probes().count()},

@@ -41,7 +41,7 @@ struct CaseSpec {
 
 std::vector<ScalePoint> bench_updates(const std::vector<CaseSpec>& specs, int updates) {
   struct Case {
-    std::unique_ptr<BenchScene> setup;
+    std::unique_ptr<PreparedScene> setup;
     std::unique_ptr<Engine> engine;
     std::vector<double> direct, probes, scatter;
   };
@@ -61,15 +61,15 @@ std::vector<ScalePoint> bench_updates(const std::vector<CaseSpec>& specs, int up
     float extent = World::build(scene).bounds.max_extent();
     pt.texels_per_scene = pt.density * extent;
     c.setup =
-        std::make_unique<BenchScene>(std::move(scene), BenchScene::density(pt.texels_per_scene));
-    const BenchScene& s = *c.setup;
-    c.engine =
-        std::make_unique<Engine>(s.world, s.atlas, s.gbuffers, s.rays,
-                                 std::make_unique<EmbreeBackend>(s.rays, s.lights), EngineParams{});
+        std::make_unique<PreparedScene>(prepare(std::move(scene), density(pt.texels_per_scene)));
+    const PreparedScene& s = *c.setup;
+    c.engine = std::make_unique<Engine>(s.world(), s.atlas(), s.gbuffers(), s.rays(),
+                                        std::make_unique<EmbreeBackend>(s.rays(), s.lights()),
+                                        EngineParams{});
     pt.setup_s = seconds_since(t0);
     pt.texels = c.engine->texel_count();
-    pt.atlas_texels = s.atlas.texel_count();
-    for (const auto& o : s.world.objects) pt.triangles += o.triangles().size();
+    pt.atlas_texels = s.atlas().texel_count();
+    for (const auto& o : s.world().objects) pt.triangles += o.triangles().size();
     c.engine->update();  // warm-up
   }
   for (int u = 0; u < updates; ++u) {
