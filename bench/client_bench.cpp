@@ -24,27 +24,30 @@
 #include <thread>
 #include <vector>
 
-#include "irradcast/common/builtin.h"
-#include "irradcast/common/camera.h"
+#include "bench_scene.h"
+#include "bench_util.h"
 #include "irradcast/client/camera_path.h"
 #include "irradcast/client/client_passes.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/camera.h"
 #include "irradcast/common/compositor.h"
-#include "irradcast/engine/embree_backend.h"
-#include "irradcast/engine/engine.h"
-#include "irradcast/engine/engine_params.h"
 #include "irradcast/common/error.h"
-#include "irradcast/engine/gbuffer.h"
 #include "irradcast/common/lights.h"
 #include "irradcast/common/progress.h"
 #include "irradcast/common/ray_scene.h"
-#include "irradcast/engine/texel_validity.h"
 #include "irradcast/common/tonemap.h"
 #include "irradcast/common/world.h"
+#include "irradcast/engine/embree_backend.h"
+#include "irradcast/engine/engine.h"
+#include "irradcast/engine/engine_params.h"
+#include "irradcast/engine/gbuffer.h"
+#include "irradcast/engine/texel_validity.h"
 #include "plot.h"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 using namespace irradcast;
+using irradcast::bench::upper_median;
 
 namespace {
 
@@ -87,49 +90,35 @@ double rms_relative(const ImageRGB& a, const ImageRGB& b) {
   return den > 0.0 ? std::sqrt(num / den) : 0.0;
 }
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
+// The scene and the lightmaps the client passes read: o.updates engine updates.
+struct ClientScene {
+  PreparedScene prepared;
+  std::vector<Lightmap> lightmaps;
 
-int run(const Options& o) {
-  Progress::set_enabled(false);
-  std::optional<tbb::global_control> limit;
-  if (o.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, o.threads);
-  const int threads =
-      o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency());
-
-  Scene scene = load_scene(o.scene, 1.0f, o.scene_root);
-  World world = World::build(scene);
-  RayScene rays(world);
-  LightSampler lights(world);
-  Atlas atlas = build_atlas(world);
-  std::vector<TexelGBuffer> gbuffers = rasterize_gbuffer(world, atlas);
-  mark_hidden_texels(rays, gbuffers);
-  std::fprintf(stderr, "[client] %s: %d engine updates for the lightmaps ...\n", o.scene.c_str(),
-               o.updates);
-  Engine engine(world, atlas, gbuffers, rays, std::make_unique<EmbreeBackend>(rays, lights),
-                EngineParams{});
-  for (int u = 0; u < o.updates; ++u) engine.update();
-  const std::vector<Lightmap> lightmaps = engine.lightmaps();
-
-  CameraPath path = o.path == "orbit" ? CameraPath::orbit(world.bounds, o.path_period, 0.0)
-                    : o.path == "random-walk"
-                        ? CameraPath::random_walk(world.bounds, 1)
-                        : CameraPath::keyframes(load_camera_keyframes(o.path), 0.0);
-  ClientPassOptions opts[kConfigs];
-  opts[1].ssao = opts[2].ssao = true;
-  opts[2].reproject = true;
-  for (ClientPassOptions& c : opts) {
-    c.ssao_params.radius = o.ssao_radius;
-    c.reprojection.converge_frames = o.reproject_frames;
-    c.reprojection.refresh = o.reproject_refresh;
-    c.validate();
+  explicit ClientScene(const Options& o)
+      : prepared(irradcast::bench::prepare(load_scene(o.scene, 1.0f, o.scene_root))) {
+    std::fprintf(stderr, "[client] %s: %d engine updates for the lightmaps ...\n", o.scene.c_str(),
+                 o.updates);
+    const RayScene& rays = prepared.rays();
+    Engine engine(prepared.world(), prepared.atlas(), prepared.gbuffers(), rays,
+                  std::make_unique<EmbreeBackend>(rays, prepared.lights()), EngineParams{});
+    for (int u = 0; u < o.updates; ++u) engine.update();
+    lightmaps = engine.lightmaps();
   }
-  // Per repeat, per configuration.
-  std::vector<std::vector<Totals>> runs(static_cast<std::size_t>(o.repeat),
-                                        std::vector<Totals>(kConfigs));
-  std::vector<double> rms_per_frame(static_cast<std::size_t>(o.frames), 0.0);
+};
+
+using Runs = std::vector<std::vector<Totals>>;  // per repeat, per configuration
+
+// Every repeat along the path, every configuration per frame; rms_per_frame: the reprojected
+// vs the from-scratch SSAO frame of the first repeat.
+Runs measure(const Options& o, const ClientScene& cs, const CameraPath& path,
+             const ClientPassOptions (&opts)[kConfigs], std::vector<double>& rms_per_frame) {
+  const World& world = cs.prepared.world();
+  const RayScene& rays = cs.prepared.rays();
+  const Atlas& atlas = cs.prepared.atlas();
+  const std::vector<Lightmap>& lightmaps = cs.lightmaps;
+  Runs runs(static_cast<std::size_t>(o.repeat), std::vector<Totals>(kConfigs));
+  rms_per_frame.assign(static_cast<std::size_t>(o.frames), 0.0);
   for (int r = 0; r < o.repeat; ++r) {
     std::vector<std::unique_ptr<ClientPasses>> passes;
     for (const ClientPassOptions& c : opts) passes.push_back(std::make_unique<ClientPasses>(c));
@@ -159,15 +148,12 @@ int run(const Options& o) {
       if (r == 0) rms_per_frame[static_cast<std::size_t>(f)] = rms_relative(images[2], images[1]);
     }
   }
-  // The repeat with the median total time of each configuration.
-  Totals best[kConfigs];
-  for (int c = 0; c < kConfigs; ++c) {
-    std::vector<double> totals;
-    for (const auto& rr : runs) totals.push_back(rr[static_cast<std::size_t>(c)].total);
-    const double m = median(totals);
-    for (const auto& rr : runs)
-      if (rr[static_cast<std::size_t>(c)].total == m) best[c] = rr[static_cast<std::size_t>(c)];
-  }
+  return runs;
+}
+
+// Prints the table and ratios; returns the JSON report.
+json report(const Options& o, const Totals (&best)[kConfigs],
+            const std::vector<double>& rms_per_frame, int threads) {
   const double nf = o.frames;
   auto ms = [&](double s) { return 1e3 * s / nf; };
   double rms_mean = 0.0, rms_max = 0.0;
@@ -224,58 +210,105 @@ int run(const Options& o) {
             {"ratio_ssao_pass_reproject_over_full", ssao_ratio},
             {"rms_relative_reproject_vs_scratch", rms_mean},
             {"rms_relative_worst_frame", rms_max}};
+  return j;
+}
+
+// The frame time along the path per configuration (o.plot_out).
+void plot_frames(const Options& o, const Totals (&best)[kConfigs], int threads) {
+  plot::XYPlot p;
+  p.title = "Client frame time, " + o.path + " path (" + o.scene + ", " + std::to_string(o.width) +
+            "x" + std::to_string(o.height) + ")";
+  p.x_label = "frame";
+  p.y_label = "ms per frame";
+  p.note = std::to_string(threads) + " thread(s); median run of " + std::to_string(o.repeat);
+  const plot::Color colors[kConfigs] = {plot::kBlue, plot::kOrange, plot::kGreen};
+  for (int k = 0; k < kConfigs; ++k) {
+    plot::Series s;
+    s.label = kNames[k];
+    s.color = colors[k];
+    s.points = false;
+    s.lines = true;
+    for (int f = 0; f < o.frames; ++f) {
+      s.x.push_back(f);
+      s.y.push_back(best[k].per_frame_ms[static_cast<std::size_t>(f)]);
+    }
+    p.series.push_back(s);
+  }
+  p.legend = plot::XYPlot::Legend::TopRight;
+  p.y_headroom = 0.3;
+  plot::write_xy_plot(o.plot_out, p);
+}
+
+// The pair at the scene's own camera, one exposure for both (the plain frame's), and the SSAO
+// visibility (o.images).
+void write_images(const Options& o, const ClientScene& cs, const ClientPassOptions& ssao) {
+  const World& world = cs.prepared.world();
+  const RayScene& rays = cs.prepared.rays();
+  const Atlas& atlas = cs.prepared.atlas();
+  const std::vector<Lightmap>& lightmaps = cs.lightmaps;
+
+  fs::create_directories(o.images);
+  const CameraPose cam = default_camera(cs.prepared.scene(), world);
+  ImageRGB plain = compose(world, rays, atlas, lightmaps, cam, o.width, o.height);
+  ClientPasses ssao_passes(ssao);
+  ImageRGB with = ssao_passes.compose(world, rays, atlas, lightmaps, cam, o.width, o.height);
+  ToneMapOptions tm;
+  tm.auto_exposure = false;
+  tm.exposure_ev = std::log2(exposure_scale(plain, ToneMapOptions{}));
+  const std::string stem = o.images + "/client_" + fs::path(o.scene).stem().string();
+  write_png(stem + "_plain.png", plain.width, plain.height, tonemap_srgb8(plain, tm));
+  write_png(stem + "_ssao.png", with.width, with.height, tonemap_srgb8(with, tm));
+  // The visibility itself, white = unoccluded.
+  ImageRGB vis(o.width, o.height);
+  for (std::size_t i = 0; i < vis.pixels.size(); ++i)
+    vis.pixels[i] = glm::vec3(ssao_passes.visibility()[i]);
+  ToneMapOptions lin;
+  lin.op = ToneOperator::Clamp;
+  lin.auto_exposure = false;
+  write_png(stem + "_ssao_visibility.png", vis.width, vis.height, tonemap_srgb8(vis, lin));
+  std::printf("images: %s_{plain,ssao,ssao_visibility}.png\n", stem.c_str());
+}
+
+int run(const Options& o) {
+  Progress::set_enabled(false);
+  std::optional<tbb::global_control> limit;
+  if (o.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, o.threads);
+  const int threads =
+      o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency());
+  const ClientScene cs(o);
+  const World& world = cs.prepared.world();
+  CameraPath path = o.path == "orbit" ? CameraPath::orbit(world.bounds, o.path_period, 0.0)
+                    : o.path == "random-walk"
+                        ? CameraPath::random_walk(world.bounds, 1)
+                        : CameraPath::keyframes(load_camera_keyframes(o.path), 0.0);
+  ClientPassOptions opts[kConfigs];
+  opts[1].ssao = opts[2].ssao = true;
+  opts[2].reproject = true;
+  for (ClientPassOptions& c : opts) {
+    c.ssao_params.radius = o.ssao_radius;
+    c.reprojection.converge_frames = o.reproject_frames;
+    c.reprojection.refresh = o.reproject_refresh;
+    c.validate();
+  }
+  std::vector<double> rms_per_frame;
+  const Runs runs = measure(o, cs, path, opts, rms_per_frame);
+  // The repeat with the median total time of each configuration.
+  Totals best[kConfigs];
+  for (int c = 0; c < kConfigs; ++c) {
+    std::vector<double> totals;
+    for (const auto& rr : runs) totals.push_back(rr[static_cast<std::size_t>(c)].total);
+    const double m = upper_median(totals);
+    for (const auto& rr : runs)
+      if (rr[static_cast<std::size_t>(c)].total == m) best[c] = rr[static_cast<std::size_t>(c)];
+  }
+  const json j = report(o, best, rms_per_frame, threads);
   if (!o.json_out.empty()) {
     std::ofstream f(o.json_out);
     f << j.dump(2) << "\n";
     if (!f) throw Error(o.json_out + ": cannot write");
   }
-  if (!o.plot_out.empty()) {
-    plot::XYPlot p;
-    p.title = "Client frame time, " + o.path + " path (" + o.scene + ", " +
-              std::to_string(o.width) + "x" + std::to_string(o.height) + ")";
-    p.x_label = "frame";
-    p.y_label = "ms per frame";
-    p.note = std::to_string(threads) + " thread(s); median run of " + std::to_string(o.repeat);
-    const plot::Color colors[kConfigs] = {plot::kBlue, plot::kOrange, plot::kGreen};
-    for (int k = 0; k < kConfigs; ++k) {
-      plot::Series s;
-      s.label = kNames[k];
-      s.color = colors[k];
-      s.points = false;
-      s.lines = true;
-      for (int f = 0; f < o.frames; ++f) {
-        s.x.push_back(f);
-        s.y.push_back(best[k].per_frame_ms[static_cast<std::size_t>(f)]);
-      }
-      p.series.push_back(s);
-    }
-    p.legend = plot::XYPlot::Legend::TopRight;
-    p.y_headroom = 0.3;
-    plot::write_xy_plot(o.plot_out, p);
-  }
-  if (!o.images.empty()) {
-    // The pair at the scene's own camera, one exposure for both (the plain frame's).
-    fs::create_directories(o.images);
-    const CameraPose cam = default_camera(scene, world);
-    ImageRGB plain = compose(world, rays, atlas, lightmaps, cam, o.width, o.height);
-    ClientPasses ssao_passes(opts[1]);
-    ImageRGB with = ssao_passes.compose(world, rays, atlas, lightmaps, cam, o.width, o.height);
-    ToneMapOptions tm;
-    tm.auto_exposure = false;
-    tm.exposure_ev = std::log2(exposure_scale(plain, ToneMapOptions{}));
-    const std::string stem = o.images + "/client_" + fs::path(o.scene).stem().string();
-    write_png(stem + "_plain.png", plain.width, plain.height, tonemap_srgb8(plain, tm));
-    write_png(stem + "_ssao.png", with.width, with.height, tonemap_srgb8(with, tm));
-    // The visibility itself, white = unoccluded.
-    ImageRGB vis(o.width, o.height);
-    for (std::size_t i = 0; i < vis.pixels.size(); ++i)
-      vis.pixels[i] = glm::vec3(ssao_passes.visibility()[i]);
-    ToneMapOptions lin;
-    lin.op = ToneOperator::Clamp;
-    lin.auto_exposure = false;
-    write_png(stem + "_ssao_visibility.png", vis.width, vis.height, tonemap_srgb8(vis, lin));
-    std::printf("images: %s_{plain,ssao,ssao_visibility}.png\n", stem.c_str());
-  }
+  if (!o.plot_out.empty()) plot_frames(o, best, threads);
+  if (!o.images.empty()) write_images(o, cs, opts[1]);
   return 0;
 }
 
@@ -314,10 +347,5 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
-  try {
-    return run(o);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "irradcast-bench-client: error: %s\n", e.what());
-    return 1;
-  }
+  return irradcast::bench::run_guarded("irradcast-bench-client: error: ", [&] { return run(o); });
 }

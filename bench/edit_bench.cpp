@@ -27,16 +27,17 @@
 #include <thread>
 #include <vector>
 
+#include "bench_util.h"
+#include "irradcast/client/view_client.h"
 #include "irradcast/common/builtin.h"
-#include "irradcast/service/engine_host.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
-#include "irradcast/service/net_server.h"
 #include "irradcast/common/progress.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/sampling.h"
 #include "irradcast/common/scene_edit.h"
-#include "irradcast/client/view_client.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/service/net_server.h"
 #include "plot.h"
 
 namespace fs = std::filesystem;
@@ -46,11 +47,8 @@ using namespace std::chrono_literals;
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
+using irradcast::bench::Clock;
+using irradcast::bench::seconds_since;
 
 // Mean luminance of every 32 x 32 tile of every lightmap (the unit the server streams): per
 // texel, Monte Carlo noise would swamp a local change.
@@ -368,6 +366,63 @@ void write_plot(const std::string& path, const json& edits) {
   write_xy_plot(path, p);
 }
 
+// Prints the table of every edit and returns their JSON.
+json report_edits(const std::vector<Result>& results) {
+  std::printf("\n%-8s %-11s %7s %7s %8s | %8s %6s %6s | %6s %6s | %8s %6s %6s | %5s %5s %5s\n",
+              "scene", "edit", "texels", "changed", "apply ms", "1st tile", "90%", "99%", "90% nb",
+              "99% nb", "scratch", "90%", "99%", "x 1st", "x 90", "x 99");
+  json j = json::array();
+  for (const Result& r : results) {
+    const double x90 = r.scratch.t90 / std::max(r.edit.t90, 1e-9);
+    const double x99 = r.scratch.t99 / std::max(r.edit.t99, 1e-9);
+    const double x1 = r.scratch.first_tile / std::max(r.edit.first_tile, 1e-9);
+    std::printf(
+        "%-8s %-11s %7zu %6.1f%% %8.0f | %8.3f %6.2f %6.2f | %6.2f %6.2f | %8.3f %6.2f %6.2f | "
+        "%5.2f %5.2f %5.2f\n",
+        r.c.scene.c_str(), r.c.kind.c_str(), r.texels, 100.0 * r.changed, r.apply_ms,
+        r.edit.first_tile, r.edit.t90, r.edit.t99, r.edit_no_blend.t90, r.edit_no_blend.t99,
+        r.scratch.first_tile, r.scratch.t90, r.scratch.t99, x1, x90, x99);
+    json e;
+    e["scene"] = r.c.scene;
+    e["edit"] = r.c.kind;
+    e["edit_json"] = r.c.json;
+    e["texels"] = r.texels;
+    e["apply_ms"] = r.apply_ms;
+    for (const auto& [name, curve] : {std::pair<const char*, const Curve*>{"incremental", &r.edit},
+                                      {"incremental_no_blend", &r.edit_no_blend},
+                                      {"scratch", &r.scratch}}) {
+      e[name]["first_tile_s"] = curve->first_tile;
+      e[name]["t90_s"] = curve->t90;
+      e[name]["t99_s"] = curve->t99;
+      e[name]["total_s"] = curve->total;
+      e[name]["t"] = curve->t;
+      e[name]["progress"] = curve->progress;
+    }
+    e["changed_fraction"] = r.changed;
+    e["speedup_first_tile"] = x1;
+    e["speedup_90"] = x90;
+    e["speedup_99"] = x99;
+    j.push_back(e);
+  }
+  return j;
+}
+
+// Prints the trace cost of the editable BVH per scene and returns its JSON.
+json report_trace_cost(const std::vector<std::string>& scenes) {
+  std::printf("\nTrace cost of the editable (two-level) BVH, closest-hit rays, interleaved:\n");
+  json trace = json::array();
+  for (const std::string& name : scenes) {
+    const auto [fixed, editable] = trace_cost(load_scene(name, 1.0f));
+    std::printf("%-10s static %.3f s / M rays, editable %.3f s / M rays: %.2fx\n", name.c_str(),
+                fixed, editable, editable / fixed);
+    trace.push_back({{"scene", name},
+                     {"static_s_per_mray", fixed},
+                     {"editable_s_per_mray", editable},
+                     {"ratio", editable / fixed}});
+  }
+  return trace;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -401,16 +456,8 @@ int main(int argc, char** argv) {
       std::printf("wrote %s/edit_progress.png\n", out_dir.c_str());
       return 0;
     }
-    std::unique_ptr<tbb::global_control> limit;
-    if (threads > 0)
-      limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
-                                                    threads);
-    std::vector<std::string> scenes;
-    {
-      std::stringstream ss(scenes_arg);
-      for (std::string s; std::getline(ss, s, ',');)
-        if (!s.empty()) scenes.push_back(s);
-    }
+    const auto limit = irradcast::bench::limit_threads(threads);
+    const std::vector<std::string> scenes = irradcast::bench::split_list(scenes_arg);
     EngineHostOptions options;
     options.max_updates = updates;
     options.engine_nice = 0;
@@ -419,56 +466,10 @@ int main(int argc, char** argv) {
     std::vector<Result> results;
     for (const EditCase& c : default_cases(scenes)) results.push_back(run_case(c, options));
 
-    std::printf("\n%-8s %-11s %7s %7s %8s | %8s %6s %6s | %6s %6s | %8s %6s %6s | %5s %5s %5s\n",
-                "scene", "edit", "texels", "changed", "apply ms", "1st tile", "90%", "99%",
-                "90% nb", "99% nb", "scratch", "90%", "99%", "x 1st", "x 90", "x 99");
-    json j = json::array();
-    for (const Result& r : results) {
-      const double x90 = r.scratch.t90 / std::max(r.edit.t90, 1e-9);
-      const double x99 = r.scratch.t99 / std::max(r.edit.t99, 1e-9);
-      const double x1 = r.scratch.first_tile / std::max(r.edit.first_tile, 1e-9);
-      std::printf(
-          "%-8s %-11s %7zu %6.1f%% %8.0f | %8.3f %6.2f %6.2f | %6.2f %6.2f | %8.3f %6.2f %6.2f | "
-          "%5.2f %5.2f %5.2f\n",
-          r.c.scene.c_str(), r.c.kind.c_str(), r.texels, 100.0 * r.changed, r.apply_ms,
-          r.edit.first_tile, r.edit.t90, r.edit.t99, r.edit_no_blend.t90, r.edit_no_blend.t99,
-          r.scratch.first_tile, r.scratch.t90, r.scratch.t99, x1, x90, x99);
-      json e;
-      e["scene"] = r.c.scene;
-      e["edit"] = r.c.kind;
-      e["edit_json"] = r.c.json;
-      e["texels"] = r.texels;
-      e["apply_ms"] = r.apply_ms;
-      for (const auto& [name, curve] :
-           {std::pair<const char*, const Curve*>{"incremental", &r.edit},
-            {"incremental_no_blend", &r.edit_no_blend},
-            {"scratch", &r.scratch}}) {
-        e[name]["first_tile_s"] = curve->first_tile;
-        e[name]["t90_s"] = curve->t90;
-        e[name]["t99_s"] = curve->t99;
-        e[name]["total_s"] = curve->total;
-        e[name]["t"] = curve->t;
-        e[name]["progress"] = curve->progress;
-      }
-      e["changed_fraction"] = r.changed;
-      e["speedup_first_tile"] = x1;
-      e["speedup_90"] = x90;
-      e["speedup_99"] = x99;
-      j.push_back(e);
-    }
-    std::printf("\nTrace cost of the editable (two-level) BVH, closest-hit rays, interleaved:\n");
-    json trace = json::array();
-    for (const std::string& name : scenes) {
-      const auto [fixed, editable] = trace_cost(load_scene(name, 1.0f));
-      std::printf("%-10s static %.3f s / M rays, editable %.3f s / M rays: %.2fx\n", name.c_str(),
-                  fixed, editable, editable / fixed);
-      trace.push_back({{"scene", name},
-                       {"static_s_per_mray", fixed},
-                       {"editable_s_per_mray", editable},
-                       {"ratio", editable / fixed}});
-    }
-    std::ofstream(out_dir + "/edit.json")
-        << json{{"edits", j}, {"trace_cost", trace}}.dump(1) << "\n";
+    const json j = report_edits(results);
+    const json trace = report_trace_cost(scenes);
+    irradcast::bench::write_json(out_dir + "/edit.json", json{{"edits", j}, {"trace_cost", trace}},
+                                 1);
 
     write_plot(out_dir + "/edit_progress.png", j);
     std::printf("\nwrote %s/edit.json and %s/edit_progress.png\n", out_dir.c_str(),

@@ -31,10 +31,11 @@
 #include <thread>
 #include <vector>
 
-#include "irradcast/common/error.h"
+#include "bench_util.h"
 #include "irradcast/client/load_generator.h"
-#include "irradcast/common/log.h"
 #include "irradcast/client/view_client.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
 #include "plot.h"
 
 namespace fs = std::filesystem;
@@ -102,20 +103,11 @@ std::uint16_t free_port() {
 class ServerProcess {
  public:
   ServerProcess(const Options& o, std::uint16_t port, const fs::path& log) {
-    std::vector<std::string> args = {o.server,
-                                     "--scene",
-                                     o.scene,
-                                     "--bind",
-                                     "127.0.0.1",
-                                     "--port",
-                                     std::to_string(port),
-                                     "--status-every",
-                                     "5",
-                                     "--idle-timeout",
+    std::vector<std::string> args = {o.server, "--scene", o.scene, "--bind", "127.0.0.1", "--port",
+                                     std::to_string(port), "--status-every", "5", "--idle-timeout",
                                      "120",
                                      // every simulated user comes from 127.0.0.1
-                                     "--max-clients-per-peer",
-                                     "0"};
+                                     "--max-clients-per-peer", "0"};
     args.insert(args.end(), o.server_args.begin(), o.server_args.end());
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
@@ -167,6 +159,146 @@ std::string ms(double v) {
   return b;
 }
 
+// Warm-up: let the engine refine as a server that has been up a while would have.
+void warm_up(const Options& o, std::uint16_t port, const ServerProcess& server) {
+  ViewClientOptions vo;
+  vo.port = port;
+  vo.name = "bench-warmup";
+  vo.connect_timeout = std::chrono::milliseconds(60000);
+  auto updates_now = [&]() -> std::uint64_t {
+    ViewClient c(vo);
+    c.connect();
+    auto s = c.request_stats(std::chrono::milliseconds(10000));
+    c.close();
+    return s ? s->updates() : 0;
+  };
+  const auto warm_start = Clock::now();
+  for (;;) {
+    if (!server.alive()) throw Error("irradcast-server exited; see its log in " + o.out);
+    const std::uint64_t u = updates_now();
+    std::fprintf(stderr, "[fanout] warm-up: %llu/%d engine updates, %.0f s\n",
+                 static_cast<unsigned long long>(u), o.warmup_updates,
+                 std::chrono::duration<double>(Clock::now() - warm_start).count());
+    if (u >= static_cast<std::uint64_t>(o.warmup_updates)) break;
+    std::this_thread::sleep_for(std::chrono::seconds(5));
+  }
+}
+
+// One run of n users: latency and the CPU of the server's threads and of the load generator.
+Point run_users(const Options& o, std::uint16_t port, const ServerProcess& server, int n) {
+  Point p;
+  p.users = n;
+  LoadOptions lo;
+  lo.port = port;
+  lo.users = n;
+  lo.ramp_s = std::min(2.0, 0.01 * n);
+  lo.duration_s = 3.0 + lo.ramp_s + o.sync_s_per_user * n + o.window_s;
+  lo.camera_hz = 5.0;
+  lo.threads = 0;
+  lo.name = "fanout";
+  const CpuTimes c0 = process_cpu(server.pid());
+  const double self0 = self_cpu();
+  const auto t0 = Clock::now();
+  p.report = run_load(lo, [&](const LoadProgress& pr) {
+    if (static_cast<int>(pr.elapsed_s) % 5 == 0)
+      std::fprintf(stderr, "[fanout] %d users: %.0f/%.0f s, %d full, %d failed, p99 %.1f ms\n", n,
+                   pr.elapsed_s, lo.duration_s, pr.full_image, pr.failed, pr.latency_p99_ms);
+  });
+  p.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  const CpuTimes c1 = process_cpu(server.pid());
+  p.io_cores = (c1.io - c0.io) / p.seconds;
+  p.engine_cores = (c1.engine - c0.engine) / p.seconds;
+  p.load_cores = (self_cpu() - self0) / p.seconds;
+  const LoadReport& r = p.report;
+  std::printf(
+      "%4d users: %d/%d ok, steady latency p50 %s p99 %s ms (%zu tiles), all live p99 %s ms, "
+      "full image p99 %s ms, %.1f kB to full image, %.1f kB/s steady; server io %.2f + "
+      "engine %.2f cores, users %.2f cores\n",
+      n, r.connected - r.failed, n, ms(r.steady_tile_latency_ms.p50).c_str(),
+      ms(r.steady_tile_latency_ms.p99).c_str(), r.steady_tile_latency_ms.count,
+      ms(r.tile_latency_ms.p99).c_str(), ms(r.full_image_ms.p99).c_str(),
+      r.bytes_to_full_image.mean / 1e3, r.steady_bytes_per_s.mean / 1e3, p.io_cores, p.engine_cores,
+      p.load_cores);
+  std::fflush(stdout);
+  return p;
+}
+
+// OUT/fanout.json.
+fs::path write_report(const Options& o, const std::vector<Point>& points) {
+  json j;
+  j["scene"] = o.scene;
+  j["cores"] = std::thread::hardware_concurrency();
+  j["warmup_updates"] = o.warmup_updates;
+  j["window_s"] = o.window_s;
+  double load[3] = {0, 0, 0};
+  if (getloadavg(load, 3) > 0) j["load_average"] = {load[0], load[1], load[2]};
+  for (const Point& p : points) {
+    json pj = json::parse(p.report.json(false));
+    pj["server_io_cores"] = p.io_cores;
+    pj["server_engine_cores"] = p.engine_cores;
+    pj["load_generator_cores"] = p.load_cores;
+    pj["seconds"] = p.seconds;
+    j["runs"].push_back(pj);
+  }
+  const fs::path json_path = fs::path(o.out) / "fanout.json";
+  std::ofstream(json_path) << j.dump(2) << "\n";
+
+  return json_path;
+}
+
+// OUT/fanout_latency.png: steady-state tile latency against users.
+void plot_latency(const Options& o, const std::vector<Point>& points) {
+  plot::XYPlot lat;
+  lat.title = "Tile latency vs thin users (" + o.scene + ", " +
+              std::to_string(std::thread::hardware_concurrency()) + " cores)";
+  lat.x_label = "simulated thin users";
+  lat.y_label = "tile latency, ms (server version -> user's apply)";
+  lat.x_log = true;
+  lat.y_log = true;
+  lat.note = "steady state: tiles applied once every user had its first full image";
+  plot::Series p50 = series("p50", plot::kBlue, true);
+  plot::Series p99 = series("p99", plot::kRed, true);
+  plot::Series goal = series("goal: p99 < 100 ms", plot::kDarkGrey, false);
+  for (const Point& p : points) {
+    if (p.report.steady_tile_latency_ms.count == 0) continue;
+    p50.x.push_back(p.users);
+    p50.y.push_back(std::max(0.01, p.report.steady_tile_latency_ms.p50));
+    p99.x.push_back(p.users);
+    p99.y.push_back(std::max(0.01, p.report.steady_tile_latency_ms.p99));
+  }
+  if (!points.empty()) {
+    goal.x = {static_cast<double>(points.front().users), static_cast<double>(points.back().users)};
+    goal.y = {100.0, 100.0};
+  }
+  lat.series = {p50, p99, goal};
+  plot::write_xy_plot((fs::path(o.out) / "fanout_latency.png").string(), lat);
+}
+
+// OUT/fanout_cpu.png: server and load-generator CPU against users.
+void plot_cpu(const Options& o, const std::vector<Point>& points) {
+  plot::XYPlot cpu;
+  cpu.title = "Server CPU vs thin users (" + o.scene + ")";
+  cpu.x_label = "simulated thin users";
+  cpu.y_label = "CPU, cores";
+  cpu.x_log = true;
+  cpu.note = "the engine refines with what the network threads leave (nice 10)";
+  plot::Series io = series("server network threads", plot::kBlue, true);
+  plot::Series eng = series("server engine", plot::kGreen, true);
+  plot::Series users = series("simulated users (load generator)", plot::kOrange, true);
+  for (const Point& p : points) {
+    io.x.push_back(p.users);
+    io.y.push_back(p.io_cores);
+    eng.x.push_back(p.users);
+    eng.y.push_back(p.engine_cores);
+    users.x.push_back(p.users);
+    users.y.push_back(p.load_cores);
+  }
+  cpu.series = {io, eng, users};
+  cpu.legend = plot::XYPlot::Legend::TopLeft;
+  cpu.y_headroom = 0.25;
+  plot::write_xy_plot((fs::path(o.out) / "fanout_cpu.png").string(), cpu);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -191,10 +323,7 @@ int main(int argc, char** argv) {
   log::set_level(log::Level::Warn);
   try {
     if (!users_list.empty()) {
-      o.users.clear();
-      std::stringstream ss(users_list);
-      std::string item;
-      while (std::getline(ss, item, ',')) o.users.push_back(std::stoi(item));
+      o.users = irradcast::bench::parse_ints(users_list);
     }
     if (o.quick) {
       o.users = {1, 4, 16};
@@ -207,136 +336,15 @@ int main(int argc, char** argv) {
     std::printf("irradcast-bench-fanout: %s on port %u (pid %d), %u cores\n", o.scene.c_str(), port,
                 server.pid(), std::thread::hardware_concurrency());
 
-    // Warm-up: let the engine refine as a server that has been up a while would have.
-    ViewClientOptions vo;
-    vo.port = port;
-    vo.name = "bench-warmup";
-    vo.connect_timeout = std::chrono::milliseconds(60000);
-    auto updates_now = [&]() -> std::uint64_t {
-      ViewClient c(vo);
-      c.connect();
-      auto s = c.request_stats(std::chrono::milliseconds(10000));
-      c.close();
-      return s ? s->updates() : 0;
-    };
-    const auto warm_start = Clock::now();
-    for (;;) {
-      if (!server.alive()) throw Error("irradcast-server exited; see its log in " + o.out);
-      const std::uint64_t u = updates_now();
-      std::fprintf(stderr, "[fanout] warm-up: %llu/%d engine updates, %.0f s\n",
-                   static_cast<unsigned long long>(u), o.warmup_updates,
-                   std::chrono::duration<double>(Clock::now() - warm_start).count());
-      if (u >= static_cast<std::uint64_t>(o.warmup_updates)) break;
-      std::this_thread::sleep_for(std::chrono::seconds(5));
-    }
-
+    warm_up(o, port, server);
     std::vector<Point> points;
     for (int n : o.users) {
-      Point p;
-      p.users = n;
-      LoadOptions lo;
-      lo.port = port;
-      lo.users = n;
-      lo.ramp_s = std::min(2.0, 0.01 * n);
-      lo.duration_s = 3.0 + lo.ramp_s + o.sync_s_per_user * n + o.window_s;
-      lo.camera_hz = 5.0;
-      lo.threads = 0;
-      lo.name = "fanout";
-      const CpuTimes c0 = process_cpu(server.pid());
-      const double self0 = self_cpu();
-      const auto t0 = Clock::now();
-      p.report = run_load(lo, [&](const LoadProgress& pr) {
-        if (static_cast<int>(pr.elapsed_s) % 5 == 0)
-          std::fprintf(stderr, "[fanout] %d users: %.0f/%.0f s, %d full, %d failed, p99 %.1f ms\n",
-                       n, pr.elapsed_s, lo.duration_s, pr.full_image, pr.failed, pr.latency_p99_ms);
-      });
-      p.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-      const CpuTimes c1 = process_cpu(server.pid());
-      p.io_cores = (c1.io - c0.io) / p.seconds;
-      p.engine_cores = (c1.engine - c0.engine) / p.seconds;
-      p.load_cores = (self_cpu() - self0) / p.seconds;
-      const LoadReport& r = p.report;
-      std::printf(
-          "%4d users: %d/%d ok, steady latency p50 %s p99 %s ms (%zu tiles), all live p99 %s ms, "
-          "full image p99 %s ms, %.1f kB to full image, %.1f kB/s steady; server io %.2f + "
-          "engine %.2f cores, users %.2f cores\n",
-          n, r.connected - r.failed, n, ms(r.steady_tile_latency_ms.p50).c_str(),
-          ms(r.steady_tile_latency_ms.p99).c_str(), r.steady_tile_latency_ms.count,
-          ms(r.tile_latency_ms.p99).c_str(), ms(r.full_image_ms.p99).c_str(),
-          r.bytes_to_full_image.mean / 1e3, r.steady_bytes_per_s.mean / 1e3, p.io_cores,
-          p.engine_cores, p.load_cores);
-      std::fflush(stdout);
-      points.push_back(std::move(p));
+      points.push_back(run_users(o, port, server, n));
       std::this_thread::sleep_for(std::chrono::seconds(2));  // let the sessions close
     }
-
-    // JSON
-    json j;
-    j["scene"] = o.scene;
-    j["cores"] = std::thread::hardware_concurrency();
-    j["warmup_updates"] = o.warmup_updates;
-    j["window_s"] = o.window_s;
-    double load[3] = {0, 0, 0};
-    if (getloadavg(load, 3) > 0) j["load_average"] = {load[0], load[1], load[2]};
-    for (const Point& p : points) {
-      json pj = json::parse(p.report.json(false));
-      pj["server_io_cores"] = p.io_cores;
-      pj["server_engine_cores"] = p.engine_cores;
-      pj["load_generator_cores"] = p.load_cores;
-      pj["seconds"] = p.seconds;
-      j["runs"].push_back(pj);
-    }
-    const fs::path json_path = fs::path(o.out) / "fanout.json";
-    std::ofstream(json_path) << j.dump(2) << "\n";
-
-    // Plots
-    plot::XYPlot lat;
-    lat.title = "Tile latency vs thin users (" + o.scene + ", " +
-                std::to_string(std::thread::hardware_concurrency()) + " cores)";
-    lat.x_label = "simulated thin users";
-    lat.y_label = "tile latency, ms (server version -> user's apply)";
-    lat.x_log = true;
-    lat.y_log = true;
-    lat.note = "steady state: tiles applied once every user had its first full image";
-    plot::Series p50 = series("p50", plot::kBlue, true);
-    plot::Series p99 = series("p99", plot::kRed, true);
-    plot::Series goal = series("goal: p99 < 100 ms", plot::kDarkGrey, false);
-    for (const Point& p : points) {
-      if (p.report.steady_tile_latency_ms.count == 0) continue;
-      p50.x.push_back(p.users);
-      p50.y.push_back(std::max(0.01, p.report.steady_tile_latency_ms.p50));
-      p99.x.push_back(p.users);
-      p99.y.push_back(std::max(0.01, p.report.steady_tile_latency_ms.p99));
-    }
-    if (!points.empty()) {
-      goal.x = {static_cast<double>(points.front().users),
-                static_cast<double>(points.back().users)};
-      goal.y = {100.0, 100.0};
-    }
-    lat.series = {p50, p99, goal};
-    plot::write_xy_plot((fs::path(o.out) / "fanout_latency.png").string(), lat);
-
-    plot::XYPlot cpu;
-    cpu.title = "Server CPU vs thin users (" + o.scene + ")";
-    cpu.x_label = "simulated thin users";
-    cpu.y_label = "CPU, cores";
-    cpu.x_log = true;
-    cpu.note = "the engine refines with what the network threads leave (nice 10)";
-    plot::Series io = series("server network threads", plot::kBlue, true);
-    plot::Series eng = series("server engine", plot::kGreen, true);
-    plot::Series users = series("simulated users (load generator)", plot::kOrange, true);
-    for (const Point& p : points) {
-      io.x.push_back(p.users);
-      io.y.push_back(p.io_cores);
-      eng.x.push_back(p.users);
-      eng.y.push_back(p.engine_cores);
-      users.x.push_back(p.users);
-      users.y.push_back(p.load_cores);
-    }
-    cpu.series = {io, eng, users};
-    cpu.legend = plot::XYPlot::Legend::TopLeft;
-    cpu.y_headroom = 0.25;
-    plot::write_xy_plot((fs::path(o.out) / "fanout_cpu.png").string(), cpu);
+    const fs::path json_path = write_report(o, points);
+    plot_latency(o, points);
+    plot_cpu(o, points);
     std::printf("wrote %s, fanout_latency.png, fanout_cpu.png\n", json_path.string().c_str());
   } catch (const std::exception& e) {
     std::fprintf(stderr, "irradcast-bench-fanout: error: %s\n", e.what());

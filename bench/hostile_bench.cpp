@@ -29,13 +29,14 @@
 #include <vector>
 
 #include "../tests/tls_cert.h"
-#include "irradcast/common/builtin.h"
-#include "irradcast/service/engine_host.h"
-#include "irradcast/common/error.h"
+#include "bench_util.h"
 #include "irradcast/client/load_generator.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
-#include "irradcast/service/net_server.h"
 #include "irradcast/common/progress.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/service/net_server.h"
 
 namespace fs = std::filesystem;
 using namespace irradcast;
@@ -59,16 +60,73 @@ double io_cpu_seconds() {
   return total;
 }
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
-
 struct Sample {
   double full_image_ms = 0.0, mb_sent = 0.0, io_cpu_s = 0.0;
   int failed = 0;
 };
+
+// One configuration ("plain", "no-watch" or "tls") for one window of `users` users.
+Sample run_config(EngineHost& host, const std::string& c, const test::TlsFiles& tls, int users,
+                  double window_s) {
+  ServerOptions so;
+  so.bind = "127.0.0.1";
+  so.port = 0;
+  so.max_clients_per_peer = 0;
+  if (c == "no-watch") so.write_stall_timeout = std::chrono::milliseconds(0);
+  if (c == "tls") {
+    so.tls_cert = tls.cert;
+    so.tls_key = tls.key;
+  }
+  Server server(host, so);
+  server.start();
+  LoadOptions lo;
+  lo.port = server.port();
+  lo.users = users;
+  lo.duration_s = window_s;
+  lo.threads = 1;
+  if (c == "tls") lo.tls = {true, tls.ca};
+  const double cpu0 = io_cpu_seconds();
+  const LoadReport rep = run_load(lo);
+  Sample s;
+  s.io_cpu_s = io_cpu_seconds() - cpu0;
+  s.mb_sent = static_cast<double>(server.stats().bytes_sent) * 1e-6;
+  s.full_image_ms = rep.full_image_ms.p50;
+  s.failed = rep.failed;
+  server.stop();
+  return s;
+}
+
+// Prints the medians and their ratios to "plain"; returns the JSON of every sample and median.
+nlohmann::json report(const std::string& scene, int users, int rounds,
+                      const std::vector<std::string>& configs,
+                      std::map<std::string, std::vector<Sample>>& samples) {
+  nlohmann::json out;
+  out["scene"] = scene;
+  out["users"] = users;
+  out["rounds"] = rounds;
+  std::map<std::string, std::pair<double, double>> med;  // full image ms, io ms per MB
+  for (const std::string& c : configs) {
+    std::vector<double> fi, cpu;
+    for (const Sample& s : samples[c]) {
+      fi.push_back(s.full_image_ms);
+      cpu.push_back(1e3 * s.io_cpu_s / std::max(s.mb_sent, 1e-9));
+      out["samples"][c].push_back({{"full_image_ms", s.full_image_ms},
+                                   {"mb_sent", s.mb_sent},
+                                   {"io_cpu_s", s.io_cpu_s},
+                                   {"failed", s.failed}});
+    }
+    med[c] = {irradcast::bench::upper_median(fi), irradcast::bench::upper_median(cpu)};
+    out["median"][c] = {{"full_image_ms", med[c].first}, {"io_cpu_ms_per_mb", med[c].second}};
+  }
+  std::printf("%d users, %s, %d rounds (medians; ratio to plain)\n", users, scene.c_str(), rounds);
+  std::printf("%-9s %18s %10s %22s %10s\n", "config", "full image p50 ms", "ratio",
+              "network CPU ms per MB", "ratio");
+  for (const std::string& c : configs)
+    std::printf("%-9s %18.1f %10.2f %22.2f %10.2f\n", c.c_str(), med[c].first,
+                med[c].first / std::max(med["plain"].first, 1e-9), med[c].second,
+                med[c].second / std::max(med["plain"].second, 1e-9));
+  return out;
+}
 
 }  // namespace
 
@@ -103,31 +161,7 @@ int main(int argc, char** argv) {
     std::map<std::string, std::vector<Sample>> samples;
     for (int r = 0; r < rounds; ++r) {
       for (const std::string& c : configs) {
-        ServerOptions so;
-        so.bind = "127.0.0.1";
-        so.port = 0;
-        so.max_clients_per_peer = 0;
-        if (c == "no-watch") so.write_stall_timeout = std::chrono::milliseconds(0);
-        if (c == "tls") {
-          so.tls_cert = tls.cert;
-          so.tls_key = tls.key;
-        }
-        Server server(host, so);
-        server.start();
-        LoadOptions lo;
-        lo.port = server.port();
-        lo.users = users;
-        lo.duration_s = window_s;
-        lo.threads = 1;
-        if (c == "tls") lo.tls = {true, tls.ca};
-        const double cpu0 = io_cpu_seconds();
-        const LoadReport rep = run_load(lo);
-        Sample s;
-        s.io_cpu_s = io_cpu_seconds() - cpu0;
-        s.mb_sent = static_cast<double>(server.stats().bytes_sent) * 1e-6;
-        s.full_image_ms = rep.full_image_ms.p50;
-        s.failed = rep.failed;
-        server.stop();
+        const Sample s = run_config(host, c, tls, users, window_s);
         samples[c].push_back(s);
         std::fprintf(stderr,
                      "[hostile] round %d %-8s: full image p50 %.1f ms, %.2f MB sent, io CPU "
@@ -138,33 +172,8 @@ int main(int argc, char** argv) {
     }
     host.stop();
 
-    nlohmann::json out;
-    out["scene"] = scene;
-    out["users"] = users;
-    out["rounds"] = rounds;
-    std::map<std::string, std::pair<double, double>> med;  // full image ms, io ms per MB
-    for (const std::string& c : configs) {
-      std::vector<double> fi, cpu;
-      for (const Sample& s : samples[c]) {
-        fi.push_back(s.full_image_ms);
-        cpu.push_back(1e3 * s.io_cpu_s / std::max(s.mb_sent, 1e-9));
-        out["samples"][c].push_back({{"full_image_ms", s.full_image_ms},
-                                     {"mb_sent", s.mb_sent},
-                                     {"io_cpu_s", s.io_cpu_s},
-                                     {"failed", s.failed}});
-      }
-      med[c] = {median(fi), median(cpu)};
-      out["median"][c] = {{"full_image_ms", med[c].first}, {"io_cpu_ms_per_mb", med[c].second}};
-    }
-    std::printf("%d users, %s, %d rounds (medians; ratio to plain)\n", users, scene.c_str(),
-                rounds);
-    std::printf("%-9s %18s %10s %22s %10s\n", "config", "full image p50 ms", "ratio",
-                "network CPU ms per MB", "ratio");
-    for (const std::string& c : configs)
-      std::printf("%-9s %18.1f %10.2f %22.2f %10.2f\n", c.c_str(), med[c].first,
-                  med[c].first / std::max(med["plain"].first, 1e-9), med[c].second,
-                  med[c].second / std::max(med["plain"].second, 1e-9));
-    if (!json_path.empty()) std::ofstream(json_path) << out.dump(2) << "\n";
+    const nlohmann::json out = report(scene, users, rounds, configs, samples);
+    if (!json_path.empty()) irradcast::bench::write_json(json_path, out);
     fs::remove_all(dir);
     return 0;
   } catch (const std::exception& e) {

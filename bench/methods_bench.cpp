@@ -21,22 +21,24 @@
 #include <string>
 #include <vector>
 
+#include "bench_util.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
 #include "irradcast/common/compositor.h"
-#include "irradcast/service/engine_host.h"
 #include "irradcast/common/error.h"
-#include "irradcast/engine/gbuffer.h"
 #include "irradcast/common/lights.h"
 #include "irradcast/common/log.h"
-#include "irradcast/engine/path_tracer.h"
 #include "irradcast/common/progress.h"
+#include "irradcast/common/tonemap.h"
+#include "irradcast/engine/gbuffer.h"
+#include "irradcast/engine/path_tracer.h"
 #include "irradcast/engine/reference_lightmaps.h"
 #include "irradcast/engine/texel_validity.h"
-#include "irradcast/common/tonemap.h"
+#include "irradcast/service/engine_host.h"
 #include "plot.h"
 
 using namespace irradcast;
+using namespace irradcast::bench;
 using json = nlohmann::json;
 namespace fs = std::filesystem;
 
@@ -108,19 +110,186 @@ void paste(plot::Canvas& canvas, const ImageRGB& image, float scale, int x0, int
     }
 }
 
+// The reference of a scene: the path tracer per texel on the host's own world and atlas (two
+// independent halves: their mean is the reference, their difference its noise), and an image.
+struct Reference {
+  std::vector<Lightmap> lightmaps;
+  std::vector<TexelGBuffer> gbuffers;
+  ImageRGB image;
+  double floor = 0.0;  // its own relative MSE
+};
+
+struct Settings {
+  int updates = 24, ref_spp = 4096, image_spp = 256, size = 128;
+};
+
+Reference make_reference(const std::string& spec, const EngineHost& host, const Config& cfg,
+                         const Settings& st) {
+  const int ref_spp = st.ref_spp;
+  Reference ref;
+  std::vector<Lightmap>& reference = ref.lightmaps;
+  std::vector<TexelGBuffer>& gbuffers = ref.gbuffers;
+  double& floor = ref.floor;
+  const Stopwatch t0;
+  RayScene rays(host.world());
+  LightSampler lights(host.world());
+  gbuffers = rasterize_gbuffer(host.world(), host.atlas());
+  mark_hidden_texels(rays, gbuffers);
+  // Two independent halves: their mean is the reference, their difference its noise.
+  PathTracer tracer(host.world(), rays, lights,
+                    PathTracerOptions{cfg.params.indirect_bounces, true, 4242});
+  PathTracer other(host.world(), rays, lights,
+                   PathTracerOptions{cfg.params.indirect_bounces, true, 4343});
+  reference = reference_lightmaps(host.world(), tracer, gbuffers, (ref_spp + 1) / 2);
+  const std::vector<Lightmap> half =
+      reference_lightmaps(host.world(), other, gbuffers, (ref_spp + 1) / 2);
+  // rel MSE of the mean against the truth ~ rel MSE(a, b) / 4.
+  floor = compare(texel_row(half, gbuffers), texel_row(reference, gbuffers)).rel_mse / 4.0;
+  for (std::size_t m = 0; m < reference.size(); ++m)
+    for (std::size_t i = 0; i < reference[m].texels.size(); ++i)
+      reference[m].texels[i] = 0.5f * (reference[m].texels[i] + half[m].texels[i]);
+  const CameraPose cam = default_camera(host.scene(), host.world());
+  ref.image = tracer.render(cam, st.size, st.size, st.image_spp);
+  std::fprintf(stderr, "%s: reference (%d paths per texel, its own rel MSE ~%.5f) in %.1f s\n",
+               spec.c_str(), ref_spp, floor, t0.seconds());
+  return ref;
+}
+
+// Runs one configuration for st.updates updates: its error curve against the reference.
+Curve run_config(EngineHost& host, const Config& cfg, const Reference& ref, const Settings& st) {
+  const std::vector<TexelGBuffer>& gbuffers = ref.gbuffers;
+  const ImageRGB ref_row = texel_row(ref.lightmaps, gbuffers);
+  Curve c;
+  c.label = cfg.label;
+  double bytes = 0.0;
+  host.set_listener([&](const std::vector<std::uint32_t>& changed) {
+    for (std::uint32_t i : changed)
+      bytes +=
+          static_cast<double>(host.tiles().snapshot(i, wire::TILE_RGB9E5_ZSTD).payload->size());
+  });
+  for (int u = 0; u < st.updates; ++u) {
+    host.step();
+    const ImageError e = compare(texel_row(host.tiles().published(), gbuffers), ref_row);
+    c.seconds.push_back(host.stats().seconds_total);
+    c.bytes.push_back(bytes);
+    c.rmse.push_back(e.rmse);
+    c.rel_mse.push_back(e.rel_mse);
+  }
+  RayScene rays(host.world());
+  c.view = compose(host.world(), rays, host.atlas(), host.tiles().published(),
+                   default_camera(host.scene(), host.world()), st.size, st.size);
+  c.summary = host.method_summary();
+  std::fprintf(stderr, "  %s: %s\n", cfg.label.c_str(), c.summary.c_str());
+  return c;
+}
+
+// Prints the rows of one scene and adds them to the report. Converged: within 10 % of the run's
+// own best error. Target: the worst final error of all configurations (every one reaches it),
+// so time and bytes compare at equal quality.
+void report_scene(const std::string& spec, const std::vector<Curve>& curves, double floor,
+                  json& report) {
+  double target = 0.0;
+  for (const Curve& c : curves) target = std::max(target, c.rel_mse.back());
+  for (const Curve& c : curves) {
+    const double best = *std::min_element(c.rel_mse.begin(), c.rel_mse.end());
+    const int conv = first_at(c, 1.1 * best), hit = first_at(c, target);
+    const double per_update = c.seconds.back() / static_cast<double>(c.seconds.size());
+    std::printf("%-9s %-16s %9.3f %9.4f %9.5f | %9.2f %10.0f | %9.2f %10.0f | %s\n", spec.c_str(),
+                c.label.c_str(), per_update, c.rmse.back(), c.rel_mse.back(),
+                c.seconds[static_cast<std::size_t>(conv)],
+                c.bytes[static_cast<std::size_t>(conv)] / 1024.0,
+                c.seconds[static_cast<std::size_t>(hit)],
+                c.bytes[static_cast<std::size_t>(hit)] / 1024.0, c.summary.c_str());
+    report.push_back({{"scene", spec},
+                      {"method", c.label},
+                      {"seconds_per_update", per_update},
+                      {"rmse", c.rmse},
+                      {"rel_mse", c.rel_mse},
+                      {"seconds", c.seconds},
+                      {"bytes", c.bytes},
+                      {"target_rel_mse", target},
+                      {"reference_rel_mse", floor},
+                      {"state", c.summary},
+                      {"converged_update", conv + 1},
+                      {"target_update", hit + 1}});
+  }
+}
+
+// The convergence plot of one scene: OUT/methods_SCENE.png.
+void plot_scene(const std::string& spec, const std::vector<Curve>& curves, double floor,
+                int ref_spp, const std::string& out_dir) {
+  plot::XYPlot xy;
+  xy.title = spec + ": error against the reference path tracer";
+  xy.x_label = "server seconds (2-core VM, Embree)";
+  xy.y_label = "relative MSE of the lightmaps";
+  xy.y_log = true;
+  xy.legend = plot::XYPlot::Legend::TopRight;
+  char note[128];
+  std::snprintf(note, sizeof note, "reference: %d paths per texel, its own rel MSE ~%.5f", ref_spp,
+                floor);
+  xy.note = note;
+  const plot::Color colors[] = {plot::kBlue,
+                                plot::Color{120, 170, 220},
+                                plot::kOrange,
+                                plot::kRed,
+                                plot::Color{250, 190, 120},
+                                plot::kGreen,
+                                plot::Color{140, 200, 140},
+                                plot::kDarkGrey};
+  for (std::size_t i = 0; i < curves.size(); ++i) {
+    plot::Series s;
+    s.label = curves[i].label;
+    s.x = curves[i].seconds;
+    s.y = curves[i].rel_mse;
+    s.color = colors[i % 8];
+    s.lines = true;
+    s.points = false;
+    xy.series.push_back(s);
+  }
+  std::string stem = spec;
+  std::replace(stem.begin(), stem.end(), ':', '_');
+  plot::write_xy_plot(out_dir + "/methods_" + stem + ".png", xy);
+}
+
+// The image grid: a row per scene, the reference first, every configuration after it, all at
+// the reference's exposure.
+void write_grid(const std::vector<std::string>& scenes, const std::vector<ImageRGB>& references,
+                const std::vector<std::vector<Curve>>& all, std::size_t configs, int size,
+                const std::string& out_dir) {
+  const int pad = 6, label_h = 18;
+  const int cols = static_cast<int>(configs) + 1;
+  plot::Canvas grid(cols * (size + pad) + pad,
+                    static_cast<int>(all.size()) * (size + label_h + pad) + pad);
+  for (std::size_t r = 0; r < all.size(); ++r) {
+    const float scale = exposure_scale(references[r], ToneMapOptions{});
+    const int y0 = pad + static_cast<int>(r) * (size + label_h + pad);
+    for (int c = 0; c < cols; ++c) {
+      const int x0 = pad + c * (size + pad);
+      const ImageRGB& img = c == 0 ? references[r] : all[r][static_cast<std::size_t>(c - 1)].view;
+      paste(grid, img, scale, x0, y0 + label_h);
+      grid.text(x0, y0 + 4,
+                c == 0 ? scenes[r] + " ref" : all[r][static_cast<std::size_t>(c - 1)].label, 1.0,
+                plot::kBlack);
+    }
+  }
+  grid.write_png(out_dir + "/methods_grid.png");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"irradcast-bench-methods: cells, VPL and irradiance cache against the reference"};
   std::string scenes_arg = "cornell,rooms:2", out_dir = "out/methods", only;
-  int updates = 24, ref_spp = 4096, image_spp = 256, size = 128, threads = 0;
+  Settings st;
+  int threads = 0;
   float density = 64.0f;
   app.add_option("--scenes", scenes_arg, "comma-separated scene specs");
-  app.add_option("--updates", updates, "updates per configuration")->check(CLI::Range(2, 1000));
+  app.add_option("--updates", st.updates, "updates per configuration")->check(CLI::Range(2, 1000));
   app.add_option("--density", density, "lightmap texels across the scene");
-  app.add_option("--ref-spp", ref_spp, "reference paths per texel")->check(CLI::Range(1, 1 << 16));
-  app.add_option("--image-spp", image_spp, "reference image samples per pixel");
-  app.add_option("--size", size, "side of each image in the grid")->check(CLI::Range(16, 1024));
+  app.add_option("--ref-spp", st.ref_spp, "reference paths per texel")
+      ->check(CLI::Range(1, 1 << 16));
+  app.add_option("--image-spp", st.image_spp, "reference image samples per pixel");
+  app.add_option("--size", st.size, "side of each image in the grid")->check(CLI::Range(16, 1024));
   app.add_option("--only", only, "run only the configurations whose label contains this");
   app.add_option("--threads", threads, "worker threads (0 = all)");
   app.add_option("--out", out_dir, "output directory");
@@ -128,16 +297,8 @@ int main(int argc, char** argv) {
   try {
     Progress::set_enabled(false);
     log::set_level(log::Level::Warn);
-    std::unique_ptr<tbb::global_control> limit;
-    if (threads > 0)
-      limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
-                                                    threads);
-    std::vector<std::string> scenes;
-    {
-      std::stringstream ss(scenes_arg);
-      for (std::string s; std::getline(ss, s, ',');)
-        if (!s.empty()) scenes.push_back(s);
-    }
+    const auto limit = limit_threads(threads);
+    const std::vector<std::string> scenes = split_list(scenes_arg);
     fs::create_directories(out_dir);
     std::vector<Config> cfgs;
     for (const Config& c : configs())
@@ -151,151 +312,25 @@ int main(int argc, char** argv) {
     for (const std::string& spec : scenes) {
       const Scene scene = load_scene(spec, 1.0f);
       std::vector<Curve> curves;
-      std::vector<Lightmap> reference;
-      std::vector<TexelGBuffer> gbuffers;
-      ImageRGB ref_image;
-      double floor = 0.0;
+      Reference ref;
       for (const Config& cfg : cfgs) {
         EngineHostOptions o;
         o.engine = cfg.params;
         o.atlas.texels_per_scene = density;
-        o.max_updates = static_cast<std::uint32_t>(updates);
+        o.max_updates = static_cast<std::uint32_t>(st.updates);
         o.engine_nice = 0;
         o.backend.kind = BackendKind::Embree;
         EngineHost host(scene, spec, o);
-        if (reference.empty()) {
-          // The reference: the path tracer per texel, on the host's own world and atlas.
-          const auto t0 = std::chrono::steady_clock::now();
-          RayScene rays(host.world());
-          LightSampler lights(host.world());
-          gbuffers = rasterize_gbuffer(host.world(), host.atlas());
-          mark_hidden_texels(rays, gbuffers);
-          // Two independent halves: their mean is the reference, their difference its noise.
-          PathTracer tracer(host.world(), rays, lights,
-                            PathTracerOptions{cfg.params.indirect_bounces, true, 4242});
-          PathTracer other(host.world(), rays, lights,
-                           PathTracerOptions{cfg.params.indirect_bounces, true, 4343});
-          reference = reference_lightmaps(host.world(), tracer, gbuffers, (ref_spp + 1) / 2);
-          const std::vector<Lightmap> half =
-              reference_lightmaps(host.world(), other, gbuffers, (ref_spp + 1) / 2);
-          // rel MSE of the mean against the truth ~ rel MSE(a, b) / 4.
-          floor = compare(texel_row(half, gbuffers), texel_row(reference, gbuffers)).rel_mse / 4.0;
-          for (std::size_t m = 0; m < reference.size(); ++m)
-            for (std::size_t i = 0; i < reference[m].texels.size(); ++i)
-              reference[m].texels[i] = 0.5f * (reference[m].texels[i] + half[m].texels[i]);
-          const CameraPose cam = default_camera(host.scene(), host.world());
-          ref_image = tracer.render(cam, size, size, image_spp);
-          std::fprintf(
-              stderr, "%s: reference (%d paths per texel, its own rel MSE ~%.5f) in %.1f s\n",
-              spec.c_str(), ref_spp, floor,
-              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-        }
-        const ImageRGB ref_row = texel_row(reference, gbuffers);
-        Curve c;
-        c.label = cfg.label;
-        double bytes = 0.0;
-        host.set_listener([&](const std::vector<std::uint32_t>& changed) {
-          for (std::uint32_t i : changed)
-            bytes += static_cast<double>(
-                host.tiles().snapshot(i, wire::TILE_RGB9E5_ZSTD).payload->size());
-        });
-        for (int u = 0; u < updates; ++u) {
-          host.step();
-          const ImageError e = compare(texel_row(host.tiles().published(), gbuffers), ref_row);
-          c.seconds.push_back(host.stats().seconds_total);
-          c.bytes.push_back(bytes);
-          c.rmse.push_back(e.rmse);
-          c.rel_mse.push_back(e.rel_mse);
-        }
-        RayScene rays(host.world());
-        c.view = compose(host.world(), rays, host.atlas(), host.tiles().published(),
-                         default_camera(host.scene(), host.world()), size, size);
-        c.summary = host.method_summary();
-        std::fprintf(stderr, "  %s: %s\n", cfg.label.c_str(), c.summary.c_str());
-        curves.push_back(std::move(c));
+        if (ref.lightmaps.empty()) ref = make_reference(spec, host, cfg, st);
+        curves.push_back(run_config(host, cfg, ref, st));
       }
-      // Converged: within 10 % of the run's own best error. Target: the worst final error of
-      // all configurations (every one reaches it), so time and bytes compare at equal quality.
-      double target = 0.0;
-      for (const Curve& c : curves) target = std::max(target, c.rel_mse.back());
-      for (const Curve& c : curves) {
-        const double best = *std::min_element(c.rel_mse.begin(), c.rel_mse.end());
-        const int conv = first_at(c, 1.1 * best), hit = first_at(c, target);
-        const double per_update = c.seconds.back() / static_cast<double>(c.seconds.size());
-        std::printf("%-9s %-16s %9.3f %9.4f %9.5f | %9.2f %10.0f | %9.2f %10.0f | %s\n",
-                    spec.c_str(), c.label.c_str(), per_update, c.rmse.back(), c.rel_mse.back(),
-                    c.seconds[static_cast<std::size_t>(conv)],
-                    c.bytes[static_cast<std::size_t>(conv)] / 1024.0,
-                    c.seconds[static_cast<std::size_t>(hit)],
-                    c.bytes[static_cast<std::size_t>(hit)] / 1024.0, c.summary.c_str());
-        report.push_back({{"scene", spec},
-                          {"method", c.label},
-                          {"seconds_per_update", per_update},
-                          {"rmse", c.rmse},
-                          {"rel_mse", c.rel_mse},
-                          {"seconds", c.seconds},
-                          {"bytes", c.bytes},
-                          {"target_rel_mse", target},
-                          {"reference_rel_mse", floor},
-                          {"state", c.summary},
-                          {"converged_update", conv + 1},
-                          {"target_update", hit + 1}});
-      }
-      // The convergence plot of this scene.
-      plot::XYPlot xy;
-      xy.title = spec + ": error against the reference path tracer";
-      xy.x_label = "server seconds (2-core VM, Embree)";
-      xy.y_label = "relative MSE of the lightmaps";
-      xy.y_log = true;
-      xy.legend = plot::XYPlot::Legend::TopRight;
-      char note[128];
-      std::snprintf(note, sizeof note, "reference: %d paths per texel, its own rel MSE ~%.5f",
-                    ref_spp, floor);
-      xy.note = note;
-      const plot::Color colors[] = {plot::kBlue,
-                                    plot::Color{120, 170, 220},
-                                    plot::kOrange,
-                                    plot::kRed,
-                                    plot::Color{250, 190, 120},
-                                    plot::kGreen,
-                                    plot::Color{140, 200, 140},
-                                    plot::kDarkGrey};
-      for (std::size_t i = 0; i < curves.size(); ++i) {
-        plot::Series s;
-        s.label = curves[i].label;
-        s.x = curves[i].seconds;
-        s.y = curves[i].rel_mse;
-        s.color = colors[i % 8];
-        s.lines = true;
-        s.points = false;
-        xy.series.push_back(s);
-      }
-      std::string stem = spec;
-      std::replace(stem.begin(), stem.end(), ':', '_');
-      plot::write_xy_plot(out_dir + "/methods_" + stem + ".png", xy);
-      references.push_back(ref_image);
+      report_scene(spec, curves, ref.floor, report);
+      plot_scene(spec, curves, ref.floor, st.ref_spp, out_dir);
+      references.push_back(ref.image);
       all.push_back(std::move(curves));
     }
-    // The image grid: a row per scene, the reference first, every configuration after it, all
-    // at the reference's exposure.
-    const int pad = 6, label_h = 18;
-    const int cols = static_cast<int>(cfgs.size()) + 1;
-    plot::Canvas grid(cols * (size + pad) + pad,
-                      static_cast<int>(all.size()) * (size + label_h + pad) + pad);
-    for (std::size_t r = 0; r < all.size(); ++r) {
-      const float scale = exposure_scale(references[r], ToneMapOptions{});
-      const int y0 = pad + static_cast<int>(r) * (size + label_h + pad);
-      for (int c = 0; c < cols; ++c) {
-        const int x0 = pad + c * (size + pad);
-        const ImageRGB& img = c == 0 ? references[r] : all[r][static_cast<std::size_t>(c - 1)].view;
-        paste(grid, img, scale, x0, y0 + label_h);
-        grid.text(x0, y0 + 4,
-                  c == 0 ? scenes[r] + " ref" : all[r][static_cast<std::size_t>(c - 1)].label, 1.0,
-                  plot::kBlack);
-      }
-    }
-    grid.write_png(out_dir + "/methods_grid.png");
-    std::ofstream(out_dir + "/methods.json") << report.dump(1) << "\n";
+    write_grid(scenes, references, all, cfgs.size(), st.size, out_dir);
+    write_json(out_dir + "/methods.json", report, 1);
     std::printf("wrote %s/methods.json, methods_grid.png and one plot per scene\n",
                 out_dir.c_str());
     return 0;

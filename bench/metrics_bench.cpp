@@ -105,6 +105,81 @@ void print_latency(const char* what, Latency& l) {
               l.quantile(1.0) * 1e3, l.failed);
 }
 
+// Raises the descriptor limit to its maximum; prints it.
+void raise_descriptor_limit() {
+  rlimit lim{};
+  getrlimit(RLIMIT_NOFILE, &lim);
+  lim.rlim_cur = lim.rlim_max;
+  setrlimit(RLIMIT_NOFILE, &lim);
+  getrlimit(RLIMIT_NOFILE, &lim);
+  std::printf("descriptor limit %llu\n", static_cast<unsigned long long>(lim.rlim_cur));
+}
+
+// The burst: `connections` concurrent scrapes.
+void burst(const tcp::endpoint& at, int connections) {
+  asio::io_context io;
+  Clients clients = connect_all(io, at, connections);
+  const auto t0 = Clock::now();
+  for (auto& client : clients) {
+    Client* c = client.get();
+    if (!c->connected) continue;
+    asio::async_write(c->socket, asio::buffer(kRequest), [c](std::error_code ec, std::size_t) {
+      if (!ec) read_to_end(c);
+    });
+  }
+  io.restart();
+  io.run_for(std::chrono::seconds(20));
+  const double s = std::chrono::duration<double>(Clock::now() - t0).count();
+  int connected = 0, answered = 0;
+  for (const auto& c : clients) {
+    connected += c->connected ? 1 : 0;
+    answered += c->closed && ok_response(c->received) ? 1 : 0;
+  }
+  std::printf("burst: %d connections (%d connected), %d answered 200, all done in %.1f ms\n\n",
+              connections, connected, answered, s * 1e3);
+}
+
+// `scrapes` sequential scrapes into l.
+void scrape_into(Latency& l, const tcp::endpoint& at, int scrapes) {
+  for (int i = 0; i < scrapes; ++i) {
+    const double s = scrape(at);
+    if (s < 0)
+      ++l.failed;
+    else
+      l.seconds.push_back(s);
+  }
+}
+
+// One round with `connections` stalled connections (half of them mid-request): scrape latency
+// into `loaded`; returns how many of them the endpoint closed meanwhile.
+int stalled_round(const tcp::endpoint& at, int connections, int scrapes, Latency& loaded,
+                  int& stalled_total) {
+  asio::io_context io;
+  Clients stalled = connect_all(io, at, connections);
+  for (std::size_t i = 0; i < stalled.size(); i += 2) {
+    std::error_code ec;
+    if (stalled[i]->connected)
+      asio::write(stalled[i]->socket, asio::buffer(std::string("GET /metrics HTTP/1.1\r\nHo")), ec);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));  // accepted by now
+  scrape_into(loaded, at, scrapes);
+  // How many of the stalled connections the endpoint closed meanwhile.
+  for (auto& c : stalled)
+    if (c->connected) read_to_end(c.get());
+  io.restart();
+  io.run_for(std::chrono::milliseconds(20));
+  for (auto& c : stalled) {
+    std::error_code ignored;
+    c->socket.cancel(ignored);
+  }
+  io.restart();
+  io.run();
+  int closed = 0;
+  for (const auto& c : stalled) closed += c->closed ? 1 : 0;
+  stalled_total += static_cast<int>(stalled.size());
+  return closed;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -119,12 +194,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   log::set_level(log::Level::Warn);
 
-  rlimit lim{};
-  getrlimit(RLIMIT_NOFILE, &lim);
-  lim.rlim_cur = lim.rlim_max;
-  setrlimit(RLIMIT_NOFILE, &lim);
-  getrlimit(RLIMIT_NOFILE, &lim);
-  std::printf("descriptor limit %llu\n", static_cast<unsigned long long>(lim.rlim_cur));
+  raise_descriptor_limit();
 
   MetricsSnapshot m;
   m.scene = "rooms:3";
@@ -141,68 +211,13 @@ int main(int argc, char** argv) {
   const tcp::endpoint at(asio::ip::make_address("127.0.0.1"), ep.port());
   std::printf("metrics text %zu bytes\n\n", text.size());
 
-  {  // The burst.
-    asio::io_context io;
-    Clients clients = connect_all(io, at, connections);
-    const auto t0 = Clock::now();
-    for (auto& client : clients) {
-      Client* c = client.get();
-      if (!c->connected) continue;
-      asio::async_write(c->socket, asio::buffer(kRequest), [c](std::error_code ec, std::size_t) {
-        if (!ec) read_to_end(c);
-      });
-    }
-    io.restart();
-    io.run_for(std::chrono::seconds(20));
-    const double s = std::chrono::duration<double>(Clock::now() - t0).count();
-    int connected = 0, answered = 0;
-    for (const auto& c : clients) {
-      connected += c->connected ? 1 : 0;
-      answered += c->closed && ok_response(c->received) ? 1 : 0;
-    }
-    std::printf("burst: %d connections (%d connected), %d answered 200, all done in %.1f ms\n\n",
-                connections, connected, answered, s * 1e3);
-  }
+  burst(at, connections);
 
   Latency idle, loaded;
   int stalled_closed = 0, stalled_total = 0;
   for (int r = 0; r < rounds; ++r) {
-    for (int i = 0; i < scrapes; ++i) {
-      const double s = scrape(at);
-      if (s < 0)
-        ++idle.failed;
-      else
-        idle.seconds.push_back(s);
-    }
-    asio::io_context io;
-    Clients stalled = connect_all(io, at, connections);
-    for (std::size_t i = 0; i < stalled.size(); i += 2) {
-      std::error_code ec;
-      if (stalled[i]->connected)
-        asio::write(stalled[i]->socket, asio::buffer(std::string("GET /metrics HTTP/1.1\r\nHo")),
-                    ec);
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));  // accepted by now
-    for (int i = 0; i < scrapes; ++i) {
-      const double s = scrape(at);
-      if (s < 0)
-        ++loaded.failed;
-      else
-        loaded.seconds.push_back(s);
-    }
-    // How many of the stalled connections the endpoint closed meanwhile.
-    for (auto& c : stalled)
-      if (c->connected) read_to_end(c.get());
-    io.restart();
-    io.run_for(std::chrono::milliseconds(20));
-    for (auto& c : stalled) {
-      std::error_code ignored;
-      c->socket.cancel(ignored);
-    }
-    io.restart();
-    io.run();
-    for (const auto& c : stalled) stalled_closed += c->closed ? 1 : 0;
-    stalled_total += static_cast<int>(stalled.size());
+    scrape_into(idle, at, scrapes);
+    stalled_closed += stalled_round(at, connections, scrapes, loaded, stalled_total);
   }
   std::printf("%-34s %9s %9s %9s %7s\n", "scrape latency (ms)", "p50", "p99", "max", "failed");
   print_latency("no other connection", idle);

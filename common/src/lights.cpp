@@ -46,79 +46,105 @@ LightSampler::LightSampler(const World& world) : world_(&world) {
   if (!cdf_.empty()) cdf_.back() = 1.0f;
 }
 
-glm::vec3 LightSampler::triangle_irradiance(const RayScene& rays, std::size_t index, glm::vec3 p,
-                                            glm::vec3 n, glm::vec3 ng, glm::vec2 u) const {
+bool LightSampler::triangle_sample(const RayScene& rays, std::size_t index, glm::vec3 p,
+                                   glm::vec3 n, glm::vec3 ng, glm::vec2 u, ShadowSample& s) const {
   const EmissiveTriangle& e = triangles_[index];
   glm::vec2 b = uniform_triangle(u);
   glm::vec3 y = e.p0 + b.x * e.e1 + b.y * e.e2;
   glm::vec3 d = y - p;
   float dist2 = glm::dot(d, d);
-  if (!(dist2 > 0.0f)) return glm::vec3(0.0f);
+  if (!(dist2 > 0.0f)) return false;
   float dist = std::sqrt(dist2);
   glm::vec3 wi = d / dist;
   float cos_x = glm::dot(n, wi);
-  if (cos_x <= 0.0f) return glm::vec3(0.0f);
+  if (cos_x <= 0.0f) return false;
   float cos_y = -glm::dot(e.normal, wi);
   if (e.double_sided) cos_y = std::fabs(cos_y);
-  if (cos_y <= 0.0f) return glm::vec3(0.0f);
+  if (cos_y <= 0.0f) return false;
   // The shadow ray runs from the offset origin to the light point itself (not along wi from the
   // offset origin, which would cross the light's plane before tmax at grazing angles).
-  Ray shadow;
-  shadow.origin = rays.offset(p, ng, wi);
-  glm::vec3 to_light = y - shadow.origin;
+  s.shadow = Ray{};
+  s.shadow.origin = rays.offset(p, ng, wi);
+  glm::vec3 to_light = y - s.shadow.origin;
   float len = glm::length(to_light);
-  shadow.direction = to_light / len;
-  shadow.tmax = len - rays.epsilon();
-  if (shadow.tmax > 0.0f && rays.occluded(shadow)) return glm::vec3(0.0f);
+  s.shadow.direction = to_light / len;
+  s.shadow.tmax = len - rays.epsilon();
+  s.triangle = index;
+  s.b = b;
+  s.factor = cos_x * cos_y * e.area / dist2;
+  return true;
+}
+
+glm::vec3 LightSampler::triangle_emitted(const ShadowSample& s) const {
+  const EmissiveTriangle& e = triangles_[s.triangle];
   // barycentrics of y for the emission lookup: y = (1-u-v) v0 + u v1 + v v2 with u = b.x, v = b.y
-  glm::vec3 le = world_->emission(e.object, e.triangle, b.x, b.y);
-  return le * (cos_x * cos_y * e.area / dist2);
+  glm::vec3 le = world_->emission(e.object, e.triangle, s.b.x, s.b.y);
+  return le * s.factor;
+}
+
+glm::vec3 LightSampler::triangle_irradiance(const RayScene& rays, std::size_t index, glm::vec3 p,
+                                            glm::vec3 n, glm::vec3 ng, glm::vec2 u) const {
+  ShadowSample s;
+  if (!triangle_sample(rays, index, p, n, ng, u, s)) return glm::vec3(0.0f);
+  if (s.shadow.tmax > 0.0f && rays.occluded(s.shadow)) return glm::vec3(0.0f);
+  return triangle_emitted(s);
+}
+
+std::size_t LightSampler::pick_triangle(float u) const {
+  auto it = std::upper_bound(cdf_.begin(), cdf_.end(), u);
+  return std::min<std::size_t>(static_cast<std::size_t>(it - cdf_.begin()), triangles_.size() - 1);
 }
 
 glm::vec3 LightSampler::area_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n,
                                         glm::vec3 ng, glm::vec3 u) const {
   if (triangles_.empty()) return glm::vec3(0.0f);
-  auto it = std::upper_bound(cdf_.begin(), cdf_.end(), u.x);
-  std::size_t i =
-      std::min<std::size_t>(static_cast<std::size_t>(it - cdf_.begin()), triangles_.size() - 1);
+  std::size_t i = pick_triangle(u.x);
   return triangle_irradiance(rays, i, p, n, ng, glm::vec2(u.y, u.z)) / pick_pdf_[i];
+}
+
+bool LightSampler::punctual_sample(const RayScene& rays, const WorldLight& l, glm::vec3 p,
+                                   glm::vec3 n, glm::vec3 ng, ShadowSample& s) {
+  glm::vec3 wi;
+  float dist = 3.4e38f;
+  float falloff = 1.0f;
+  if (l.type == Light::Type::Directional) {
+    wi = -l.direction;
+  } else {
+    glm::vec3 d = l.position - p;
+    float dist2 = glm::dot(d, d);
+    if (!(dist2 > 0.0f)) return false;
+    dist = std::sqrt(dist2);
+    wi = d / dist;
+    falloff = 1.0f / dist2;
+    if (l.range > 0.0f) {  // KHR_lights_punctual recommended range window
+      float r = dist / l.range;
+      falloff *= glm::clamp(1.0f - r * r * r * r, 0.0f, 1.0f);
+    }
+    if (l.type == Light::Type::Spot) {
+      float cd = glm::dot(l.direction, -wi);
+      float denom = std::max(1e-4f, l.cos_inner - l.cos_outer);
+      float t = glm::clamp((cd - l.cos_outer) / denom, 0.0f, 1.0f);
+      falloff *= t * t;
+    }
+  }
+  float cos_x = glm::dot(n, wi);
+  if (cos_x <= 0.0f || falloff <= 0.0f) return false;
+  s.shadow = Ray{};
+  s.shadow.origin = rays.offset(p, ng, wi);
+  s.shadow.direction = wi;
+  s.shadow.tmax = l.type == Light::Type::Directional ? 3.4e38f : dist - rays.epsilon();
+  s.irradiance = l.intensity * (cos_x * falloff);
+  return true;
 }
 
 glm::vec3 LightSampler::punctual_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n,
                                             glm::vec3 ng) const {
   glm::vec3 sum(0.0f);
   for (const WorldLight& l : world_->lights) {
-    glm::vec3 wi;
-    float dist = 3.4e38f;
-    float falloff = 1.0f;
-    if (l.type == Light::Type::Directional) {
-      wi = -l.direction;
-    } else {
-      glm::vec3 d = l.position - p;
-      float dist2 = glm::dot(d, d);
-      if (!(dist2 > 0.0f)) continue;
-      dist = std::sqrt(dist2);
-      wi = d / dist;
-      falloff = 1.0f / dist2;
-      if (l.range > 0.0f) {  // KHR_lights_punctual recommended range window
-        float r = dist / l.range;
-        falloff *= glm::clamp(1.0f - r * r * r * r, 0.0f, 1.0f);
-      }
-      if (l.type == Light::Type::Spot) {
-        float cd = glm::dot(l.direction, -wi);
-        float denom = std::max(1e-4f, l.cos_inner - l.cos_outer);
-        float t = glm::clamp((cd - l.cos_outer) / denom, 0.0f, 1.0f);
-        falloff *= t * t;
-      }
-    }
-    float cos_x = glm::dot(n, wi);
-    if (cos_x <= 0.0f || falloff <= 0.0f) continue;
-    Ray shadow;
-    shadow.origin = rays.offset(p, ng, wi);
-    shadow.direction = wi;
-    shadow.tmax = l.type == Light::Type::Directional ? 3.4e38f : dist - rays.epsilon();
-    if (rays.occluded(shadow)) continue;
-    sum += l.intensity * (cos_x * falloff);
+    ShadowSample s;
+    if (!punctual_sample(rays, l, p, n, ng, s)) continue;
+    if (rays.occluded(s.shadow)) continue;
+    sum += s.irradiance;
   }
   return sum;
 }

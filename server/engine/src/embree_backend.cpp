@@ -10,18 +10,60 @@
 #include "irradcast/common/sampling.h"
 
 namespace irradcast {
-namespace {
-
-using Clock = std::chrono::steady_clock;
-
-// Stream ids keep each pass's random numbers independent of the others'.
-enum Stream : std::uint64_t { kDirect = 1, kProbe = 2, kScatter = 3, kProbePick = 4 };
+namespace embree_sampling {
 
 Rng texel_rng(const EngineParams& p, std::uint64_t index, std::uint32_t update, Stream stream,
               std::uint32_t bounce) {
   return Rng(mix64(p.seed) ^ index,
              (static_cast<std::uint64_t>(update) << 16) ^ (stream << 8) ^ bounce);
 }
+
+glm::vec3 sample_probe(const std::vector<glm::vec3>& radiance, std::size_t probe, int res,
+                       glm::vec3 dir) {
+  glm::vec2 uv = octahedral_encode(dir) * static_cast<float>(res) - 0.5f;
+  glm::vec2 f = glm::floor(uv);
+  glm::vec2 a = uv - f;
+  auto at = [&](int x, int y) {
+    x = glm::clamp(x, 0, res - 1);
+    y = glm::clamp(y, 0, res - 1);
+    return radiance[probe * res * res + static_cast<std::size_t>(y) * res + x];
+  };
+  int x = static_cast<int>(f.x), y = static_cast<int>(f.y);
+  return glm::mix(glm::mix(at(x, y), at(x + 1, y), a.x),
+                  glm::mix(at(x, y + 1), at(x + 1, y + 1), a.x), a.y);
+}
+
+glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d) {
+  glm::vec3 pad = 1e-3f * glm::max(b.extent(), glm::vec3(1e-6f));
+  float t = 3.4e38f;
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] > 0.0f) t = std::min(t, (b.hi[a] + pad[a] - p[a]) / d[a]);
+    if (d[a] < 0.0f) t = std::min(t, (b.lo[a] - pad[a] - p[a]) / d[a]);
+  }
+  return p + std::max(t, 0.0f) * d;
+}
+
+glm::vec3 probe_direction(std::size_t t, int res, glm::vec2 jitter) {
+  glm::vec2 uv((static_cast<float>(t % res) + jitter.x) / res,
+               (static_cast<float>(t / res) + jitter.y) / res);
+  return octahedral_decode(uv);
+}
+
+int pick_probe(const ProbeWeights& w, float u) {
+  float acc = 0.0f;
+  for (int k = 0; k + 1 < w.count; ++k) {
+    acc += w.weight[k];
+    if (u < acc) return k;
+  }
+  return w.count - 1;
+}
+
+}  // namespace embree_sampling
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using namespace embree_sampling;
 
 // Runs body(texel) over every work unit (cell or object) in dispatch order, units in parallel
 // and large units split further; each worker adds its ray count.
@@ -43,42 +85,6 @@ std::uint64_t for_each_texel(const PassInput& in, Body&& body) {
         }
       });
   return rays.load();
-}
-
-glm::vec3 sample_probe(const std::vector<glm::vec3>& radiance, std::size_t probe, int res,
-                       glm::vec3 dir) {
-  glm::vec2 uv = octahedral_encode(dir) * static_cast<float>(res) - 0.5f;
-  glm::vec2 f = glm::floor(uv);
-  glm::vec2 a = uv - f;
-  auto at = [&](int x, int y) {
-    x = glm::clamp(x, 0, res - 1);
-    y = glm::clamp(y, 0, res - 1);
-    return radiance[probe * res * res + static_cast<std::size_t>(y) * res + x];
-  };
-  int x = static_cast<int>(f.x), y = static_cast<int>(f.y);
-  return glm::mix(glm::mix(at(x, y), at(x + 1, y), a.x),
-                  glm::mix(at(x, y + 1), at(x + 1, y + 1), a.x), a.y);
-}
-
-// Where a ray leaving p along d leaves the scene's bounds (slightly enlarged).
-glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d) {
-  glm::vec3 pad = 1e-3f * glm::max(b.extent(), glm::vec3(1e-6f));
-  float t = 3.4e38f;
-  for (int a = 0; a < 3; ++a) {
-    if (d[a] > 0.0f) t = std::min(t, (b.hi[a] + pad[a] - p[a]) / d[a]);
-    if (d[a] < 0.0f) t = std::min(t, (b.lo[a] - pad[a] - p[a]) / d[a]);
-  }
-  return p + std::max(t, 0.0f) * d;
-}
-
-// One of a texel's probes, chosen with probability equal to its weight (u uniform in [0, 1)).
-int pick_probe(const ProbeWeights& w, float u) {
-  float acc = 0.0f;
-  for (int k = 0; k + 1 < w.count; ++k) {
-    acc += w.weight[k];
-    if (u < acc) return k;
-  }
-  return w.count - 1;
 }
 
 }  // namespace
@@ -132,12 +138,9 @@ PassResult EmbreeBackend::gather_probes(const PassInput& in, const RadianceField
                         if (!g.usable[pi]) continue;
                         Rng rng = texel_rng(in.params, pi, in.update, kProbe, in.bounce);
                         for (std::size_t t = 0; t < per; ++t) {
-                          glm::vec2 jitter = rng.next_2d();
-                          glm::vec2 uv((static_cast<float>(t % res) + jitter.x) / res,
-                                       (static_cast<float>(t / res) + jitter.y) / res);
                           Ray ray;
                           ray.origin = g.position[pi];
-                          ray.direction = octahedral_decode(uv);
+                          ray.direction = probe_direction(t, res, rng.next_2d());
                           Hit h = rays_->intersect(ray);
                           ++local;
                           if (h.valid()) out[pi * per + t] = radiance_at(prev, h);

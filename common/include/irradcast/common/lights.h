@@ -45,6 +45,27 @@ class LightSampler {
   // Exact direct irradiance at p from every punctual light (each with one shadow ray).
   glm::vec3 punctual_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n, glm::vec3 ng) const;
 
+  // The steps of the estimates above, for a caller that traces the shadow rays itself
+  // (bench/engine times them through raw Embree). A sample is its shadow ray and what it adds
+  // when that ray is unoccluded: `irradiance` for a punctual light, triangle_emitted(s) for an
+  // area light.
+  struct ShadowSample {
+    Ray shadow;
+    glm::vec3 irradiance{0.0f};  // punctual light
+    std::size_t triangle = 0;    // area light: the triangle, the barycentrics of the point and
+    glm::vec2 b{0.0f};           // the geometric factor cos_x cos_y area / dist^2
+    float factor = 0.0f;
+  };
+  // The area light that u (in [0, 1)) picks by power.
+  std::size_t pick_triangle(float u) const;
+  // triangle_irradiance before its shadow ray; false: no contribution (no ray).
+  bool triangle_sample(const RayScene& rays, std::size_t index, glm::vec3 p, glm::vec3 n,
+                       glm::vec3 ng, glm::vec2 u, ShadowSample& s) const;
+  glm::vec3 triangle_emitted(const ShadowSample& s) const;
+  // One punctual light before its shadow ray; false: no contribution (no ray).
+  static bool punctual_sample(const RayScene& rays, const WorldLight& l, glm::vec3 p, glm::vec3 n,
+                              glm::vec3 ng, ShadowSample& s);
+
  private:
   const World* world_;
   std::vector<EmissiveTriangle> triangles_;

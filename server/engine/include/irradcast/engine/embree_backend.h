@@ -3,9 +3,32 @@
 
 #include "irradcast/common/lights.h"
 #include "irradcast/common/ray_scene.h"
+#include "irradcast/common/sampling.h"
 #include "irradcast/engine/trace_backend.h"
 
 namespace irradcast {
+
+// The backend's sampling, public so that a caller can regenerate exactly the rays a pass traces
+// (bench/engine does, to time them through raw Embree).
+namespace embree_sampling {
+
+// Stream ids keep each pass's random numbers independent of the others'.
+enum Stream : std::uint64_t { kDirect = 1, kProbe = 2, kScatter = 3, kProbePick = 4 };
+
+// The random stream of one texel (or probe) in one pass of one update.
+Rng texel_rng(const EngineParams& p, std::uint64_t index, std::uint32_t update, Stream stream,
+              std::uint32_t bounce);
+// A probe's radiance in direction dir, bilinear in its octahedral map (res x res per probe).
+glm::vec3 sample_probe(const std::vector<glm::vec3>& radiance, std::size_t probe, int res,
+                       glm::vec3 dir);
+// Where a ray leaving p along d leaves the scene's bounds (slightly enlarged).
+glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d);
+// The direction of a probe's gather ray for octahedral texel t (res x res), jittered.
+glm::vec3 probe_direction(std::size_t t, int res, glm::vec2 jitter);
+// One of a texel's probes, chosen with probability equal to its weight (u uniform in [0, 1)).
+int pick_probe(const ProbeWeights& w, float u);
+
+}  // namespace embree_sampling
 
 class EmbreeBackend final : public TraceBackend {
  public:

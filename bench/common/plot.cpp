@@ -233,8 +233,10 @@ std::string tick_label(double value, double step) {
   return buf;
 }
 
-void write_xy_plot(const std::string& path, const XYPlot& in) {
-  // On a log axis the series are drawn in decimal logarithms; points that have none are dropped.
+namespace {
+
+// On a log axis the series are drawn in decimal logarithms; points that have none are dropped.
+XYPlot to_log_axes(const XYPlot& in) {
   XYPlot plot = in;
   if (plot.x_log || plot.y_log)
     for (Series& s : plot.series) {
@@ -253,6 +255,46 @@ void write_xy_plot(const std::string& path, const XYPlot& in) {
       }
       s = std::move(t);
     }
+  return plot;
+}
+
+// The legend, in the chosen corner inside the plot area (px0..px1 x py0..py1).
+void draw_legend(Canvas& c, const XYPlot& plot, double px0, double px1, double py0, double py1) {
+  double lw = 0;
+  std::size_t rows = 0;
+  for (const Series& s : plot.series)
+    if (!s.label.empty()) {
+      lw = std::max(lw, Canvas::text_width(s.label, 2.0));
+      ++rows;
+    }
+  if (lw > 0) {
+    const double row = 26, bw = lw + 62, bh = row * static_cast<double>(rows) + 10;
+    const bool right =
+        plot.legend == XYPlot::Legend::TopRight || plot.legend == XYPlot::Legend::BottomRight;
+    const bool bottom =
+        plot.legend == XYPlot::Legend::BottomLeft || plot.legend == XYPlot::Legend::BottomRight;
+    const double lx = right ? px1 - 16 - bw : px0 + 16, ly = bottom ? py1 - 16 - bh : py0 + 12;
+    c.fill_rect(lx, ly, lx + bw, ly + bh, kWhite);
+    c.line(lx, ly, lx + bw, ly, 1.0, kGrey);
+    c.line(lx + bw, ly, lx + bw, ly + bh, 1.0, kGrey);
+    c.line(lx + bw, ly + bh, lx, ly + bh, 1.0, kGrey);
+    c.line(lx, ly + bh, lx, ly, 1.0, kGrey);
+    double y = ly + 8;
+    for (const Series& s : plot.series) {
+      if (s.label.empty()) continue;
+      double my = y + Canvas::text_height(2.0) / 2;
+      if (s.lines) c.line(lx + 8, my, lx + 40, my, s.line_width, s.color);
+      if (s.points) c.disc(lx + 24, my, 5.0, s.color);
+      c.text(lx + 50, y, s.label, 2.0, kBlack);
+      y += row;
+    }
+  }
+}
+
+}  // namespace
+
+void write_xy_plot(const std::string& path, const XYPlot& in) {
+  const XYPlot plot = to_log_axes(in);
   Canvas c(plot.width, plot.height);
   const double left = 110, right = 40, top = plot.note.empty() ? 70 : 80, bottom = 80;
   const double px0 = left, px1 = plot.width - right, py0 = top, py1 = plot.height - bottom;
@@ -314,36 +356,7 @@ void write_xy_plot(const std::string& path, const XYPlot& in) {
     }
   }
 
-  // Legend, in the chosen corner inside the plot area.
-  double lw = 0;
-  std::size_t rows = 0;
-  for (const Series& s : plot.series)
-    if (!s.label.empty()) {
-      lw = std::max(lw, Canvas::text_width(s.label, 2.0));
-      ++rows;
-    }
-  if (lw > 0) {
-    const double row = 26, bw = lw + 62, bh = row * static_cast<double>(rows) + 10;
-    const bool right =
-        plot.legend == XYPlot::Legend::TopRight || plot.legend == XYPlot::Legend::BottomRight;
-    const bool bottom =
-        plot.legend == XYPlot::Legend::BottomLeft || plot.legend == XYPlot::Legend::BottomRight;
-    const double lx = right ? px1 - 16 - bw : px0 + 16, ly = bottom ? py1 - 16 - bh : py0 + 12;
-    c.fill_rect(lx, ly, lx + bw, ly + bh, kWhite);
-    c.line(lx, ly, lx + bw, ly, 1.0, kGrey);
-    c.line(lx + bw, ly, lx + bw, ly + bh, 1.0, kGrey);
-    c.line(lx + bw, ly + bh, lx, ly + bh, 1.0, kGrey);
-    c.line(lx, ly + bh, lx, ly, 1.0, kGrey);
-    double y = ly + 8;
-    for (const Series& s : plot.series) {
-      if (s.label.empty()) continue;
-      double my = y + Canvas::text_height(2.0) / 2;
-      if (s.lines) c.line(lx + 8, my, lx + 40, my, s.line_width, s.color);
-      if (s.points) c.disc(lx + 24, my, 5.0, s.color);
-      c.text(lx + 50, y, s.label, 2.0, kBlack);
-      y += row;
-    }
-  }
+  draw_legend(c, plot, px0, px1, py0, py1);
   c.write_png(path);
 }
 

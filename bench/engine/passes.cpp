@@ -1,0 +1,474 @@
+// irradcast-bench-engine, part 1: the engine's passes against RayScene and raw Embree on the very
+// same rays. The engine runs on a BenchBackend, a TraceBackend that forwards every pass to the
+// real EmbreeBackend; in the measured update it regenerates, from the PassInput it is handed, the
+// rays that pass traces (with the backend's own sampling: embree_sampling, LightSampler's sample
+// steps), times the three side by side, and checks the regenerated rays: shading them with the
+// engine's formulas must reproduce the pass's output.
+#include <embree3/rtcore.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <memory>
+
+#include "bench_util.h"
+#include "engine_bench.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/sampling.h"
+#include "irradcast/engine/embree_backend.h"
+#include "irradcast/engine/engine.h"
+
+namespace irradcast::bench {
+namespace {
+
+using json = nlohmann::json;
+using namespace embree_sampling;
+
+// ---------------------------------------------------------------------------------------------
+// The rays of one pass.
+
+enum class Kind { Occlusion, Intersection };
+
+struct RawRay {
+  glm::vec3 org;
+  float tmin;
+  glm::vec3 dir;
+  float tmax;
+};
+
+RawRay to_raw(const Ray& r) {
+  return {r.origin, r.tmin, r.direction, r.tmax};
+}
+
+Ray to_ray(const RawRay& s) {
+  Ray r;
+  r.origin = s.org;
+  r.direction = s.dir;
+  r.tmin = s.tmin;
+  r.tmax = s.tmax;
+  return r;
+}
+
+struct Capture {
+  Kind kind = Kind::Intersection;
+  std::vector<RawRay> rays;
+  // Direct pass, per light sample that passed the cosine tests, in the order the backend sums
+  // them: its unoccluded contribution and its shadow ray (-1: none traced, always visible).
+  struct LightSample {
+    std::uint32_t texel;
+    std::int32_t ray;
+    glm::vec3 weight;
+    bool area;
+  };
+  std::vector<LightSample> samples;
+  // Gather / scatter: the output entry each ray belongs to (probe texel / surface texel).
+  std::vector<std::uint32_t> owner;
+};
+
+// Texels in the order the backend's for_each_texel visits them (units in dispatch order).
+template <typename Body>
+void for_each_texel_in_order(const PassInput& in, Body&& body) {
+  for (std::size_t k = 0; k < in.unit_texels.size(); ++k) body(in.unit_texels[k]);
+}
+
+// Direct pass rays: LightSampler's punctual and area samples, as EmbreeBackend::direct (through
+// punctual_irradiance and area_irradiance) takes them.
+Capture capture_direct(const RayScene& rays, const LightSampler& lights, const PassInput& in) {
+  Capture c;
+  c.kind = Kind::Occlusion;
+  const int n = in.params.direct_samples;
+  const bool area = !lights.emissive_triangles().empty();
+  for_each_texel_in_order(in, [&](std::uint32_t i) {
+    const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
+                    ng = in.texels.geo_normal[i];
+    LightSampler::ShadowSample s;
+    for (const WorldLight& l : in.world.lights) {
+      if (!LightSampler::punctual_sample(rays, l, p, nrm, ng, s)) continue;
+      c.samples.push_back({i, static_cast<std::int32_t>(c.rays.size()), s.irradiance, false});
+      c.rays.push_back(to_raw(s.shadow));
+    }
+    if (!area) return;
+    Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
+    for (int k = 0; k < n; ++k) {
+      float pick = (static_cast<float>(k) + rng.next_float()) / static_cast<float>(n);
+      glm::vec2 pos = rng.next_2d();
+      const std::size_t li = lights.pick_triangle(pick);
+      if (!lights.triangle_sample(rays, li, p, nrm, ng, pos, s)) continue;
+      glm::vec3 w = lights.triangle_emitted(s) / lights.pick_pdf()[li];
+      std::int32_t index = -1;
+      if (s.shadow.tmax > 0.0f) {
+        index = static_cast<std::int32_t>(c.rays.size());
+        c.rays.push_back(to_raw(s.shadow));
+      }
+      c.samples.push_back({i, index, w, true});
+    }
+  });
+  return c;
+}
+
+// Probe gather rays: EmbreeBackend::gather_probes.
+Capture capture_probes(const PassInput& in) {
+  Capture c;
+  const ProbeGrid& g = in.probes;
+  const int res = g.resolution;
+  const std::size_t per = g.texels_per_probe();
+  for (std::size_t pi = 0; pi < g.count(); ++pi) {
+    if (!g.usable[pi]) continue;
+    Rng rng = texel_rng(in.params, pi, in.update, kProbe, in.bounce);
+    for (std::size_t t = 0; t < per; ++t) {
+      c.rays.push_back({g.position[pi], 0.0f, probe_direction(t, res, rng.next_2d()), 3.4e38f});
+      c.owner.push_back(static_cast<std::uint32_t>(pi * per + t));
+    }
+  }
+  return c;
+}
+
+// Scatter rays: EmbreeBackend::scatter.
+Capture capture_scatter(const RayScene& rays, const PassInput& in) {
+  Capture c;
+  const int n = in.params.indirect_samples;
+  const float extent = in.world.bounds.max_extent();
+  const float range = in.params.unbiased() ? 3.4e38f : in.params.tracing_range * extent;
+  c.rays.reserve(in.texels.size() * static_cast<std::size_t>(n));
+  for_each_texel_in_order(in, [&](std::uint32_t i) {
+    const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
+                    ng = in.texels.geo_normal[i];
+    Rng rng = texel_rng(in.params, i, in.update, kScatter, in.bounce);
+    Frame frame(nrm);
+    for (int s = 0; s < n; ++s) {
+      glm::vec3 dir = frame.to_world(cosine_hemisphere(rng.next_2d()));
+      c.rays.push_back({rays.offset(p, ng, dir), 0.0f, dir, range});
+      c.owner.push_back(i);
+    }
+  });
+  return c;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tracing the captured rays: raw Embree, and through RayScene.
+
+void to_embree(const RawRay& s, RTCRay& ray) {
+  ray.org_x = s.org.x;
+  ray.org_y = s.org.y;
+  ray.org_z = s.org.z;
+  ray.tnear = s.tmin;
+  ray.dir_x = s.dir.x;
+  ray.dir_y = s.dir.y;
+  ray.dir_z = s.dir.z;
+  ray.time = 0.0f;
+  ray.tfar = s.tmax;
+  ray.mask = 0xFFFFFFFFu;
+  ray.id = 0;
+  ray.flags = 0;
+}
+
+std::uint64_t trace_raw(RTCScene scene, const Capture& c) {
+  std::atomic<std::uint64_t> hits{0};
+  const RawRay* rays = c.rays.data();
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.rays.size(), 256),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      RTCIntersectContext ctx;
+                      rtcInitIntersectContext(&ctx);
+                      std::uint64_t local = 0;
+                      if (c.kind == Kind::Occlusion) {
+                        for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                          RTCRay ray;
+                          to_embree(rays[i], ray);
+                          rtcOccluded1(scene, &ctx, &ray);
+                          local += ray.tfar < 0.0f;
+                        }
+                      } else {
+                        for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                          RTCRayHit rh;
+                          to_embree(rays[i], rh.ray);
+                          rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+                          rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+                          rtcIntersect1(scene, &ctx, &rh);
+                          local += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+                        }
+                      }
+                      hits += local;
+                    });
+  return hits.load();
+}
+
+std::uint64_t trace_rayscene(const RayScene& scene, const Capture& c) {
+  std::atomic<std::uint64_t> hits{0};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.rays.size(), 256),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      std::uint64_t local = 0;
+                      for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                        Ray ray = to_ray(c.rays[i]);
+                        local += c.kind == Kind::Occlusion ? scene.occluded(ray)
+                                                           : scene.intersect(ray).valid();
+                      }
+                      hits += local;
+                    });
+  return hits.load();
+}
+
+std::vector<Hit> intersect_all(const RayScene& rays, const Capture& c) {
+  std::vector<Hit> hits(c.rays.size());
+  tbb::parallel_for(std::size_t(0), c.rays.size(),
+                    [&](std::size_t i) { hits[i] = rays.intersect(to_ray(c.rays[i])); });
+  return hits;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Shading the captured rays with the engine's formulas (the check against the pass's output).
+
+void shade_direct(const RayScene& rays, const LightSampler& lights, const PassInput& in,
+                  const Capture& c, std::vector<glm::vec3>& est) {
+  std::vector<std::uint8_t> blocked(c.rays.size());
+  tbb::parallel_for(std::size_t(0), c.rays.size(),
+                    [&](std::size_t i) { blocked[i] = rays.occluded(to_ray(c.rays[i])); });
+  est.assign(in.texels.size(), glm::vec3(0.0f));
+  const float n = static_cast<float>(in.params.direct_samples);
+  const bool area = !lights.emissive_triangles().empty();
+  for (std::size_t s = 0; s < c.samples.size();) {
+    const std::uint32_t t = c.samples[s].texel;
+    glm::vec3 e(0.0f), sum(0.0f);
+    for (; s < c.samples.size() && c.samples[s].texel == t; ++s) {
+      const Capture::LightSample& ls = c.samples[s];
+      if (ls.ray >= 0 && blocked[ls.ray]) continue;
+      (ls.area ? sum : e) += ls.weight;
+    }
+    if (area) e += sum / n;
+    est[t] = e;
+  }
+}
+
+void shade_probes(const RayScene& rays, const PassInput& in, const RadianceField& prev,
+                  const Capture& c, std::vector<glm::vec3>& est) {
+  std::vector<Hit> hits = intersect_all(rays, c);
+  est.assign(in.probes.count() * in.probes.texels_per_probe(), glm::vec3(0.0f));
+  for (std::size_t r = 0; r < c.rays.size(); ++r)
+    if (hits[r].valid()) est[c.owner[r]] = radiance_at(prev, hits[r]);
+}
+
+void shade_scatter(const RayScene& rays, const PassInput& in, const RadianceField& prev,
+                   const std::vector<glm::vec3>& probe_radiance, const Capture& c,
+                   std::vector<glm::vec3>& est) {
+  std::vector<Hit> hits = intersect_all(rays, c);
+  const int n = in.params.indirect_samples;
+  const float extent = in.world.bounds.max_extent();
+  const bool unbiased = in.params.unbiased();
+  const bool fixed = in.params.distant_point == DistantPoint::FixedDistance;
+  est.assign(in.texels.size(), glm::vec3(0.0f));
+  for (std::size_t r0 = 0; r0 < c.rays.size(); r0 += static_cast<std::size_t>(n)) {
+    const std::uint32_t i = c.owner[r0];
+    const glm::vec3 p = in.texels.position[i];
+    Rng pick = texel_rng(in.params, i, in.update, kProbePick, in.bounce);
+    glm::vec3 sum(0.0f);
+    for (int s = 0; s < n; ++s) {
+      const Hit& h = hits[r0 + s];
+      const glm::vec3 d = c.rays[r0 + s].dir;
+      if (h.valid()) {
+        sum += radiance_at(prev, h);
+      } else if (!unbiased && !in.probe_weights.empty()) {
+        // One probe picked by weight from the texel's own stream (EmbreeBackend::scatter).
+        glm::vec3 q = fixed ? p + extent * d : exit_point(in.world.bounds, p, d);
+        const ProbeWeights& w = in.probe_weights[i];
+        const int k = pick_probe(w, pick.next_float());
+        glm::vec3 dd = q - in.probes.position[w.probe[k]];
+        float len = glm::length(dd);
+        if (len > 0.0f)
+          sum += sample_probe(probe_radiance, w.probe[k], in.probes.resolution, dd / len);
+      }
+    }
+    est[i] = sum * (kPi / static_cast<float>(n));
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The backend the engine runs on during the benchmark.
+
+struct PassMeasure {
+  std::string pass;  // direct | probes | scatter
+  std::uint32_t bounce = 0;
+  Kind kind = Kind::Intersection;
+  std::uint64_t engine_rays = 0;  // what the pass reports (PassResult::rays)
+  std::uint64_t traced_rays = 0;  // rays actually sent to Embree
+  std::uint64_t hits = 0;         // occluded / hit rays (raw and RayScene agree)
+  std::vector<double> pipeline_s, rayscene_s, raw_s;
+  double max_abs_diff = 0.0;   // regenerated-ray shading vs the pass's output
+  double max_abs_value = 0.0;  // of the pass's output
+};
+
+// The largest difference between the pass's output and the shaded regenerated rays.
+void compare(const std::vector<glm::vec3>& out, const std::vector<glm::vec3>& est, PassMeasure& m) {
+  for (std::size_t i = 0; i < out.size() && i < est.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      m.max_abs_diff =
+          std::max(m.max_abs_diff, static_cast<double>(std::fabs(out[i][k] - est[i][k])));
+      m.max_abs_value = std::max(m.max_abs_value, static_cast<double>(std::fabs(out[i][k])));
+    }
+  if (est.size() != out.size()) m.max_abs_diff = INFINITY;
+}
+
+class BenchBackend final : public TraceBackend {
+ public:
+  BenchBackend(const RayScene& rays, const LightSampler& lights, MeasureOptions options)
+      : rays_(&rays), lights_(&lights), inner_(rays, lights), options_(options) {}
+
+  bool measuring = false;
+  std::vector<PassMeasure> results;
+
+  std::string name() const override { return "embree (benchmarked)"; }
+
+  PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) override {
+    if (!measuring) return inner_.direct(in, out);
+    Capture c = capture_direct(*rays_, *lights_, in);
+    auto run = [&] { return inner_.direct(in, out); };
+    auto shade = [&](std::vector<glm::vec3>& est) { shade_direct(*rays_, *lights_, in, c, est); };
+    return measure("direct", in, c, run, shade, out);
+  }
+
+  PassResult gather_probes(const PassInput& in, const RadianceField& prev,
+                           std::vector<glm::vec3>& out) override {
+    if (!measuring) return inner_.gather_probes(in, prev, out);
+    Capture c = capture_probes(in);
+    auto run = [&] { return inner_.gather_probes(in, prev, out); };
+    auto shade = [&](std::vector<glm::vec3>& est) { shade_probes(*rays_, in, prev, c, est); };
+    return measure("probes", in, c, run, shade, out);
+  }
+
+  PassResult scatter(const PassInput& in, const RadianceField& prev,
+                     const std::vector<glm::vec3>& probe_radiance,
+                     std::vector<glm::vec3>& out) override {
+    if (!measuring) return inner_.scatter(in, prev, probe_radiance, out);
+    Capture c = capture_scatter(*rays_, in);
+    auto run = [&] { return inner_.scatter(in, prev, probe_radiance, out); };
+    auto shade = [&](std::vector<glm::vec3>& est) {
+      shade_scatter(*rays_, in, prev, probe_radiance, c, est);
+    };
+    return measure("scatter", in, c, run, shade, out);
+  }
+
+ private:
+  // Runs the engine pass, RayScene and raw Embree on the captured rays, interleaved, and
+  // checks the captured rays against the pass's output.
+  template <typename Run, typename Shade>
+  PassResult measure(const char* pass, const PassInput& in, const Capture& c, Run&& run,
+                     Shade&& shade, std::vector<glm::vec3>& out) {
+    PassMeasure m;
+    m.pass = pass;
+    m.bounce = in.bounce;
+    m.kind = c.kind;
+    m.traced_rays = c.rays.size();
+    PassResult first = run();  // warm-up, and the output to verify
+    m.engine_rays = first.rays;
+    std::vector<glm::vec3> est;
+    shade(est);
+    compare(out, est, m);
+    const RTCScene scene = rays_->embree_scene();
+    trace_raw(scene, c);  // warm-up
+    int reps = options_.min_reps;
+    if (first.seconds > 0.0)
+      reps = std::clamp(static_cast<int>(std::ceil(options_.min_seconds / first.seconds)),
+                        options_.min_reps, options_.max_reps);
+    PassResult last = first;
+    for (int r = 0; r < reps; ++r) {
+      last = run();
+      m.pipeline_s.push_back(last.seconds);
+      auto t0 = Clock::now();
+      std::uint64_t raw_hits = trace_raw(scene, c);
+      m.raw_s.push_back(seconds_since(t0));
+      t0 = Clock::now();
+      std::uint64_t scene_hits = trace_rayscene(*rays_, c);
+      m.rayscene_s.push_back(seconds_since(t0));
+      if (raw_hits != scene_hits)
+        throw Error(std::string(pass) + ": raw Embree and RayScene disagree on the hits");
+      m.hits = raw_hits;
+    }
+    results.push_back(std::move(m));
+    return last;
+  }
+
+  const RayScene* rays_;
+  const LightSampler* lights_;
+  EmbreeBackend inner_;
+  MeasureOptions options_;
+};
+
+json pass_json(const PassMeasure& m) {
+  return {{"pass", m.pass},
+          {"bounce", m.bounce},
+          {"kind", m.kind == Kind::Occlusion ? "occluded" : "intersect"},
+          {"engine_rays", m.engine_rays},
+          {"traced_rays", m.traced_rays},
+          {"hits", m.hits},
+          {"reps", m.pipeline_s.size()},
+          {"pipeline_s_min", minimum(m.pipeline_s)},
+          {"rayscene_s_min", minimum(m.rayscene_s)},
+          {"raw_s_min", minimum(m.raw_s)},
+          {"pipeline_s_median", median(m.pipeline_s)},
+          {"rayscene_s_median", median(m.rayscene_s)},
+          {"raw_s_median", median(m.raw_s)},
+          {"pipeline_s", m.pipeline_s},
+          {"rayscene_s", m.rayscene_s},
+          {"raw_s", m.raw_s},
+          {"verify_max_abs_diff", m.max_abs_diff},
+          {"verify_max_abs_value", m.max_abs_value}};
+}
+
+}  // namespace
+
+std::vector<PassRow> bench_passes(const std::string& spec, float texels_per_scene,
+                                  const MeasureOptions& mo, json& out) {
+  auto t0 = Clock::now();
+  const PreparedScene s = prepare(load_scene(spec), density(texels_per_scene));
+  auto backend = std::make_unique<BenchBackend>(s.rays(), s.lights(), mo);
+  BenchBackend* bench = backend.get();
+  Engine engine(s.world(), s.atlas(), s.gbuffers(), s.rays(), std::move(backend), EngineParams{});
+  const double setup_s = seconds_since(t0);
+  engine.update();  // warm-up: caches, TBB threads, probe radiance
+  bench->measuring = true;
+  t0 = Clock::now();
+  engine.update();
+  const double measure_s = seconds_since(t0);
+  bench->measuring = false;
+
+  std::vector<PassRow> rows;
+  json passes = json::array();
+  for (const char* pass : {"direct", "probes", "scatter"}) {
+    PassRow row;
+    row.scene = spec;
+    row.pass = pass;
+    row.texels = engine.texel_count();
+    for (const PassMeasure& m : bench->results) {
+      if (m.pass != pass) continue;
+      row.engine_rays += m.engine_rays;
+      row.traced_rays += m.traced_rays;
+      row.hits += m.hits;
+      row.pipeline_s += minimum(m.pipeline_s);
+      row.rayscene_s += minimum(m.rayscene_s);
+      row.raw_s += minimum(m.raw_s);
+      row.reps = static_cast<int>(m.pipeline_s.size());
+      double rel = m.max_abs_value > 0 ? m.max_abs_diff / m.max_abs_value : m.max_abs_diff;
+      row.max_rel_diff = std::max(row.max_rel_diff, rel);
+    }
+    rows.push_back(row);
+  }
+  for (const PassMeasure& m : bench->results) passes.push_back(pass_json(m));
+  out.push_back({{"scene", spec},
+                 {"texels_per_scene", texels_per_scene},
+                 {"texels", engine.texel_count()},
+                 {"atlas_texels", s.atlas().texel_count()},
+                 {"triangles",
+                  [&] {
+                    std::size_t n = 0;
+                    for (const auto& o : s.world().objects) n += o.triangles().size();
+                    return n;
+                  }()},
+                 {"probes", engine.probes().count()},
+                 {"setup_s", setup_s},
+                 {"measured_update_wall_s", measure_s},
+                 {"passes", passes}});
+  return rows;
+}
+
+}  // namespace irradcast::bench
