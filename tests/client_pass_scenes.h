@@ -4,9 +4,11 @@
 
 #include <cmath>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "irradcast/common/atlas.h"
+#include "irradcast/common/error.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/lightmap.h"
 #include "irradcast/common/ray_scene.h"
@@ -14,6 +16,17 @@
 #include "scene_builders.h"
 
 namespace irradcast::test {
+
+// The message of the Error that p.validate() throws, or "" when it accepts p.
+template <class Params>
+std::string validate_error(const Params& p) {
+  try {
+    p.validate();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return {};
+}
 
 struct BlockOnFloor {
   // A 10 x 10 floor at y = 0 and a block [-1, 1] x [0, height] x [-1, 1] (lifted by `gap`).

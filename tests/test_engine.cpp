@@ -9,13 +9,13 @@
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
 #include "irradcast/common/compositor.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/lights.h"
+#include "irradcast/common/progress.h"
 #include "irradcast/engine/embree_backend.h"
 #include "irradcast/engine/engine.h"
-#include "irradcast/common/error.h"
 #include "irradcast/engine/gbuffer.h"
-#include "irradcast/common/lights.h"
 #include "irradcast/engine/path_tracer.h"
-#include "irradcast/common/progress.h"
 #include "irradcast/engine/reference_lightmaps.h"
 #include "irradcast/engine/texel_validity.h"
 #include "scene_builders.h"
@@ -101,21 +101,11 @@ class EngineCornell : public ::testing::TestWithParam<float> {};
 TEST_P(EngineCornell, ComposedViewMatchesTheReferenceAndImprovesWithSamples) {
   const float range = GetParam();
   EngineSetup s(make_cornell_box(), 64.0f);
-  CameraPose cam = default_camera(s.scene, s.world);
-  const int w = 48, h = 48;
-  PathTracer tracer(s.world, s.rays, s.lights, PathTracerOptions{2, true, 99});
-  ImageRGB ref = tracer.render(cam, w, h, 1024);
+  const test::ReferenceView view(s);
   EngineParams p;
   p.tracing_range = range;
   auto engine = s.engine(p);
-  engine->update();
-  double first =
-      compare(compose(s.world, s.rays, s.atlas, engine->lightmaps(), cam, w, h), ref).rel_mse;
-  for (int u = 1; u < 16; ++u) engine->update();
-  double last =
-      compare(compose(s.world, s.rays, s.atlas, engine->lightmaps(), cam, w, h), ref).rel_mse;
-  RecordProperty("rel_mse_1_update", std::to_string(first));
-  RecordProperty("rel_mse_16_updates", std::to_string(last));
+  const auto [first, last] = view.after_1_and_16_updates(*engine);
   EXPECT_LT(last, 0.01);
   EXPECT_LT(last, 0.7 * first) << "error must fall as samples accumulate";
   EXPECT_LT(engine->mean_relative_error(), 0.1);

@@ -9,8 +9,8 @@
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
 #include "irradcast/common/compositor.h"
-#include "irradcast/engine/engine.h"
 #include "irradcast/common/error.h"
+#include "irradcast/engine/engine.h"
 #include "irradcast/engine/halton.h"
 #include "irradcast/engine/irradiance_cache.h"
 #include "irradcast/engine/path_tracer.h"
@@ -103,19 +103,9 @@ class MethodCornell : public ::testing::TestWithParam<Method> {};
 TEST_P(MethodCornell, ComposedViewMatchesTheReference) {
   const Method method = GetParam();
   EngineSetup s(make_cornell_box(), 64.0f);
-  CameraPose cam = default_camera(s.scene, s.world);
-  const int w = 48, h = 48;
-  PathTracer tracer(s.world, s.rays, s.lights, PathTracerOptions{2, true, 99});
-  ImageRGB ref = tracer.render(cam, w, h, 1024);
+  const test::ReferenceView view(s);
   auto engine = s.engine(method_params(method));
-  engine->update();
-  const double first =
-      compare(compose(s.world, s.rays, s.atlas, engine->lightmaps(), cam, w, h), ref).rel_mse;
-  for (int u = 1; u < 16; ++u) engine->update();
-  const double last =
-      compare(compose(s.world, s.rays, s.atlas, engine->lightmaps(), cam, w, h), ref).rel_mse;
-  RecordProperty("rel_mse_1_update", std::to_string(first));
-  RecordProperty("rel_mse_16_updates", std::to_string(last));
+  const auto [first, last] = view.after_1_and_16_updates(*engine);
   std::printf("%s: rel MSE %.5f after 1 update, %.5f after 16 (%s)\n", method_name(method).c_str(),
               first, last, engine->method_summary().c_str());
   EXPECT_LT(last, 0.002);

@@ -6,14 +6,15 @@
 #include "cli.h"
 #include "client_pass_scenes.h"
 #include "irradcast/client/client_passes.h"
-#include "irradcast/common/compositor.h"
-#include "irradcast/common/error.h"
 #include "irradcast/client/frame_gbuffer.h"
 #include "irradcast/client/reprojection.h"
 #include "irradcast/client/ssao.h"
+#include "irradcast/common/compositor.h"
+#include "irradcast/common/error.h"
 
 using namespace irradcast;
 using test::BlockOnFloor;
+using test::validate_error;
 
 namespace {
 
@@ -178,27 +179,20 @@ TEST(Reprojection, StillCameraConvergesAndRefreshesTiles) {
 }
 
 TEST(Reprojection, RejectsBadParameters) {
-  auto message = [](const ClientPassOptions& o) {
-    try {
-      o.validate();
-    } catch (const Error& e) {
-      return std::string(e.what());
-    }
-    return std::string();
-  };
   ClientPassOptions o;
   o.reproject = true;
-  EXPECT_NE(message(o).find("--reproject needs --ssao"), std::string::npos) << message(o);
+  EXPECT_NE(validate_error(o).find("--reproject needs --ssao"), std::string::npos)
+      << validate_error(o);
   o.ssao = true;
-  EXPECT_EQ(message(o), "");
+  EXPECT_EQ(validate_error(o), "");
   o.reprojection.epsilon = 0.0f;
-  EXPECT_NE(message(o).find("epsilon 0"), std::string::npos) << message(o);
+  EXPECT_NE(validate_error(o).find("epsilon 0"), std::string::npos) << validate_error(o);
   o.reprojection = {};
   o.reprojection.refresh = 2.0f;
-  EXPECT_NE(message(o).find("refresh 2"), std::string::npos) << message(o);
+  EXPECT_NE(validate_error(o).find("refresh 2"), std::string::npos) << validate_error(o);
   o.reprojection = {};
   o.reprojection.converge_frames = 0;
-  EXPECT_NE(message(o).find("converge frames 0"), std::string::npos) << message(o);
+  EXPECT_NE(validate_error(o).find("converge frames 0"), std::string::npos) << validate_error(o);
   EXPECT_THROW(ReprojectionCache{o.reprojection}, Error);
 }
 

@@ -4,13 +4,14 @@
 
 #include "client_pass_scenes.h"
 #include "irradcast/client/client_passes.h"
-#include "irradcast/common/compositor.h"
-#include "irradcast/common/error.h"
 #include "irradcast/client/frame_gbuffer.h"
 #include "irradcast/client/ssao.h"
+#include "irradcast/common/compositor.h"
+#include "irradcast/common/error.h"
 
 using namespace irradcast;
 using test::BlockOnFloor;
+using test::validate_error;
 
 namespace {
 
@@ -198,27 +199,19 @@ TEST(Ssao, StrengthZeroIsNoOcclusionAndStrengthScales) {
 }
 
 TEST(Ssao, RejectsBadParameters) {
-  auto message = [](SsaoParams p) {
-    try {
-      p.validate();
-    } catch (const Error& e) {
-      return std::string(e.what());
-    }
-    return std::string();
-  };
   SsaoParams p;
   p.radius = 0.0f;
-  EXPECT_NE(message(p).find("radius 0"), std::string::npos) << message(p);
+  EXPECT_NE(validate_error(p).find("radius 0"), std::string::npos) << validate_error(p);
   p.radius = std::nanf("");
-  EXPECT_NE(message(p).find("radius"), std::string::npos);
+  EXPECT_NE(validate_error(p).find("radius"), std::string::npos);
   p.radius = 1.5f;
-  EXPECT_NE(message(p).find("radius 1.5"), std::string::npos);
+  EXPECT_NE(validate_error(p).find("radius 1.5"), std::string::npos);
   p = {};
   p.strength = -1.0f;
-  EXPECT_NE(message(p).find("strength -1"), std::string::npos) << message(p);
+  EXPECT_NE(validate_error(p).find("strength -1"), std::string::npos) << validate_error(p);
   p = {};
   p.directions = 0;
-  EXPECT_NE(message(p).find("directions 0"), std::string::npos);
+  EXPECT_NE(validate_error(p).find("directions 0"), std::string::npos);
   ClientPassOptions o;
   o.ssao = true;
   o.ssao_params.radius = -0.1f;

@@ -9,13 +9,13 @@
 
 #include "cli.h"
 #include "engine_setup.h"
-#include "irradcast/engine/backend_select.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
 #include "irradcast/common/error.h"
+#include "irradcast/common/sampling.h"
+#include "irradcast/engine/backend_select.h"
 #include "irradcast/engine/path_tracer.h"
 #include "irradcast/engine/reference_lightmaps.h"
-#include "irradcast/common/sampling.h"
 #include "irradcast/engine/vulkan_backend.h"
 #include "scene_builders.h"
 
@@ -33,6 +33,36 @@ std::unique_ptr<VulkanBackend> vulkan(const EngineSetup& s, bool staging = false
 std::string first_message(const VulkanBackend& v) {
   auto log = v.validation_log();
   return log.empty() ? std::string() : log.front();
+}
+
+// Luminance of a device result (a) against the CPU's (b), value by value: the RMS difference
+// relative to b's mean, and a's mean relative to b's.
+struct LuminanceGap {
+  double d2 = 0.0, sa = 0.0, sb = 0.0;
+  std::size_t n = 0;
+  void add(glm::vec3 a, glm::vec3 b) {
+    const double ya = luminance(a), yb = luminance(b);
+    d2 += (ya - yb) * (ya - yb);
+    sa += ya;
+    sb += yb;
+    ++n;
+  }
+  double rms() const {
+    return std::sqrt(d2 / static_cast<double>(n)) / (sb / static_cast<double>(n));
+  }
+  double mean() const { return sa / sb - 1.0; }
+};
+
+// The device against the CPU (`gap`) next to the CPU against itself with another seed
+// (`control`): RMS at most 1.25 x the control's, mean within `mean_tolerance`.
+void expect_device_like_cpu(const LuminanceGap& gap, const LuminanceGap& control,
+                            double mean_tolerance) {
+  ::testing::Test::RecordProperty("rms_vulkan_cpu", std::to_string(gap.rms()));
+  ::testing::Test::RecordProperty("rms_cpu_cpu", std::to_string(control.rms()));
+  ::testing::Test::RecordProperty("mean_vulkan_cpu", std::to_string(gap.mean()));
+  ::testing::Test::RecordProperty("mean_cpu_cpu", std::to_string(control.mean()));
+  EXPECT_LT(gap.rms(), 1.25 * control.rms()) << "CPU vs CPU: " << control.rms();
+  EXPECT_LT(std::fabs(gap.mean()), mean_tolerance) << "CPU vs CPU: " << control.mean();
 }
 
 // How far apart two engines' lightmaps are, texel by texel, in units of their combined standard
@@ -262,28 +292,13 @@ TEST(VulkanReference, LightmapsAgreeWithTheCpuPathTracer) {
   };
   const auto cpu = cpu_maps(5), cpu2 = cpu_maps(6);
   auto compare = [&](const std::vector<Lightmap>& a, const std::vector<Lightmap>& b) {
-    double d2 = 0.0, sa = 0.0, sb = 0.0;
-    std::size_t n = 0;
+    LuminanceGap gap;
     for (std::size_t o = 0; o < a.size(); ++o)
-      for (std::size_t i = 0; i < a[o].texels.size(); ++i) {
-        if (!s.gbuffers[o].valid(i)) continue;
-        const double ya = luminance(a[o].texels[i]), yb = luminance(b[o].texels[i]);
-        d2 += (ya - yb) * (ya - yb);
-        sa += ya;
-        sb += yb;
-        ++n;
-      }
-    return std::make_pair(std::sqrt(d2 / static_cast<double>(n)) / (sb / static_cast<double>(n)),
-                          sa / sb - 1.0);
+      for (std::size_t i = 0; i < a[o].texels.size(); ++i)
+        if (s.gbuffers[o].valid(i)) gap.add(a[o].texels[i], b[o].texels[i]);
+    return gap;
   };
-  const auto [rms, mean] = compare(gpu, cpu);
-  const auto [rms_control, mean_control] = compare(cpu2, cpu);
-  RecordProperty("rms_vulkan_cpu", std::to_string(rms));
-  RecordProperty("rms_cpu_cpu", std::to_string(rms_control));
-  RecordProperty("mean_vulkan_cpu", std::to_string(mean));
-  RecordProperty("mean_cpu_cpu", std::to_string(mean_control));
-  EXPECT_LT(rms, 1.25 * rms_control) << "CPU vs CPU: " << rms_control;
-  EXPECT_LT(std::fabs(mean), 0.015) << "CPU vs CPU: " << mean_control;
+  expect_device_like_cpu(compare(gpu, cpu), compare(cpu2, cpu), 0.015);
   EXPECT_GT(vs.rays, 0u);
   EXPECT_EQ(v->validation_messages(), 0u) << first_message(*v);
 }
@@ -304,24 +319,11 @@ TEST(VulkanReference, ViewAgreesWithTheCpuPathTracer) {
   };
   const ImageRGB cpu = cpu_view(7), cpu2 = cpu_view(8);
   auto compare = [&](const ImageRGB& a, const ImageRGB& b) {
-    double d2 = 0.0, sa = 0.0, sb = 0.0;
-    for (std::size_t i = 0; i < a.pixels.size(); ++i) {
-      const double ya = luminance(a.pixels[i]), yb = luminance(b.pixels[i]);
-      d2 += (ya - yb) * (ya - yb);
-      sa += ya;
-      sb += yb;
-    }
-    const double n = static_cast<double>(a.pixels.size());
-    return std::make_pair(std::sqrt(d2 / n) / (sb / n), sa / sb - 1.0);
+    LuminanceGap gap;
+    for (std::size_t i = 0; i < a.pixels.size(); ++i) gap.add(a.pixels[i], b.pixels[i]);
+    return gap;
   };
-  const auto [rms, mean] = compare(gpu, cpu);
-  const auto [rms_control, mean_control] = compare(cpu2, cpu);
-  RecordProperty("rms_vulkan_cpu", std::to_string(rms));
-  RecordProperty("rms_cpu_cpu", std::to_string(rms_control));
-  RecordProperty("mean_vulkan_cpu", std::to_string(mean));
-  RecordProperty("mean_cpu_cpu", std::to_string(mean_control));
-  EXPECT_LT(rms, 1.25 * rms_control) << "CPU vs CPU: " << rms_control;
-  EXPECT_LT(std::fabs(mean), 0.02) << "CPU vs CPU: " << mean_control;
+  expect_device_like_cpu(compare(gpu, cpu), compare(cpu2, cpu), 0.02);
   EXPECT_GT(vs.rays, static_cast<std::uint64_t>(w * h));
   EXPECT_EQ(v->validation_messages(), 0u) << first_message(*v);
 }
@@ -411,8 +413,7 @@ TEST(BackendChoice, ReferenceRunsWhereTheBackendWould) {
   const auto gpu_maps = gpu->lightmaps(s.gbuffers, 2);
   const auto v_maps = v->reference_lightmaps(s.gbuffers, 2, pto.indirect_bounces, pto.seed);
   ASSERT_EQ(gpu_maps.size(), v_maps.size());
-  for (std::size_t m = 0; m < gpu_maps.size(); ++m)
-    EXPECT_EQ(gpu_maps[m].texels, v_maps[m].texels);
+  for (std::size_t m = 0; m < gpu_maps.size(); ++m) EXPECT_EQ(gpu_maps[m].texels, v_maps[m].texels);
   EXPECT_EQ(gpu->render(cam, 16, 16, 2).pixels,
             v->render_reference(cam, 16, 16, 2, pto.indirect_bounces, pto.seed).pixels);
 }

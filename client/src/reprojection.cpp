@@ -6,35 +6,26 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <cstdio>
 #include <string>
 
+#include "float_text.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/sampling.h"
 
 namespace irradcast {
 
-namespace {
-
-std::string num(float v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", static_cast<double>(v));
-  return buf;
-}
-
-}  // namespace
-
 void ReprojectionParams::validate() const {
   if (!(epsilon > 0.0f && epsilon <= 1.0f))
-    throw Error("reprojection epsilon " + num(epsilon) +
+    throw Error("reprojection epsilon " + float_text(epsilon) +
                 " must be in (0, 1] (a fraction of the scene's largest extent)");
   if (!(confidence_bias > 0.0f && confidence_bias <= 100.0f))
-    throw Error("reprojection confidence bias " + num(confidence_bias) + " must be in (0, 100]");
+    throw Error("reprojection confidence bias " + float_text(confidence_bias) +
+                " must be in (0, 100]");
   if (converge_frames < 1 || converge_frames > 250)
     throw Error("reprojection converge frames " + std::to_string(converge_frames) +
                 " must be in [1, 250]");
   if (!(refresh >= 0.0f && refresh <= 1.0f))
-    throw Error("reprojection refresh " + num(refresh) + " must be in [0, 1]");
+    throw Error("reprojection refresh " + float_text(refresh) + " must be in [0, 1]");
   if (tile < 1 || tile > 4096)
     throw Error("reprojection tile " + std::to_string(tile) + " px must be in [1, 4096]");
 }
@@ -80,7 +71,7 @@ std::vector<int> ReprojectionCache::refresh_tiles(int width, int height) {
 void ReprojectionCache::reproject(const FrameGBuffer& g, float world_epsilon,
                                   std::vector<std::uint8_t>& compute, ReprojectionStats* stats) {
   if (!(world_epsilon > 0.0f))
-    throw Error("reprojection: world epsilon " + num(world_epsilon) + " must be positive");
+    throw Error("reprojection: world epsilon " + float_text(world_epsilon) + " must be positive");
   const std::size_t n = g.size();
   compute.assign(n, 0);
   reprojected_.assign(n, 1.0f);

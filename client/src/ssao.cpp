@@ -6,21 +6,15 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <cstdio>
 #include <string>
 
+#include "float_text.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/sampling.h"
 
 namespace irradcast {
 
 namespace {
-
-std::string num(float v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", static_cast<double>(v));
-  return buf;
-}
 
 constexpr float kTwoPi = 6.28318530717958647692f;
 constexpr float kRotationPerFrame = 10.0f * kTwoPi / 360.0f;  // seed 002 §3.2.2
@@ -30,27 +24,28 @@ constexpr float kGolden = 0.61803398875f;
 
 void SsaoParams::validate() const {
   if (!(radius > 0.0f && radius <= 1.0f))
-    throw Error("ssao radius " + num(radius) +
+    throw Error("ssao radius " + float_text(radius) +
                 " must be in (0, 1] (a fraction of the scene's largest extent)");
   if (!(strength >= 0.0f && strength <= 10.0f))
-    throw Error("ssao strength " + num(strength) + " must be in [0, 10]");
+    throw Error("ssao strength " + float_text(strength) + " must be in [0, 10]");
   if (directions < 1 || directions > 16)
     throw Error("ssao directions " + std::to_string(directions) + " must be in [1, 16]");
   if (steps < 1 || steps > 16)
     throw Error("ssao steps " + std::to_string(steps) + " must be in [1, 16]");
   if (!(near_fraction > 0.0f && near_fraction <= 1.0f))
-    throw Error("ssao near fraction " + num(near_fraction) + " must be in (0, 1]");
+    throw Error("ssao near fraction " + float_text(near_fraction) + " must be in (0, 1]");
   if (!(max_radius_px >= 1.0f))
-    throw Error("ssao max radius " + num(max_radius_px) + " px must be at least 1");
+    throw Error("ssao max radius " + float_text(max_radius_px) + " px must be at least 1");
   if (!(cos_bias >= 0.0f && cos_bias < 1.0f))
-    throw Error("ssao cosine bias " + num(cos_bias) + " must be in [0, 1)");
+    throw Error("ssao cosine bias " + float_text(cos_bias) + " must be in [0, 1)");
 }
 
 std::size_t ssao(const FrameGBuffer& g, const SsaoParams& p, float world_radius,
                  std::uint32_t frame, std::vector<float>& out,
                  const std::vector<std::uint8_t>* which) {
   p.validate();
-  if (!(world_radius > 0.0f)) throw Error("ssao: world radius " + num(world_radius) + " <= 0");
+  if (!(world_radius > 0.0f))
+    throw Error("ssao: world radius " + float_text(world_radius) + " <= 0");
   if (which && which->size() != g.size())
     throw Error("ssao: mask has " + std::to_string(which->size()) + " entries for " +
                 std::to_string(g.size()) + " pixels");

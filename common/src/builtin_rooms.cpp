@@ -307,36 +307,36 @@ std::vector<Piece> furnish(const RoomInfo& room, std::uint32_t seed, float detai
     return hi - (hi - lo) * f;
   };
 
+  // A piece `length` along a wall drawn now and `depth` deep, made by build(b), at a random
+  // spot along it; false (nothing placed) when the spot is not free.
+  auto place_against_wall = [&](const char* name, float length, float depth, auto build) {
+    Side side = static_cast<Side>(rng.below(4));
+    float t = rng.range(kInLo + kWallGap, kInHi - kWallGap - length);
+    auto [rect, local] = against_wall(side, t, length, depth);
+    if (!is_free(rect, doors, placed)) return false;
+    placed.push_back(rect);
+    Piece p{prefix + name, local, {}};
+    BoxBuilder b(p.mesh, detail);
+    build(b);
+    pieces.push_back(std::move(p));
+    return true;
+  };
   // Couch against a wall.
   std::uint32_t fabric = rng.below(2) == 0 ? kFabricBlueMat : kFabricRedMat;
   for (int attempt = 0; attempt < kPlacementAttempts; ++attempt) {
     float length = rng.range(1.2f, shrink(attempt, 1.2f, 1.9f));
-    Side side = static_cast<Side>(rng.below(4));
-    float t = rng.range(kInLo + kWallGap, kInHi - kWallGap - length);
-    auto [rect, local] = against_wall(side, t, length, 0.85f);
-    if (!is_free(rect, doors, placed)) continue;
-    placed.push_back(rect);
-    Piece p{prefix + "_couch", local, {}};
-    BoxBuilder b(p.mesh, detail);
-    build_couch(b, length, fabric);
-    pieces.push_back(std::move(p));
-    break;
+    if (place_against_wall("_couch", length, 0.85f,
+                           [&](BoxBuilder& b) { build_couch(b, length, fabric); }))
+      break;
   }
   // Shelf against a wall.
   for (int attempt = 0; attempt < kPlacementAttempts; ++attempt) {
     float width = rng.range(0.7f, shrink(attempt, 0.7f, 1.2f));
     float height = rng.range(1.5f, 2.0f);
     int boards = 3 + rng.below(3);
-    Side side = static_cast<Side>(rng.below(4));
-    float t = rng.range(kInLo + kWallGap, kInHi - kWallGap - width);
-    auto [rect, local] = against_wall(side, t, width, 0.35f);
-    if (!is_free(rect, doors, placed)) continue;
-    placed.push_back(rect);
-    Piece p{prefix + "_shelf", local, {}};
-    BoxBuilder b(p.mesh, detail);
-    build_shelf(b, width, height, 0.35f, boards);
-    pieces.push_back(std::move(p));
-    break;
+    if (place_against_wall("_shelf", width, 0.35f,
+                           [&](BoxBuilder& b) { build_shelf(b, width, height, 0.35f, boards); }))
+      break;
   }
   // Free-standing table, axis aligned either way round.
   for (int attempt = 0; attempt < kPlacementAttempts; ++attempt) {

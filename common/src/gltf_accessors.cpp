@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "gltf_import.h"
+#include "irradcast/common/code_names.h"
 
 namespace irradcast::gltf_import {
 namespace {
@@ -32,48 +33,29 @@ int component_size(int component_type) {
   }
 }
 
+constexpr CodeName kComponentNames[] = {
+    {TINYGLTF_COMPONENT_TYPE_BYTE, "BYTE"},
+    {TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE, "UNSIGNED_BYTE"},
+    {TINYGLTF_COMPONENT_TYPE_SHORT, "SHORT"},
+    {TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT, "UNSIGNED_SHORT"},
+    {TINYGLTF_COMPONENT_TYPE_INT, "INT"},
+    {TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, "UNSIGNED_INT"},
+    {TINYGLTF_COMPONENT_TYPE_FLOAT, "FLOAT"},
+    {TINYGLTF_COMPONENT_TYPE_DOUBLE, "DOUBLE"},
+};
+
+constexpr CodeName kTypeNames[] = {
+    {TINYGLTF_TYPE_SCALAR, "SCALAR"}, {TINYGLTF_TYPE_VEC2, "VEC2"}, {TINYGLTF_TYPE_VEC3, "VEC3"},
+    {TINYGLTF_TYPE_VEC4, "VEC4"},     {TINYGLTF_TYPE_MAT2, "MAT2"}, {TINYGLTF_TYPE_MAT3, "MAT3"},
+    {TINYGLTF_TYPE_MAT4, "MAT4"},
+};
+
 const char* component_name(int component_type) {
-  switch (component_type) {
-    case TINYGLTF_COMPONENT_TYPE_BYTE:
-      return "BYTE";
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
-      return "UNSIGNED_BYTE";
-    case TINYGLTF_COMPONENT_TYPE_SHORT:
-      return "SHORT";
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
-      return "UNSIGNED_SHORT";
-    case TINYGLTF_COMPONENT_TYPE_INT:
-      return "INT";
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
-      return "UNSIGNED_INT";
-    case TINYGLTF_COMPONENT_TYPE_FLOAT:
-      return "FLOAT";
-    case TINYGLTF_COMPONENT_TYPE_DOUBLE:
-      return "DOUBLE";
-    default:
-      return "unknown";
-  }
+  return code_name(component_type, kComponentNames, "unknown");
 }
 
 const char* type_name(int type) {
-  switch (type) {
-    case TINYGLTF_TYPE_SCALAR:
-      return "SCALAR";
-    case TINYGLTF_TYPE_VEC2:
-      return "VEC2";
-    case TINYGLTF_TYPE_VEC3:
-      return "VEC3";
-    case TINYGLTF_TYPE_VEC4:
-      return "VEC4";
-    case TINYGLTF_TYPE_MAT2:
-      return "MAT2";
-    case TINYGLTF_TYPE_MAT3:
-      return "MAT3";
-    case TINYGLTF_TYPE_MAT4:
-      return "MAT4";
-    default:
-      return "unknown";
-  }
+  return code_name(type, kTypeNames, "unknown");
 }
 
 // One component at p (little-endian, as glTF stores it), normalized if asked.

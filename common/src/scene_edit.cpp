@@ -270,44 +270,46 @@ void validate_edit(const Scene& scene, const SceneEdit& edit) {
   if (!locals.empty()) check_world(scene, locals);
 }
 
+namespace {
+
+// Applies one op to its resolved target i and returns the effect list that records it.
+std::vector<int>& apply_op(Scene& scene, const EditOp& op, int i, EditEffect& effect) {
+  switch (op.kind) {
+    case Kind::Move:
+    case Kind::Rotate:
+    case Kind::Scale:
+    case Kind::SetTransform:
+      scene.nodes[i].local = transformed(scene.nodes[i].local, op);
+      return effect.nodes;
+    case Kind::Show:
+    case Kind::Hide:
+      scene.nodes[i].visible = op.kind == Kind::Show;
+      return effect.nodes;
+    case Kind::LightColor:
+      scene.lights[i].color = op.vector;
+      return effect.lights;
+    case Kind::LightIntensity:
+      scene.lights[i].intensity = op.value;
+      return effect.lights;
+    case Kind::MaterialAlbedo:
+      scene.materials[i].base_color = op.vector;
+      return effect.materials;
+    case Kind::MaterialEmission:
+      scene.materials[i].emissive = op.vector;
+      scene.materials[i].emissive_strength = op.value;
+      return effect.materials;
+  }
+  throw Error("edit: unknown op kind");
+}
+
+}  // namespace
+
 EditEffect apply_edit(Scene& scene, const SceneEdit& edit) {
   validate_edit(scene, edit);
   EditEffect effect;
   for (const EditOp& op : edit.ops) {
     const int i = resolve(scene, op, "");
-    switch (op.kind) {
-      case Kind::Move:
-      case Kind::Rotate:
-      case Kind::Scale:
-      case Kind::SetTransform: {
-        Node& n = scene.nodes[i];
-        n.local = transformed(n.local, op);
-        add_unique(effect.nodes, i);
-        break;
-      }
-      case Kind::Show:
-      case Kind::Hide:
-        scene.nodes[i].visible = op.kind == Kind::Show;
-        add_unique(effect.nodes, i);
-        break;
-      case Kind::LightColor:
-        scene.lights[i].color = op.vector;
-        add_unique(effect.lights, i);
-        break;
-      case Kind::LightIntensity:
-        scene.lights[i].intensity = op.value;
-        add_unique(effect.lights, i);
-        break;
-      case Kind::MaterialAlbedo:
-        scene.materials[i].base_color = op.vector;
-        add_unique(effect.materials, i);
-        break;
-      case Kind::MaterialEmission:
-        scene.materials[i].emissive = op.vector;
-        scene.materials[i].emissive_strength = op.value;
-        add_unique(effect.materials, i);
-        break;
-    }
+    add_unique(apply_op(scene, op, i, effect), i);
   }
   return effect;
 }

@@ -270,6 +270,22 @@ void rasterize_gbuffer(const World& world, const Atlas& atlas, std::vector<Texel
   });
 }
 
+namespace {
+
+// Calls f(j) with the index of each texel of the 3x3 block around (x, y) that lies in the
+// width x height image, the centre included, row by row.
+template <class F>
+void for_each_neighbour(int x, int y, int width, int height, F f) {
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int nx = x + dx, ny = y + dy;
+      if (nx < 0 || ny < 0 || nx >= width || ny >= height) continue;
+      f(static_cast<std::size_t>(ny) * width + nx);
+    }
+}
+
+}  // namespace
+
 void dilate(std::vector<glm::vec3>& texels, int width, int height,
             const std::vector<TexelKind>& valid, int rings) {
   const std::size_t size =
@@ -282,15 +298,11 @@ void dilate(std::vector<glm::vec3>& texels, int width, int height,
   for (std::size_t i = 0; i < size; ++i) state[i] = holds_estimate(valid[i]) ? 1 : 0;
   std::vector<std::uint32_t> frontier, next;
   auto push_neighbours = [&](int x, int y, std::vector<std::uint32_t>& out) {
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dx = -1; dx <= 1; ++dx) {
-        int nx = x + dx, ny = y + dy;
-        if (nx < 0 || ny < 0 || nx >= width || ny >= height) continue;
-        std::size_t j = static_cast<std::size_t>(ny) * width + nx;
-        if (state[j] != 0) continue;
-        state[j] = 2;
-        out.push_back(static_cast<std::uint32_t>(j));
-      }
+    for_each_neighbour(x, y, width, height, [&](std::size_t j) {
+      if (state[j] != 0) return;
+      state[j] = 2;
+      out.push_back(static_cast<std::uint32_t>(j));
+    });
   };
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x)
@@ -307,17 +319,13 @@ void dilate(std::vector<glm::vec3>& texels, int width, int height,
                           int y = static_cast<int>(frontier[k] / width);
                           glm::vec3 first(0.0f), diff(0.0f);
                           int count = 0;
-                          for (int dy = -1; dy <= 1; ++dy)
-                            for (int dx = -1; dx <= 1; ++dx) {
-                              int nx = x + dx, ny = y + dy;
-                              if (nx < 0 || ny < 0 || nx >= width || ny >= height) continue;
-                              std::size_t j = static_cast<std::size_t>(ny) * width + nx;
-                              if (state[j] != 1) continue;
-                              if (count++ == 0)
-                                first = texels[j];
-                              else
-                                diff += texels[j] - first;
-                            }
+                          for_each_neighbour(x, y, width, height, [&](std::size_t j) {
+                            if (state[j] != 1) return;
+                            if (count++ == 0)
+                              first = texels[j];
+                            else
+                              diff += texels[j] - first;
+                          });
                           values[k] = count > 1 ? first + diff / static_cast<float>(count) : first;
                         }
                       });

@@ -8,6 +8,7 @@
 
 #include "irradcast/common/camera.h"
 #include "irradcast/common/error.h"
+#include "run_stats.h"
 
 namespace irradcast {
 namespace {
@@ -116,11 +117,7 @@ ImageRGB PathTracer::render(const CameraPose& camera, int width, int height, int
   ImageRGB image(width, height);
   for (std::size_t i = 0; i < n; ++i)
     image.pixels[i] = glm::vec3(sum[i] / static_cast<double>(spp));
-  if (stats) {
-    stats->rays = total_rays.load();
-    stats->seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  }
+  record_run(stats, total_rays.load(), start);
   return image;
 }
 

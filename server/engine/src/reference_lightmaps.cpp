@@ -8,6 +8,7 @@
 
 #include "irradcast/common/error.h"
 #include "irradcast/common/progress.h"
+#include "run_stats.h"
 
 namespace irradcast {
 
@@ -51,11 +52,7 @@ std::vector<Lightmap> reference_lightmaps(const World& world, const PathTracer& 
     dilate(map.texels, map.width, map.height, g.kind);
   }
   progress.finish();
-  if (stats) {
-    stats->rays = rays.load();
-    stats->seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  }
+  record_run(stats, rays.load(), start);
   return maps;
 }
 

@@ -2,19 +2,12 @@
 // the device description, and the direct, probe gather and scatter passes.
 #include "irradcast/engine/vulkan_backend.h"
 
-#include <chrono>
 #include <string>
 
 #include "irradcast/common/error.h"
 #include "vulkan_backend_impl.h"
 
 namespace irradcast {
-namespace {
-
-using Clock = std::chrono::steady_clock;
-
-}  // namespace
-
 VulkanBackend::VulkanBackend(const World& world, const RayScene& rays, const LightSampler& lights,
                              VulkanContextOptions options, bool force_staging)
     : impl_(std::make_unique<Impl>(world, rays, lights, options, force_staging)) {}
@@ -47,61 +40,44 @@ std::vector<std::string> VulkanBackend::validation_log() const {
 }
 
 PassResult VulkanBackend::direct(const PassInput& in, std::vector<glm::vec3>& out) {
-  std::lock_guard lock(impl_->mutex);
-  Impl::ForgetOnThrow guard{impl_.get()};
-  const auto start = Clock::now();
-  impl_->prepare(in);
-  PushConstants pc = impl_->constants(in);
-  pc.samples = static_cast<std::uint32_t>(in.params.direct_samples);
-  const auto items = static_cast<std::uint32_t>(in.unit_texels.size());
-  impl_->run(kDirectPipeline, pc, items, out, in.texels.size());
-  PassResult r;
-  r.rays = static_cast<std::uint64_t>(in.unit_texels.size()) *
+  return impl_->timed_pass(in, nullptr, [&]() -> std::uint64_t {
+    PushConstants pc = impl_->constants(in);
+    pc.samples = static_cast<std::uint32_t>(in.params.direct_samples);
+    const auto items = static_cast<std::uint32_t>(in.unit_texels.size());
+    impl_->run(kDirectPipeline, pc, items, out, in.texels.size());
+    return static_cast<std::uint64_t>(in.unit_texels.size()) *
            (impl_->punctual_count + (impl_->emissive_count > 0 ? pc.samples : 0u));
-  r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  return r;
+  });
 }
 
 PassResult VulkanBackend::gather_probes(const PassInput& in, const RadianceField& prev,
                                         std::vector<glm::vec3>& out) {
-  std::lock_guard lock(impl_->mutex);
-  Impl::ForgetOnThrow guard{impl_.get()};
-  const auto start = Clock::now();
-  impl_->prepare(in);
-  impl_->write_previous(prev, in);
-  PushConstants pc = impl_->constants(in);
-  const std::size_t items = in.probes.count() * in.probes.texels_per_probe();
-  if (items > 0xFFFFFFFFu) throw Error("Vulkan backend: too many probe texels for one pass");
-  impl_->run(kGatherPipeline, pc, static_cast<std::uint32_t>(items), out, items);
-  std::size_t usable = 0;
-  for (std::uint8_t u : in.probes.usable) usable += u ? 1 : 0;
-  PassResult r;
-  r.rays = usable * in.probes.texels_per_probe();
-  r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  return r;
+  return impl_->timed_pass(in, &prev, [&]() -> std::uint64_t {
+    PushConstants pc = impl_->constants(in);
+    const std::size_t items = in.probes.count() * in.probes.texels_per_probe();
+    if (items > 0xFFFFFFFFu) throw Error("Vulkan backend: too many probe texels for one pass");
+    impl_->run(kGatherPipeline, pc, static_cast<std::uint32_t>(items), out, items);
+    std::size_t usable = 0;
+    for (std::uint8_t u : in.probes.usable) usable += u ? 1 : 0;
+    return usable * in.probes.texels_per_probe();
+  });
 }
 
 PassResult VulkanBackend::scatter(const PassInput& in, const RadianceField& prev,
                                   const std::vector<glm::vec3>& probe_radiance,
                                   std::vector<glm::vec3>& out) {
-  std::lock_guard lock(impl_->mutex);
-  Impl::ForgetOnThrow guard{impl_.get()};
-  const auto start = Clock::now();
-  impl_->prepare(in);
-  impl_->write_previous(prev, in);
-  impl_->write(kProbeRadiance, probe_radiance.size() * sizeof(glm::vec4), [&](void* dst) {
-    auto* v = static_cast<glm::vec4*>(dst);
-    for (std::size_t i = 0; i < probe_radiance.size(); ++i)
-      v[i] = glm::vec4(probe_radiance[i], 0.0f);
+  return impl_->timed_pass(in, &prev, [&]() -> std::uint64_t {
+    impl_->write(kProbeRadiance, probe_radiance.size() * sizeof(glm::vec4), [&](void* dst) {
+      auto* v = static_cast<glm::vec4*>(dst);
+      for (std::size_t i = 0; i < probe_radiance.size(); ++i)
+        v[i] = glm::vec4(probe_radiance[i], 0.0f);
+    });
+    PushConstants pc = impl_->constants(in);
+    pc.samples = static_cast<std::uint32_t>(in.params.indirect_samples);
+    const auto items = static_cast<std::uint32_t>(in.unit_texels.size());
+    impl_->run(kScatterPipeline, pc, items, out, in.texels.size());
+    return static_cast<std::uint64_t>(in.unit_texels.size()) * pc.samples;
   });
-  PushConstants pc = impl_->constants(in);
-  pc.samples = static_cast<std::uint32_t>(in.params.indirect_samples);
-  const auto items = static_cast<std::uint32_t>(in.unit_texels.size());
-  impl_->run(kScatterPipeline, pc, items, out, in.texels.size());
-  PassResult r;
-  r.rays = static_cast<std::uint64_t>(in.unit_texels.size()) * pc.samples;
-  r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  return r;
 }
 
 }  // namespace irradcast

@@ -10,6 +10,7 @@
 
 #include <vulkan/vulkan.h>
 
+#include <chrono>
 #include <cstdint>
 #include <cstring>
 #include <exception>
@@ -210,6 +211,22 @@ struct VulkanBackend::Impl {
       }
     }
   };
+
+  // One pass, under the lock and forgetting the uploads if it throws: prepare(in), then the
+  // previous bounce's field when `prev` is given, then `body()`, which runs the pipeline and
+  // returns the rays it traced. The result carries those rays and the pass's time.
+  template <class Body>
+  PassResult timed_pass(const PassInput& in, const RadianceField* prev, Body body) {
+    std::lock_guard lock(mutex);
+    ForgetOnThrow guard{this};
+    const auto start = std::chrono::steady_clock::now();
+    prepare(in);
+    if (prev) write_previous(*prev, in);
+    PassResult r;
+    r.rays = body();
+    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return r;
+  }
 
   EngineKey engine_key;
   PrevKey prev_key;
