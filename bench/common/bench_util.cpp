@@ -7,6 +7,9 @@
 #include <sstream>
 #include <thread>
 
+#include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+
 namespace irradcast::bench {
 
 double seconds_since(Clock::time_point t0) {
@@ -98,6 +101,11 @@ std::unique_ptr<tbb::global_control> limit_threads(int threads) {
 int tbb_threads() {
   return static_cast<int>(
       tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+}
+
+void quiet_run(bool verbose) {
+  Progress::set_enabled(false);
+  log::set_level(verbose ? log::Level::Info : log::Level::Warn);
 }
 
 void write_json(const std::string& path, const nlohmann::json& j, int indent) {

@@ -32,8 +32,6 @@
 #include "irradcast/common/progress.h"
 #include "irradcast/engine/engine_params.h"
 
-namespace fs = std::filesystem;
-using json = nlohmann::json;
 using namespace irradcast;
 using namespace irradcast::bench;
 
@@ -62,8 +60,7 @@ json params_json(const Options& o, const std::string& metric) {
 
 int run(Cli& cli) {
   Options& o = cli.o;
-  Progress::set_enabled(false);
-  log::set_level(log::Level::Warn);
+  quiet_run();
   const auto limit = limit_threads(cli.threads);
   const int used_threads = tbb_threads();
   fs::create_directories(o.out);

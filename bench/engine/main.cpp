@@ -33,8 +33,6 @@
 #include "irradcast/common/progress.h"
 #include "plot.h"
 
-namespace fs = std::filesystem;
-using json = nlohmann::json;
 using namespace irradcast;
 using namespace irradcast::bench;
 
@@ -150,8 +148,7 @@ json params_json(const Options& o) {
 }
 
 int run(Options o) {
-  Progress::set_enabled(false);
-  log::set_level(log::Level::Warn);
+  quiet_run();
   const auto limit = limit_threads(o.threads);
   const int used_threads = tbb_threads();
   fs::create_directories(o.out_dir);
