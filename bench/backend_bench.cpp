@@ -215,10 +215,7 @@ json run_references(const std::string& spec, const Options& o, const PreparedSce
 }
 
 int run(Options o) {
-  quiet_run();
-  const auto limit = limit_threads(o.threads);
-  fs::create_directories(o.out);
-  if (o.json_path.empty()) o.json_path = (fs::path(o.out) / "backend.json").string();
+  const auto limit = start_run(o.threads, o.out, o.json_path, "backend.json");
   const std::vector<std::string> backends = split_list(o.backends_text);
   json results = json::array();
   plot::BarChart chart;

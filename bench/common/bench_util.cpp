@@ -108,6 +108,15 @@ void quiet_run(bool verbose) {
   log::set_level(verbose ? log::Level::Info : log::Level::Warn);
 }
 
+std::unique_ptr<tbb::global_control> start_run(int threads, const std::string& out_dir,
+                                               std::string& json_path, const char* json_name) {
+  quiet_run();
+  auto limit = limit_threads(threads);
+  fs::create_directories(out_dir);
+  if (json_path.empty()) json_path = (fs::path(out_dir) / json_name).string();
+  return limit;
+}
+
 void write_json(const std::string& path, const nlohmann::json& j, int indent) {
   std::ofstream(path) << j.dump(indent) << "\n";
 }

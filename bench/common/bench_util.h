@@ -71,6 +71,11 @@ int tbb_threads();
 // `verbose`, info too).
 void quiet_run(bool verbose = false);
 
+// The start of a bench run that writes into out_dir: quiet_run(), the thread limit (hold the
+// result for the run), out_dir created, and an empty json_path set to out_dir/json_name.
+std::unique_ptr<tbb::global_control> start_run(int threads, const std::string& out_dir,
+                                               std::string& json_path, const char* json_name);
+
 // Runs body() and returns its exit status; an exception is printed to stderr as prefix + what()
 // and a newline, and gives 1.
 template <typename Body>
