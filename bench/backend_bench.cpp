@@ -38,8 +38,6 @@
 #include "irradcast/engine/vulkan_backend.h"
 #include "plot.h"
 
-namespace fs = std::filesystem;
-using json = nlohmann::json;
 using namespace irradcast;
 using namespace irradcast::bench;
 
@@ -217,11 +215,7 @@ json run_references(const std::string& spec, const Options& o, const PreparedSce
 }
 
 int run(Options o) {
-  Progress::set_enabled(false);
-  log::set_level(log::Level::Warn);
-  const auto limit = limit_threads(o.threads);
-  fs::create_directories(o.out);
-  if (o.json_path.empty()) o.json_path = (fs::path(o.out) / "backend.json").string();
+  const auto limit = start_run(o.threads, o.out, o.json_path, "backend.json");
   const std::vector<std::string> backends = split_list(o.backends_text);
   json results = json::array();
   plot::BarChart chart;

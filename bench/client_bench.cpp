@@ -26,6 +26,7 @@
 
 #include "bench_scene.h"
 #include "bench_util.h"
+#include "client_pass_scenes.h"
 #include "irradcast/client/camera_path.h"
 #include "irradcast/client/client_passes.h"
 #include "irradcast/common/builtin.h"
@@ -48,6 +49,7 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 using namespace irradcast;
 using irradcast::bench::upper_median;
+using irradcast::test::rms_relative;
 
 namespace {
 
@@ -78,17 +80,6 @@ struct Totals {
   double reused = 0, ssao_pixels = 0, disoccluded = 0;
   std::vector<double> per_frame_ms;
 };
-
-double rms_relative(const ImageRGB& a, const ImageRGB& b) {
-  double num = 0.0, den = 0.0;
-  for (std::size_t i = 0; i < a.pixels.size(); ++i)
-    for (int c = 0; c < 3; ++c) {
-      const double d = a.pixels[i][c] - b.pixels[i][c];
-      num += d * d;
-      den += static_cast<double>(b.pixels[i][c]) * b.pixels[i][c];
-    }
-  return den > 0.0 ? std::sqrt(num / den) : 0.0;
-}
 
 // The scene and the lightmaps the client passes read: o.updates engine updates.
 struct ClientScene {

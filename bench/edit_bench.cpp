@@ -446,8 +446,7 @@ int main(int argc, char** argv) {
   app.add_option("--out", out_dir, "output directory (JSON, PNG)")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   try {
-    Progress::set_enabled(false);
-    log::set_level(verbose ? log::Level::Info : log::Level::Warn);
+    bench::quiet_run(verbose);
     if (!replot.empty()) {
       std::ifstream in(replot);
       if (!in) throw Error("cannot read " + replot);

@@ -144,8 +144,7 @@ int main(int argc, char** argv) {
   app.add_option("--json", json_path, "write the samples and medians here");
   CLI11_PARSE(app, argc, argv);
   try {
-    Progress::set_enabled(false);
-    log::set_level(log::Level::Warn);
+    bench::quiet_run();
     const fs::path dir =
         fs::temp_directory_path() / ("irradcast_bench_hostile_" + std::to_string(getpid()));
     fs::create_directories(dir);

@@ -49,28 +49,32 @@ struct Config {
   EngineParams params;
 };
 
+// The engine's defaults for each method, and variants: one of them with a tweak applied.
 std::vector<Config> configs() {
-  std::vector<Config> c;
-  EngineParams p;
-  c.push_back({"cells", p});
-  p.tracing_range = std::numeric_limits<float>::infinity();
-  c.push_back({"cells range inf", p});
-  p = EngineParams{};
-  p.method = Method::Vpl;
-  c.push_back({"vpl", p});
-  p.vpl_paths = 4096;
-  c.push_back({"vpl 4096 paths", p});
-  p.vpl_paths = 1024;
-  p.vpl_clamp = 0.01f;
-  c.push_back({"vpl clamp 0.01", p});
-  p = EngineParams{};
-  p.method = Method::IrradianceCache;
-  c.push_back({"cache", p});
-  p.ic_accuracy = 0.4f;
-  c.push_back({"cache a 0.4", p});
-  p.ic_accuracy = 0.15f;
-  c.push_back({"cache a 0.15", p});
-  return c;
+  using P = EngineParams&;
+  const EngineParams cells;
+  EngineParams vpl, cache;
+  vpl.method = Method::Vpl;
+  cache.method = Method::IrradianceCache;
+  auto tweak = [](EngineParams p, auto change) {
+    change(p);
+    return p;
+  };
+  return {
+      {"cells", cells},
+      {"cells range inf",
+       tweak(cells, [](P p) { p.tracing_range = std::numeric_limits<float>::infinity(); })},
+      {"vpl", vpl},
+      {"vpl 4096 paths", tweak(vpl, [](P p) { p.vpl_paths = 4096; })},
+      {"vpl clamp 0.01", tweak(vpl,
+                               [](P p) {
+                                 p.vpl_paths = 1024;
+                                 p.vpl_clamp = 0.01f;
+                               })},
+      {"cache", cache},
+      {"cache a 0.4", tweak(cache, [](P p) { p.ic_accuracy = 0.4f; })},
+      {"cache a 0.15", tweak(cache, [](P p) { p.ic_accuracy = 0.15f; })},
+  };
 }
 
 struct Curve {
@@ -295,8 +299,7 @@ int main(int argc, char** argv) {
   app.add_option("--out", out_dir, "output directory");
   CLI11_PARSE(app, argc, argv);
   try {
-    Progress::set_enabled(false);
-    log::set_level(log::Level::Warn);
+    quiet_run();
     const auto limit = limit_threads(threads);
     const std::vector<std::string> scenes = split_list(scenes_arg);
     fs::create_directories(out_dir);

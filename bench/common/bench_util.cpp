@@ -7,6 +7,9 @@
 #include <sstream>
 #include <thread>
 
+#include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+
 namespace irradcast::bench {
 
 double seconds_since(Clock::time_point t0) {
@@ -98,6 +101,20 @@ std::unique_ptr<tbb::global_control> limit_threads(int threads) {
 int tbb_threads() {
   return static_cast<int>(
       tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+}
+
+void quiet_run(bool verbose) {
+  Progress::set_enabled(false);
+  log::set_level(verbose ? log::Level::Info : log::Level::Warn);
+}
+
+std::unique_ptr<tbb::global_control> start_run(int threads, const std::string& out_dir,
+                                               std::string& json_path, const char* json_name) {
+  quiet_run();
+  auto limit = limit_threads(threads);
+  fs::create_directories(out_dir);
+  if (json_path.empty()) json_path = (fs::path(out_dir) / json_name).string();
+  return limit;
 }
 
 void write_json(const std::string& path, const nlohmann::json& j, int indent) {

@@ -1,6 +1,7 @@
 // The benches' shared helpers (irradcast_bench_util): wall and CPU time, minimum and medians, the
-// machine description and load average for the reports, comma-separated option lists, the TBB
-// thread limit, and writing a JSON report. Each bench is one tool; this is what they share.
+// machine description and load average for the reports, the quiet start of a run, comma-separated
+// option lists, the TBB thread limit, and writing a JSON report. Each bench is one tool; this is
+// what they share.
 #pragma once
 
 #include <tbb/global_control.h>
@@ -9,6 +10,7 @@
 #include <chrono>
 #include <cstdio>
 #include <exception>
+#include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -16,6 +18,8 @@
 
 namespace irradcast::bench {
 
+namespace fs = std::filesystem;
+using json = nlohmann::json;
 using Clock = std::chrono::steady_clock;
 
 // Wall seconds since t0.
@@ -62,6 +66,15 @@ std::vector<int> parse_ints(const std::string& text);
 std::unique_ptr<tbb::global_control> limit_threads(int threads);
 // TBB's current worker limit.
 int tbb_threads();
+
+// The start of a bench run: no progress lines, and only warnings and errors logged (with
+// `verbose`, info too).
+void quiet_run(bool verbose = false);
+
+// The start of a bench run that writes into out_dir: quiet_run(), the thread limit (hold the
+// result for the run), out_dir created, and an empty json_path set to out_dir/json_name.
+std::unique_ptr<tbb::global_control> start_run(int threads, const std::string& out_dir,
+                                               std::string& json_path, const char* json_name);
 
 // Runs body() and returns its exit status; an exception is printed to stderr as prefix + what()
 // and a newline, and gives 1.

@@ -32,8 +32,6 @@
 #include "irradcast/common/progress.h"
 #include "irradcast/engine/engine_params.h"
 
-namespace fs = std::filesystem;
-using json = nlohmann::json;
 using namespace irradcast;
 using namespace irradcast::bench;
 
@@ -62,12 +60,8 @@ json params_json(const Options& o, const std::string& metric) {
 
 int run(Cli& cli) {
   Options& o = cli.o;
-  Progress::set_enabled(false);
-  log::set_level(log::Level::Warn);
-  const auto limit = limit_threads(cli.threads);
+  const auto limit = start_run(cli.threads, o.out, cli.json_path, "crossover.json");
   const int used_threads = tbb_threads();
-  fs::create_directories(o.out);
-  if (cli.json_path.empty()) cli.json_path = (fs::path(o.out) / "crossover.json").string();
   const Stopwatch wall;
   const double cpu_start = process_cpu_seconds();
   json result;

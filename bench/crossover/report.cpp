@@ -14,9 +14,6 @@
 
 namespace irradcast::bench {
 
-namespace fs = std::filesystem;
-using json = nlohmann::json;
-
 namespace {
 
 std::string kstar_text(double k) {

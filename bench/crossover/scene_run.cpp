@@ -26,9 +26,6 @@
 
 namespace irradcast::bench {
 
-namespace fs = std::filesystem;
-using json = nlohmann::json;
-
 namespace {
 
 std::uint64_t fnv1a(const std::string& s) {

@@ -33,8 +33,6 @@
 #include "irradcast/common/progress.h"
 #include "plot.h"
 
-namespace fs = std::filesystem;
-using json = nlohmann::json;
 using namespace irradcast;
 using namespace irradcast::bench;
 
@@ -150,12 +148,8 @@ json params_json(const Options& o) {
 }
 
 int run(Options o) {
-  Progress::set_enabled(false);
-  log::set_level(log::Level::Warn);
-  const auto limit = limit_threads(o.threads);
+  const auto limit = start_run(o.threads, o.out_dir, o.json_path, "bench_engine.json");
   const int used_threads = tbb_threads();
-  fs::create_directories(o.out_dir);
-  if (o.json_path.empty()) o.json_path = (fs::path(o.out_dir) / "bench_engine.json").string();
   const Stopwatch total;
   json result;
   result["machine"] = machine_json(used_threads);

@@ -24,7 +24,6 @@
 namespace irradcast::bench {
 namespace {
 
-using json = nlohmann::json;
 using namespace embree_sampling;
 
 // ---------------------------------------------------------------------------------------------

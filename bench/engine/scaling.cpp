@@ -19,9 +19,6 @@
 namespace irradcast::bench {
 namespace {
 
-namespace fs = std::filesystem;
-using json = nlohmann::json;
-
 struct ScalePoint {
   int n = 0;
   float density = 0;  // texels per metre

@@ -94,6 +94,7 @@ std::vector<irradcast::EditStep> steps_of(const Options& o) {
         op.vector = vec3(args.at(1), flag);
         break;
       case Kind::Rotate:
+      case Kind::MaterialEmission:
         op.vector = vec3(args.at(1), flag);
         op.value = number(args.at(2), flag);
         break;
@@ -102,10 +103,6 @@ std::vector<irradcast::EditStep> steps_of(const Options& o) {
         break;
       case Kind::LightIntensity:
         op.value = number(args.at(1), flag);
-        break;
-      case Kind::MaterialEmission:
-        op.vector = vec3(args.at(1), flag);
-        op.value = number(args.at(2), flag);
         break;
       default:
         break;
