@@ -4,6 +4,11 @@
 // (docs/OPERATIONS.md, "TLS").
 #pragma once
 
+// A standard header before asio: asio's config decides between aligned_alloc and operator new
+// from libstdc++'s _GLIBCXX_HAVE_ALIGNED_ALLOC, so every file must see it defined alike (else
+// one file allocates handler memory with aligned_alloc and another frees it with delete).
+#include <cstddef>
+
 #include <asio.hpp>
 #include <asio/ssl.hpp>
 
