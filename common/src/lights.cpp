@@ -44,6 +44,39 @@ LightSampler::LightSampler(const World& world) : world_(&world) {
     pick_pdf_[i] = static_cast<float>(power[i] / total);
   }
   if (!cdf_.empty()) cdf_.back() = 1.0f;
+  if (world.scene && world.scene->sky.enabled()) {
+    sky_ = &world.scene->sky;
+    sky_dist_ = SkyDistribution(*sky_);
+  }
+}
+
+glm::vec3 LightSampler::sky_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n, glm::vec3 ng,
+                                       glm::vec4 u, std::uint64_t* rays_traced) const {
+  if (!sky_) return glm::vec3(0.0f);
+  // Radiance from `dir` if a ray from p leaves the scene that way, else 0.
+  auto escapes = [&](glm::vec3 dir) {
+    Ray r;
+    r.origin = rays.offset(p, ng, dir);
+    r.direction = dir;
+    if (rays_traced) ++*rays_traced;
+    return !rays.occluded(r);
+  };
+  const Frame frame(n);
+  const glm::vec3 cos_dir = frame.to_world(cosine_hemisphere(glm::vec2(u.x, u.y)));
+  if (!sky_dist_.valid()) {
+    // Cosine-weighted: E = pi x L, exact for a constant sky up to visibility.
+    return escapes(cos_dir) ? kPi * sky_->radiance(cos_dir) : glm::vec3(0.0f);
+  }
+  glm::vec3 e(0.0f);
+  const SkyDistribution::Sample s = sky_dist_.sample(glm::vec2(u.x, u.y));
+  const float cos_s = glm::dot(n, s.direction);
+  if (s.pdf > 0.0f && cos_s > 0.0f && escapes(s.direction))
+    e += sky_->radiance(s.direction) * (cos_s / (s.pdf + cos_s * kInvPi));
+  const glm::vec3 c = frame.to_world(cosine_hemisphere(glm::vec2(u.z, u.w)));
+  const float cos_c = glm::dot(n, c);
+  if (cos_c > 0.0f && escapes(c))
+    e += sky_->radiance(c) * (cos_c / (sky_dist_.pdf(c) + cos_c * kInvPi));
+  return e;
 }
 
 bool LightSampler::triangle_sample(const RayScene& rays, std::size_t index, glm::vec3 p,

@@ -1,6 +1,6 @@
-// Direct lighting: emissive triangles (area lights, picked in proportion to their power) and
-// KHR_lights_punctual lights, with shadow rays. Shared by the reference path tracer and the
-// engine's direct pass so both see exactly the same lights.
+// Direct lighting: emissive triangles (area lights, picked in proportion to their power),
+// KHR_lights_punctual lights and the scene's sky (sky.h), with shadow rays. Shared by the reference
+// path tracer and the engine's direct pass so both see exactly the same lights.
 #pragma once
 
 #include <cstdint>
@@ -9,6 +9,7 @@
 #include <glm/glm.hpp>
 
 #include "irradcast/common/ray_scene.h"
+#include "irradcast/common/sky.h"
 #include "irradcast/common/world.h"
 
 namespace irradcast {
@@ -26,7 +27,12 @@ class LightSampler {
  public:
   explicit LightSampler(const World& world);
 
-  bool empty() const { return triangles_.empty() && world_->lights.empty(); }
+  bool empty() const { return triangles_.empty() && world_->lights.empty() && !has_sky(); }
+  // The scene's sky lights it (Sky::enabled()).
+  bool has_sky() const { return sky_ != nullptr; }
+  const Sky* sky() const { return sky_; }
+  // Importance sampling of the sky's map; !valid() for a constant sky.
+  const SkyDistribution& sky_distribution() const { return sky_dist_; }
   const std::vector<EmissiveTriangle>& emissive_triangles() const { return triangles_; }
   float total_area_power() const { return total_power_; }
   // Per emissive triangle: cumulative pick probability (the last is 1) and pick probability.
@@ -42,6 +48,15 @@ class LightSampler {
   // does): divides by the triangle's own area pdf only.
   glm::vec3 triangle_irradiance(const RayScene& rays, std::size_t index, glm::vec3 p, glm::vec3 n,
                                 glm::vec3 ng, glm::vec2 u) const;
+  // One-sample estimate of the direct irradiance at p from the sky (0 without one); the number of
+  // shadow rays it traced goes to *rays.
+  //   Constant sky: one cosine-weighted ray (u.x, u.y); if it leaves the scene, pi x radiance.
+  //   Map: one ray toward a direction drawn by the map's luminance (u.x, u.y) and one
+  //   cosine-weighted ray (u.z, u.w), combined by multiple importance sampling (balance
+  //   heuristic): each that leaves the scene adds radiance x cos / (pdf_map + cos / pi).
+  // A ray leaves the scene when nothing occludes it out to infinity. Unbiased.
+  glm::vec3 sky_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n, glm::vec3 ng,
+                           glm::vec4 u, std::uint64_t* rays_traced = nullptr) const;
   // Exact direct irradiance at p from every punctual light (each with one shadow ray).
   glm::vec3 punctual_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n, glm::vec3 ng) const;
 
@@ -72,6 +87,8 @@ class LightSampler {
   std::vector<float> cdf_;  // cumulative power, normalised to 1
   std::vector<float> pick_pdf_;
   float total_power_ = 0.0f;
+  const Sky* sky_ = nullptr;  // the world's scene's sky when enabled
+  SkyDistribution sky_dist_;
 };
 
 }  // namespace irradcast

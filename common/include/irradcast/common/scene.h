@@ -9,6 +9,8 @@
 
 #include <glm/glm.hpp>
 
+#include "irradcast/common/sky.h"
+
 namespace irradcast {
 
 // An 8-bit RGBA image as glTF stores it. Colour textures (baseColor, emissive) are sRGB encoded;
@@ -35,7 +37,15 @@ struct Material {
   int emissive_uv = 0;
   float emissive_strength = 1.0f;
   bool double_sided = false;
+  // glTF alphaMode: Opaque ignores alpha; Mask cuts out every point whose alpha (the base
+  // colour factor's alpha x the base colour texture's alpha) is below alpha_cutoff: rays pass
+  // through it and it holds no lightmap estimate. glTF's BLEND loads as Mask at 0.5.
+  enum class AlphaMode { Opaque, Mask };
+  AlphaMode alpha_mode = AlphaMode::Opaque;
+  float alpha_cutoff = 0.5f;
+  float base_alpha = 1.0f;  // the base colour factor's alpha
 
+  bool cut_out() const { return alpha_mode == AlphaMode::Mask; }
   glm::vec3 emission() const { return emissive * emissive_strength; }
   bool is_emissive() const {
     return emissive_strength > 0.0f &&
@@ -114,6 +124,8 @@ struct Scene {
   std::vector<Texture> textures;
   std::vector<Light> lights;
   std::vector<Camera> cameras;
+  // Light from where rays leave the scene; none (black) unless a tool or an edit sets one.
+  Sky sky;
 
   // Adds a node (and links it under parent, or makes it a root). Returns its index.
   int add_node(Node node);
