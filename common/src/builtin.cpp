@@ -10,8 +10,10 @@ namespace irradcast {
 namespace {
 
 Scene build_or_load(const std::string& spec, float detail, const std::string& scene_root) {
-  if (spec.empty()) throw Error("empty scene spec (expected cornell, rooms:N or a glTF file)");
+  if (spec.empty())
+    throw Error("empty scene spec (expected cornell, rooms:N, sponza or a glTF file)");
   if (spec == "cornell") return make_cornell_box();
+  if (spec == "sponza") return make_sponza(scene_root);
   if (spec.rfind("rooms:", 0) == 0) {
     std::string n = spec.substr(6);
     int count = 0;

@@ -1,6 +1,7 @@
 // Built-in scenes and the scene spec parser shared by every tool:
 //   "cornell"            the Cornell box (published measurements, ceiling light, standard camera)
 //   "rooms:N"            a procedural N x N building of rooms (see RoomsOptions)
+//   "sponza"             the Dabrovic Sponza of the shared sample data, with a sky and a sun
 //   anything else        a glTF 2.0 file (.gltf / .glb)
 #pragma once
 
@@ -23,6 +24,15 @@ struct RoomsOptions {
 // ceiling panel in some rooms (never all, never none when N > 1). Room (i, j) is named
 // "room_i_j"; lit rooms have a node "light_i_j". Deterministic for given options.
 Scene make_rooms(const RoomsOptions& options);
+
+// The file `relative` (e.g. "dabrovic-sponza/sponza.gltf") in the shared sample data: under
+// $IRRADCAST_TESTDATA, else ../shared/testdata or shared/testdata from the current directory.
+// Throws irradcast::Error naming the places tried.
+std::string find_sample_data(const std::string& relative);
+// The Dabrovic Sponza atrium (find_sample_data) lit as an outdoor courtyard: a constant daylight
+// sky (radiance (0.25, 0.33, 0.45)), a sun (directional, 6 W/m^2, travelling along
+// (0.35, -1, 0.22)) through the open roof, and a camera down the long axis.
+Scene make_sponza(const std::string& scene_root = "");
 
 // Parses a scene spec (see above) and loads or builds the scene; `detail` applies to rooms:N.
 // A glTF file may read external files under `scene_root` only (default: its own folder; see
