@@ -117,6 +117,15 @@ void VulkanBackend::Impl::upload_sky() {
     } else if (dist.valid() && dist.width() == sky->map.width && dist.height() == sky->map.height &&
                sky->map.pixels.size() == static_cast<std::size_t>(dist.width()) * dist.height()) {
       sky_flags |= kFlagSkyMap;
+      const VkDeviceSize bytes =
+          4 * (8 + 5 * sky->map.pixels.size() + 2 * static_cast<std::size_t>(dist.height()) + 1);
+      if (bytes > max_buffer)
+        throw Error("Vulkan: the " + std::to_string(dist.width()) + "x" +
+                    std::to_string(dist.height()) + " sky map needs a " +
+                    std::to_string(bytes >> 20) + " MiB buffer, beyond " + context.device().name +
+                    "'s limit of " + std::to_string(max_buffer >> 20) +
+                    " MiB (maxStorageBufferRange); use a smaller map or --backend embree");
+      data.reserve(bytes / 4);
       data[3] = as_float(static_cast<std::uint32_t>(dist.width()));
       data[4] = as_float(static_cast<std::uint32_t>(dist.height()));
       for (const glm::vec3& c : sky->map.pixels)
