@@ -12,14 +12,17 @@ const uint EMPTY = 0xFFFFFFFFu;
 // 4 vec4 per node: (lo0, child0) (hi0, child1) (lo1, count0) (hi1, count1). count 0: the child
 // is an inner node; EMPTY: no child; otherwise a leaf of `count` triangles from index `child`.
 layout(std430, binding = 0) readonly buffer Nodes { vec4 nodes[]; };
-// 3 vec4 per triangle in BVH order: (v0, object) (v1, triangle in object) (v2, -).
+// 3 vec4 per triangle in BVH order: (v0, object) (v1, triangle in object) (v2, cut-out flag):
+// the flag (uint bits) is 1 when the triangle's material is Mask (Material::cut_out), so only
+// those hits pay for the alpha test (cut_out_at).
 layout(std430, binding = 1) readonly buffer Tris { vec4 tris[]; };
 // 4 vec4 per triangle, objects[o].x + t: lightmap uv corners (0,1) | (2, base uv 0) |
 // base uv (1,2) | (material, its index in emissive[] or -1, -, -).
 layout(std430, binding = 2) readonly buffer TriAttr { vec4 tri_attr[]; };
 // Per object: first triangle in tri_attr, first lightmap texel in prev[], width, height.
 layout(std430, binding = 3) readonly buffer Objects { uvec4 objects[]; };
-// 2 vec4 per material: (base colour, base texture) (emission, emissive texture).
+// 3 vec4 per material: (base colour, base texture) (emission, emissive texture)
+// (base alpha, alpha cutoff, -, -).
 layout(std430, binding = 4) readonly buffer Materials { vec4 materials[]; };
 // Per texture: first texel in tex_texels, width, height, -.
 layout(std430, binding = 5) readonly buffer TexHeaders { uvec4 tex_headers[]; };
@@ -42,9 +45,14 @@ layout(std430, binding = 15) writeonly buffer Result { vec4 result[]; };
 // 3 vec4 per triangle, objects[o].x + t: the corners' shading normals; w of the first is 0 when
 // the mesh has none (the geometric normal is used). Read by the reference path tracer.
 layout(std430, binding = 16) readonly buffer TriNormals { vec4 tri_normals[]; };
+// The sky (common/sky.h), read when FLAG_SKY is set: (radiance of a constant sky x strength,
+// map width bits) (map height bits, -, -, -), then for a map: its radiance x strength (3 floats
+// per texel, row-major), SkyDistribution's marginal cdf (height + 1), conditional cdfs
+// (height x (width + 1)) and densities (width x height). sky.glsl reads it.
+layout(std430, binding = 17) readonly buffer SkyData { float sky[]; };
 
 const uint FLAG_AREA = 1u, FLAG_UNBIASED = 2u, FLAG_FIXED = 4u, FLAG_PROBES = 8u;
-const uint FLAG_CAMERA = 16u;
+const uint FLAG_CAMERA = 16u, FLAG_SKY = 32u, FLAG_SKY_MAP = 64u;
 
 layout(push_constant) uniform Params {
   uint base;     // first item of this dispatch
@@ -202,6 +210,8 @@ bool hit_triangle(uint i, ShearedRay r, float tmin, float tmax, out vec3 tuv) {
   return true;
 }
 
+bool cut_out_at(uint prim, float u, float v);
+
 // Closest hit (any_hit false) or the first hit found (any_hit true) in (tmin, tmax).
 Hit trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit) {
   Hit h;
@@ -231,6 +241,7 @@ Hit trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit) {
       for (uint i = child[k]; i < child[k] + count[k]; ++i) {
         vec3 tuv;
         if (hit_triangle(i, sheared, tmin, h.t, tuv)) {
+          if (floatBitsToUint(tris[3 * i + 2].w) != 0u && cut_out_at(i, tuv.y, tuv.z)) continue;
           h.object = int(floatBitsToUint(tris[3 * i].w));
           h.triangle = floatBitsToUint(tris[3 * i + 1].w);
           h.prim = i;
@@ -272,11 +283,14 @@ vec3 texel_rgb(uint first, int w, int x, int y) {
   return vec3(srgb_to_linear(c.r), srgb_to_linear(c.g), srgb_to_linear(c.b));
 }
 
-// Bilinear, REPEAT, sRGB decoded (Texture::sample_srgb).
-vec3 sample_texture(int tex, vec2 uv) {
-  uvec4 th = tex_headers[tex];
-  int w = int(th.y), h = int(th.z);
-  if (w <= 0 || h <= 0) return vec3(1.0);
+// The four texels around uv (REPEAT) and the bilinear weights, as Texture::sample_srgb.
+struct Bilinear {
+  int x0, y0, x1, y1;
+  float ax, ay;
+};
+
+Bilinear bilinear(int w, int h, vec2 uv) {
+  Bilinear b;
   float x = uv.x * float(w) - 0.5, y = uv.y * float(h) - 0.5;
   float fx = floor(x), fy = floor(y);
   float ax = x - fx, ay = y - fy;
@@ -287,10 +301,39 @@ vec3 sample_texture(int tex, vec2 uv) {
   y0 = y0 >= h ? y0 - h : (y0 < 0 ? y0 + h : y0);
   x0 = clamp(x0, 0, w - 1);
   y0 = clamp(y0, 0, h - 1);
-  int x1 = x0 + 1 == w ? 0 : x0 + 1, y1 = y0 + 1 == h ? 0 : y0 + 1;
-  vec3 top = mix(texel_rgb(th.x, w, x0, y0), texel_rgb(th.x, w, x1, y0), ax);
-  vec3 bottom = mix(texel_rgb(th.x, w, x0, y1), texel_rgb(th.x, w, x1, y1), ax);
-  return mix(top, bottom, ay);
+  b.x0 = x0;
+  b.y0 = y0;
+  b.x1 = x0 + 1 == w ? 0 : x0 + 1;
+  b.y1 = y0 + 1 == h ? 0 : y0 + 1;
+  b.ax = ax;
+  b.ay = ay;
+  return b;
+}
+
+// Bilinear, REPEAT, sRGB decoded (Texture::sample_srgb).
+vec3 sample_texture(int tex, vec2 uv) {
+  uvec4 th = tex_headers[tex];
+  int w = int(th.y), h = int(th.z);
+  if (w <= 0 || h <= 0) return vec3(1.0);
+  Bilinear b = bilinear(w, h, uv);
+  vec3 top = mix(texel_rgb(th.x, w, b.x0, b.y0), texel_rgb(th.x, w, b.x1, b.y0), b.ax);
+  vec3 bottom = mix(texel_rgb(th.x, w, b.x0, b.y1), texel_rgb(th.x, w, b.x1, b.y1), b.ax);
+  return mix(top, bottom, b.ay);
+}
+
+float texel_alpha(uint first, int w, int x, int y) {
+  return unpackUnorm4x8(tex_texels[first + uint(y * w + x)]).a;
+}
+
+// The texture's alpha, bilinear and linear (Texture::sample_srgb's alpha).
+float sample_alpha(int tex, vec2 uv) {
+  uvec4 th = tex_headers[tex];
+  int w = int(th.y), h = int(th.z);
+  if (w <= 0 || h <= 0) return 1.0;
+  Bilinear b = bilinear(w, h, uv);
+  float top = mix(texel_alpha(th.x, w, b.x0, b.y0), texel_alpha(th.x, w, b.x1, b.y0), b.ax);
+  float bottom = mix(texel_alpha(th.x, w, b.x0, b.y1), texel_alpha(th.x, w, b.x1, b.y1), b.ax);
+  return mix(top, bottom, b.ay);
 }
 
 vec2 lerp_uv(vec2 a, vec2 b, vec2 c, float u, float v) {
@@ -300,7 +343,7 @@ vec2 lerp_uv(vec2 a, vec2 b, vec2 c, float u, float v) {
 vec3 albedo_at(uint object, uint triangle, float u, float v) {
   uint g = objects[object].x + triangle;
   uint m = floatBitsToUint(tri_attr[4 * g + 3].x);
-  vec4 base = materials[2 * m];
+  vec4 base = materials[3 * m];
   vec3 albedo = base.rgb;
   int tex = floatBitsToInt(base.w);
   if (tex >= 0) {
@@ -308,6 +351,21 @@ vec3 albedo_at(uint object, uint triangle, float u, float v) {
     albedo *= sample_texture(tex, lerp_uv(a.zw, b.xy, b.zw, u, v));
   }
   return albedo;
+}
+
+// Whether the hit (u, v) on BVH triangle `prim` (a Mask material's) is cut out: its alpha
+// (base alpha x the base colour texture's alpha at the base colour uv set) below the cutoff.
+bool cut_out_at(uint prim, float u, float v) {
+  uint g = objects[floatBitsToUint(tris[3 * prim].w)].x + floatBitsToUint(tris[3 * prim + 1].w);
+  uint m = floatBitsToUint(tri_attr[4 * g + 3].x);
+  vec4 alpha = materials[3 * m + 2];
+  float a = alpha.x;
+  int tex = floatBitsToInt(materials[3 * m].w);
+  if (tex >= 0) {
+    vec4 p = tri_attr[4 * g + 1], q = tri_attr[4 * g + 2];
+    a *= sample_alpha(tex, lerp_uv(p.zw, q.xy, q.zw, u, v));
+  }
+  return a < alpha.y;
 }
 
 // Lightmap::bilinear over object `object`'s part of prev[] (uv in texel units).

@@ -42,7 +42,7 @@ vec3 punctual_irradiance(vec3 p, vec3 n, vec3 ng) {
 vec3 emission_at(uint k, vec2 b) {
   vec4 info = emissive[7 * k + 4];
   uint m = floatBitsToUint(info.z);
-  vec4 em = materials[2 * m + 1];
+  vec4 em = materials[3 * m + 1];
   vec3 e = em.rgb;
   int tex = floatBitsToInt(em.w);
   if (tex >= 0) {

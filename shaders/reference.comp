@@ -1,14 +1,19 @@
 #version 450
 #extension GL_GOOGLE_include_directive : require
 // The reference path tracer (PathTracer with next-event estimation): at every vertex the direct
-// light (all punctual lights, one area-light sample), then one cosine-sampled bounce, `bounce`
-// indirect bounces in all. Items are texels (their irradiance, reference_lightmaps) or, with
-// FLAG_CAMERA, pixels (the radiance along their primary ray, PathTracer::render: the primary
-// hit is traced once, `samples` paths leave it). The mean and the rays traced are written.
+// light (all punctual lights, one area-light sample, one sky estimate with FLAG_SKY), then one
+// cosine-sampled bounce, `bounce` indirect bounces in all (a bounce ray that leaves the scene
+// ends the path: the sky is direct light, counted at the vertices). Items are texels (their
+// irradiance, reference_lightmaps) or, with FLAG_CAMERA, pixels (the radiance along their
+// primary ray, PathTracer::render: the primary hit is traced once, `samples` paths leave it; a
+// primary ray that misses shows the sky's radiance). The mean and the rays traced are written.
 #include "common.glsl"
 #include "lights.glsl"
+#include "sky.glsl"
 
-const uint STREAM_REFERENCE = 5u;
+const uint STREAM_REFERENCE = 5u, STREAM_REFERENCE_SKY = 7u;
+
+uint sky_rng;  // the sky's own stream (sky-less results keep their bits)
 
 vec3 lights_direct(vec3 p, vec3 n, vec3 ng, inout uint rng, inout float rays) {
   vec3 e = punctual_irradiance(p, n, ng);
@@ -17,6 +22,10 @@ vec3 lights_direct(vec3 p, vec3 n, vec3 ng, inout uint rng, inout float rays) {
     vec2 a = next_2d(rng);
     e += area_irradiance(p, n, ng, vec3(a, next_float(rng)));
     rays += 1.0;
+  }
+  if ((pc.flags & FLAG_SKY) != 0u) {
+    vec2 a = next_2d(sky_rng);
+    e += sky_irradiance(p, n, ng, vec4(a, next_2d(sky_rng)), rays);
   }
   return e;
 }
@@ -78,6 +87,7 @@ void main() {
   uint item = pc.base + gl_GlobalInvocationID.x;
   if (item >= pc.count) return;
   uint rng = rng_init(item, STREAM_REFERENCE);
+  sky_rng = rng_init(item, STREAM_REFERENCE_SKY);
   float rays = 0.0;
   vec3 sum = vec3(0.0);
   vec4 a = texels[3 * item], b = texels[3 * item + 1], c = texels[3 * item + 2];
@@ -95,6 +105,8 @@ void main() {
       vec3 reflect = albedo_at(uint(h.object), h.triangle, h.u, h.v) * INV_PI;
       for (uint s = 0u; s < pc.samples; ++s)
         sum += le + reflect * irradiance(p, n, ng, rng, rays);
+    } else if ((pc.flags & FLAG_SKY) != 0u) {
+      sum = sky_radiance(b.xyz) * float(pc.samples);
     }
   }
   result[item] = vec4(sum / float(max(pc.samples, 1u)), rays);

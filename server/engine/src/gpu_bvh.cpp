@@ -175,6 +175,7 @@ GpuBvh build_gpu_bvh(const World& world) {
       g.v2 = c;
       g.object = static_cast<std::uint32_t>(o.object);
       g.triangle = t;
+      g.cut_out = world.material(o.object, t).cut_out() ? 1u : 0u;
       glm::vec3 lo = glm::min(a, glm::min(b, c)), hi = glm::max(a, glm::max(b, c));
       RTCBuildPrimitive p{};
       p.lower_x = lo.x;

@@ -43,6 +43,7 @@ enum Binding : int {
   kProbeRadiance,
   kResult,
   kTriNormals,
+  kSky,
   kBindings
 };
 
@@ -59,7 +60,9 @@ enum Flags : std::uint32_t {
   kFlagUnbiased = 2,
   kFlagFixed = 4,
   kFlagProbes = 8,
-  kFlagCamera = 16
+  kFlagCamera = 16,
+  kFlagSky = 32,     // the scene has a sky (Sky::enabled)
+  kFlagSkyMap = 64,  // ... a map with its sampling tables (SkyDistribution::valid)
 };
 
 // shaders/common.glsl's push constant block (std430 offsets).
@@ -142,14 +145,19 @@ struct VulkanBackend::Impl {
     });
   }
   // Records the pending uploads, `count` items of one pass and the read-back of `count`
-  // results, submits and waits; the results land in `out`.
+  // results, submits and waits; the results land in `out`. With `w_sum`, the results' w are
+  // added to it: every result's, or only those at `w_at`.
   void run(PipelineId pipeline, PushConstants pc, std::uint32_t count, std::vector<glm::vec3>& out,
-           std::size_t out_size, double* w_sum = nullptr);
+           std::size_t out_size, double* w_sum = nullptr,
+           const std::vector<std::uint32_t>* w_at = nullptr);
   void barrier(VkPipelineStageFlags src_stage, VkAccessFlags src, VkPipelineStageFlags dst_stage,
                VkAccessFlags dst);
 
   // vulkan_scene_upload.cpp: the scene and the engine's data.
   void upload_scene();
+  // The sky (kSky) and its flags: a constant's radiance, or the map with LightSampler's
+  // sampling tables.
+  void upload_sky();
   std::uint32_t material_index(int object, std::uint32_t t) const;
   // Per object: triangle base, lightmap offset and size; per triangle: lightmap and base-colour
   // uv corners, material. Without an atlas (the reference path tracer reads no lightmap) the
@@ -193,6 +201,7 @@ struct VulkanBackend::Impl {
   std::vector<std::pair<int, VkDeviceSize>> uploads;
   bool descriptors_dirty = true;
   std::uint32_t punctual_count = 0, emissive_count = 0;
+  std::uint32_t sky_flags = 0;  // kFlagSky, kFlagSkyMap
   struct PrevKey {
     const void* maps = nullptr;
     std::uint32_t update = ~0u, bounce = ~0u;

@@ -109,9 +109,11 @@ void VulkanBackend::Impl::write(int binding, VkDeviceSize bytes,
 }
 
 // Records the pending uploads, `count` items of one pass and the read-back of `count`
-// results, submits and waits; the results land in `out`.
+// results, submits and waits; the results land in `out`. With `w_sum`, the results' w are
+// added to it: every result's, or only those at `w_at`.
 void VulkanBackend::Impl::run(PipelineId pipeline, PushConstants pc, std::uint32_t count,
-                              std::vector<glm::vec3>& out, std::size_t out_size, double* w_sum) {
+                              std::vector<glm::vec3>& out, std::size_t out_size, double* w_sum,
+                              const std::vector<std::uint32_t>* w_at) {
   const VkDeviceSize result_bytes = std::max<VkDeviceSize>(out_size * sizeof(glm::vec4), 16);
   ensure(kResult, result_bytes);
   const bool readback = device_buffers[kResult].mapped == nullptr;
@@ -171,7 +173,9 @@ void VulkanBackend::Impl::run(PipelineId pipeline, PushConstants pc, std::uint32
                                                            : device_buffers[kResult].mapped);
   out.resize(out_size);
   for (std::size_t i = 0; i < out_size; ++i) out[i] = glm::vec3(src[i]);
-  if (w_sum)
+  if (w_sum && w_at)
+    for (std::uint32_t i : *w_at) *w_sum += i < out_size ? src[i].w : 0.0f;
+  else if (w_sum)
     for (std::size_t i = 0; i < out_size; ++i) *w_sum += src[i].w;
 }
 

@@ -30,6 +30,7 @@ std::vector<glm::dvec3> VulkanBackend::Impl::paths(std::size_t items, int sample
   pc.punctual_count = punctual_count;
   pc.emissive_count = emissive_count;
   if (emissive_count > 0) pc.flags |= kFlagArea;
+  pc.flags |= sky_flags;
   if (camera) pc.flags |= kFlagCamera;
   const int batch = 16;
   std::vector<glm::dvec3> sum(items, glm::dvec3(0.0));

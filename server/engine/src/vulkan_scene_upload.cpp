@@ -1,5 +1,5 @@
 // What the Vulkan backend uploads (vulkan_backend_impl.h): the scene (BVH, materials, textures,
-// lights, normals), the surfaces with their lightmaps, the engine's pass data (texels, units,
+// lights, normals, sky), the surfaces with their lightmaps, the engine's pass data (texels, units,
 // probes, probe weights), the previous bounce's lightmaps, and each pass's push constants.
 #include "vulkan_backend_impl.h"
 
@@ -8,6 +8,8 @@
 #include <vector>
 
 #include "irradcast/common/error.h"
+#include "irradcast/common/lights.h"
+#include "irradcast/common/sky.h"
 #include "irradcast/engine/gpu_bvh.h"
 
 namespace irradcast {
@@ -26,6 +28,7 @@ void VulkanBackend::Impl::upload_scene() {
     mats.emplace_back(m.base_color, texture(m.base_color_texture));
     mats.emplace_back(m.is_emissive() ? m.emission() : glm::vec3(0.0f),
                       texture(m.emissive_texture));
+    mats.emplace_back(m.base_alpha, m.alpha_cutoff, 0.0f, 0.0f);
   }
   write(kMaterials, mats);
   std::vector<glm::uvec4> headers;
@@ -93,6 +96,45 @@ void VulkanBackend::Impl::upload_scene() {
   }
   write(kTriNormals, normals);
   write_surfaces(nullptr);
+  upload_sky();
+}
+
+// The sky as common.glsl describes it: a header (a constant's radiance x strength, the map's
+// size), then a map's radiance x strength and LightSampler's sampling tables. A map that is
+// black everywhere (no tables) is a black constant: its rays are traced, its light is 0.
+void VulkanBackend::Impl::upload_sky() {
+  std::vector<float> data(8, 0.0f);
+  sky_flags = 0;
+  const Sky* sky = lights->sky();
+  if (sky) {
+    sky_flags = kFlagSky;
+    const SkyDistribution& dist = lights->sky_distribution();
+    if (sky->map.width <= 0 || sky->map.height <= 0) {
+      const glm::vec3 l = sky->color * sky->strength;
+      data[0] = l.x;
+      data[1] = l.y;
+      data[2] = l.z;
+    } else if (dist.valid() && dist.width() == sky->map.width && dist.height() == sky->map.height &&
+               sky->map.pixels.size() == static_cast<std::size_t>(dist.width()) * dist.height()) {
+      sky_flags |= kFlagSkyMap;
+      const VkDeviceSize bytes =
+          4 * (8 + 5 * sky->map.pixels.size() + 2 * static_cast<std::size_t>(dist.height()) + 1);
+      if (bytes > max_buffer)
+        throw Error("Vulkan: the " + std::to_string(dist.width()) + "x" +
+                    std::to_string(dist.height()) + " sky map needs a " +
+                    std::to_string(bytes >> 20) + " MiB buffer, beyond " + context.device().name +
+                    "'s limit of " + std::to_string(max_buffer >> 20) +
+                    " MiB (maxStorageBufferRange); use a smaller map or --backend embree");
+      data.reserve(bytes / 4);
+      data[3] = as_float(static_cast<std::uint32_t>(dist.width()));
+      data[4] = as_float(static_cast<std::uint32_t>(dist.height()));
+      for (const glm::vec3& c : sky->map.pixels)
+        for (int k = 0; k < 3; ++k) data.push_back(c[k] * sky->strength);
+      for (const auto* table : {&dist.marginal_cdf(), &dist.conditional_cdf(), &dist.density()})
+        data.insert(data.end(), table->begin(), table->end());
+    }
+  }
+  write(kSky, data);
 }
 
 std::uint32_t VulkanBackend::Impl::material_index(int object, std::uint32_t t) const {
@@ -227,6 +269,7 @@ PushConstants VulkanBackend::Impl::constants(const PassInput& in) const {
   }
   pc.probe_res = in.probes.resolution;
   if (emissive_count > 0) pc.flags |= kFlagArea;
+  pc.flags |= sky_flags;
   if (in.params.unbiased()) pc.flags |= kFlagUnbiased;
   if (in.params.distant_point == DistantPoint::FixedDistance) pc.flags |= kFlagFixed;
   if (!in.probe_weights.empty()) pc.flags |= kFlagProbes;

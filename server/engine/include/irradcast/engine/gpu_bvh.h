@@ -29,14 +29,15 @@ struct GpuBvhNode {
 static_assert(sizeof(GpuBvhNode) == 64);
 
 // A triangle in BVH order, its corners as the world has them (the watertight test needs the
-// shared vertices of neighbours bit for bit), with its object and its index there.
+// shared vertices of neighbours bit for bit), with its object and its index there, and whether
+// its material is Mask (Material::cut_out): the shaders test the alpha of those hits only.
 struct GpuTriangle {
   glm::vec3 v0;
   std::uint32_t object;
   glm::vec3 v1;
   std::uint32_t triangle;
   glm::vec3 v2;
-  std::uint32_t pad = 0;
+  std::uint32_t cut_out = 0;  // 1: a Mask material's triangle
 };
 static_assert(sizeof(GpuTriangle) == 48);
 
@@ -47,7 +48,8 @@ struct GpuBvh {
   std::vector<GpuTriangle> triangles;
   int depth = 0;  // longest root-to-leaf path, in nodes
 
-  // Closest hit in (tmin, tmax), as the shader computes it.
+  // Closest hit in (tmin, tmax), as the shader computes it for opaque triangles (it does not
+  // evaluate alpha: a cut-out triangle counts as hit here).
   Hit intersect(const Ray& ray) const;
 };
 
