@@ -2,7 +2,8 @@
 #extension GL_GOOGLE_include_directive : require
 // One indirect bounce per texel: cosine-weighted hemisphere rays within the tracing range read
 // the previous bounce at their hits; rays that reach the range read one of the texel's probes,
-// picked by weight (EmbreeBackend::scatter).
+// picked by weight, and a texel that sees no probe traces its rays to their hit
+// (EmbreeBackend::scatter).
 #include "common.glsl"
 
 const uint STREAM_SCATTER = 3u, STREAM_PROBE_PICK = 4u;
@@ -42,18 +43,19 @@ void main() {
   uint pick = rng_init(i, STREAM_PROBE_PICK);
   bool use_probes = (pc.flags & FLAG_UNBIASED) == 0u && (pc.flags & FLAG_PROBES) != 0u;
   bool fixed_distance = (pc.flags & FLAG_FIXED) != 0u;
+  uint w = 20u * i;
+  uint count = use_probes ? probe_weights[w + 16u] : 0u;
+  // A texel that sees no probe (count 0) traces its rays to their hit.
+  float range = use_probes && count == 0u ? 3.4e38 : pc.range;
   vec3 sum = vec3(0.0);
   for (uint s = 0u; s < pc.samples; ++s) {
     vec3 d = frame_to_world(n, cosine_hemisphere(next_2d(rng)));
     vec3 o = offset_origin(p, ng, d);
-    Hit h = trace(o, d, 0.0, pc.range, false);
+    Hit h = trace(o, d, 0.0, range, false);
     if (h.object >= 0) {
       sum += radiance_at(h);
-    } else if (use_probes) {
+    } else if (use_probes && count > 0u) {
       vec3 q = fixed_distance ? p + pc.extent * d : exit_point(p, d);
-      uint w = 20u * i;
-      uint count = probe_weights[w + 16u];
-      if (count == 0u) continue;
       float u = next_float(pick);
       float acc = 0.0;
       uint k = count - 1u;

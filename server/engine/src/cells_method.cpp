@@ -130,7 +130,8 @@ void CellsMethod::place(const std::vector<std::size_t>& which, Probes& probes) c
 
 void CellsMethod::weigh(const SurfaceTexels& texels, Probes& probes) const {
   // Probe weights per texel: trilinear over the 8 surrounding probes, keeping only usable probes
-  // the texel can see (a wall between them means the probe sees another room's light).
+  // the texel can see (a wall between them means the probe sees another room's light). A texel
+  // that sees none of them keeps an empty list: any other probe would be one it cannot see.
   const ProbeGrid& grid = probes.grid;
   probes.weights.resize(texels.size());
   tbb::parallel_for(std::size_t(0), texels.size(), [&](std::size_t t) {
@@ -166,13 +167,8 @@ void CellsMethod::weigh(const SurfaceTexels& texels, Probes& probes) const {
       ++w.count;
       sum += weight;
     }
-    if (w.count == 0) {
-      // No visible usable neighbour: fall back to the texel's own cell probe.
-      w.probe[0] = texels.cell[t];
-      w.weight[0] = 1.0f;
-      w.count = 1;
-      sum = 1.0f;
-    }
+    // No visible usable neighbour (the outside of a building, a gap behind furniture): the
+    // texel reads no probe; its scatter rays go on to their hit instead.
     for (int k = 0; k < w.count; ++k) w.weight[k] /= sum;
     probes.weights[t] = w;
   });

@@ -173,17 +173,20 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
     // A stream of its own for probe choices, so the ray directions do not depend on which rays
     // missed.
     Rng pick = texel_rng(in.params, i, in.update, kProbePick, in.bounce);
+    // A texel that sees no probe (ProbeWeights::count 0) traces its rays to their hit.
+    const bool weighed = !unbiased && !in.probe_weights.empty();
+    const bool probes = weighed && in.probe_weights[i].count > 0;
     Frame frame(nrm);
     glm::vec3 sum(0.0f);
     for (int s = 0; s < n; ++s) {
       Ray ray;
       ray.direction = frame.to_world(cosine_hemisphere(rng.next_2d()));
       ray.origin = rays_->offset(p, ng, ray.direction);
-      ray.tmax = range;
+      ray.tmax = weighed && !probes ? 3.4e38f : range;
       Hit h = rays_->intersect(ray);
       if (h.valid()) {
         sum += radiance_at(prev, h);
-      } else if (!unbiased && !in.probe_weights.empty()) {
+      } else if (probes) {
         // One probe, picked with probability equal to its interpolation weight: the same
         // expectation as the weighted sum over all (up to 8) of them, at one lookup instead of
         // eight; over many rays and updates the choice averages out.

@@ -31,7 +31,8 @@ struct SurfaceTexels {
   std::size_t size() const { return position.size(); }
 };
 
-// Up to 8 probes a texel reads for distant light, with weights summing to 1.
+// Up to 8 probes a texel reads for distant light, with weights summing to 1; none (count 0)
+// when it sees none of its neighbour probes, and then its scatter rays go on to their hit.
 struct ProbeWeights {
   std::uint32_t probe[8];
   float weight[8];
