@@ -182,10 +182,12 @@ void keep_centroids(const ObjectLightmap& lm, std::size_t n, TexelGBuffer& g, Sa
   }
 }
 
-// Surface attributes of every valid texel, its sample pulled `inset` toward the centroid.
+// Surface attributes of every valid texel, its sample pulled `inset` toward the centroid; a
+// texel whose sample is cut out becomes CutOut.
 void fill_attributes(const World& world, std::size_t oi, float inset, const Samples& s,
                      TexelGBuffer& g) {
   const WorldObject& wo = world.objects[oi];
+  const bool cut_outs = world.has_cut_outs(static_cast<int>(oi));
   tbb::parallel_for(0, g.height, [&](int y) {
     for (int x = 0; x < g.width; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
@@ -205,6 +207,7 @@ void fill_attributes(const World& world, std::size_t oi, float inset, const Samp
       g.position[i] = wo.position(t, u, v);
       g.normal[i] = wo.shading_normal(t, u, v);
       g.albedo[i] = world.albedo(static_cast<int>(oi), t, u, v);
+      if (cut_outs && world.cut_out(static_cast<int>(oi), t, u, v)) g.kind[i] = TexelKind::CutOut;
     }
   });
 }
