@@ -19,10 +19,10 @@
 
 #include "gltf_builders.h"
 #include "irradcast/common/builtin.h"
+#include "irradcast/common/cutout.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/gltf.h"
 #include "irradcast/common/scene.h"
-#include "irradcast/common/world.h"
 #include "testdata.h"
 
 using namespace irradcast;
@@ -917,7 +917,9 @@ void expect_same_scene(const Scene& a, const Scene& b) {
       EXPECT_EQ(pa.double_sided, pb.double_sided);
       EXPECT_EQ(pa.alpha_mode, pb.alpha_mode);
       EXPECT_FLOAT_EQ(pa.base_alpha, pb.base_alpha);
-      if (pa.cut_out()) EXPECT_FLOAT_EQ(pa.alpha_cutoff, pb.alpha_cutoff);
+      if (pa.cut_out()) {
+        EXPECT_FLOAT_EQ(pa.alpha_cutoff, pb.alpha_cutoff);
+      }
       EXPECT_EQ(pa.base_color_texture >= 0, pb.base_color_texture >= 0);
       EXPECT_EQ(pa.emissive_texture >= 0, pb.emissive_texture >= 0);
       if (pa.base_color_texture >= 0 && pb.base_color_texture >= 0) {
@@ -1110,10 +1112,10 @@ TEST_F(GltfTest, AlphaModeMaskLoadsCutoffAndBaseAlpha) {
   EXPECT_FLOAT_EQ(s.materials[2].alpha_cutoff, 0.5f);  // glTF's default
   // Alpha 0.4 >= 0.25: the whole triangle stays; at cutoff 0.5 it would all be cut out.
   World world = World::build(s);
-  EXPECT_FLOAT_EQ(world.alpha(0, 0, 0.2f, 0.2f), 0.4f);
-  EXPECT_FALSE(world.cut_out(0, 0, 0.2f, 0.2f));
+  EXPECT_FLOAT_EQ(surface_alpha(world, 0, 0, 0.2f, 0.2f), 0.4f);
+  EXPECT_FALSE(cut_out(world, 0, 0, 0.2f, 0.2f));
   s.materials[0].alpha_cutoff = 0.5f;
-  EXPECT_TRUE(world.cut_out(0, 0, 0.2f, 0.2f));
+  EXPECT_TRUE(cut_out(world, 0, 0, 0.2f, 0.2f));
 }
 
 TEST_F(GltfTest, AlphaModeBlendLoadsAsMaskAtOneHalfWithOneWarning) {

@@ -1,3 +1,8 @@
+// The Embree scene (ray_scene.h). Cut-outs: an object with Mask materials (cutout.h) gets Embree
+// intersection and occlusion filter functions that reject hits on its cut-out points, so every
+// ray, occlusion ray and packet passes through the holes, in the single-level and the two-level
+// (editable) scene alike. Objects without Mask materials get no filter: an opaque scene traces
+// exactly as before.
 #include "irradcast/common/ray_scene.h"
 
 #include <embree3/rtcore.h>
@@ -5,6 +10,7 @@
 #include <cstring>
 #include <string>
 
+#include "irradcast/common/cutout.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 
@@ -68,8 +74,8 @@ void cut_out_filter(const RTCFilterFunctionNArguments* args) {
   const unsigned n = args->N;
   for (unsigned i = 0; i < n; ++i) {
     if (args->valid[i] != -1) continue;
-    if (f->world->cut_out(f->object, RTCHitN_primID(args->hit, n, i), RTCHitN_u(args->hit, n, i),
-                          RTCHitN_v(args->hit, n, i)))
+    if (cut_out(*f->world, f->object, RTCHitN_primID(args->hit, n, i), RTCHitN_u(args->hit, n, i),
+                RTCHitN_v(args->hit, n, i)))
       args->valid[i] = 0;
   }
 }
@@ -131,7 +137,7 @@ RayScene::RayScene(const World& world, bool editable)
     }
     std::memcpy(vb, o.positions.data(), o.positions.size() * sizeof(glm::vec3));
     std::memcpy(ib, tris.data(), tris.size() * sizeof(glm::uvec3));
-    if (world.has_cut_outs(o.object))
+    if (has_cut_outs(world, o.object))
       attach_cut_out_filter(geom, world, o.object,
                             impl_->filters[static_cast<std::size_t>(o.object)]);
     if (!o.visible) rtcDisableGeometry(geom);

@@ -1,5 +1,7 @@
 #include "irradcast/common/world.h"
 
+#include "irradcast/common/cutout.h"
+
 #include <cmath>
 
 #include <glm/gtc/matrix_inverse.hpp>
@@ -150,32 +152,11 @@ glm::vec3 World::albedo(int object, std::uint32_t t, float u, float v) const {
   return a;
 }
 
-float World::alpha(int object, std::uint32_t t, float u, float v) const {
-  const Material& mat = material(object, t);
-  float a = mat.base_alpha;
-  if (mat.base_color_texture >= 0) {
-    glm::vec2 uv = objects[object].uv(mat.base_color_uv, t, u, v);
-    a *= scene->textures[mat.base_color_texture].sample_srgb(uv).w;
-  }
-  return a;
-}
-
-bool World::cut_out(int object, std::uint32_t t, float u, float v) const {
-  const Material& mat = material(object, t);
-  return mat.cut_out() && !(alpha(object, t, u, v) >= mat.alpha_cutoff);
-}
-
-bool World::has_cut_outs(int object) const {
-  const Mesh& mesh = *objects[object].source;
-  for (std::uint32_t t = 0; t < mesh.triangles.size(); ++t)
-    if (material(object, t).cut_out()) return true;
-  return false;
-}
-
 glm::vec3 World::emission(int object, std::uint32_t t, float u, float v) const {
   const Material& mat = material(object, t);
   if (!mat.is_emissive()) return glm::vec3(0.0f);
-  if (mat.cut_out() && cut_out(object, t, u, v)) return glm::vec3(0.0f);
+  // A cut-out point emits nothing (cutout.h).
+  if (mat.cut_out() && cut_out(*this, object, t, u, v)) return glm::vec3(0.0f);
   glm::vec3 e = mat.emission();
   if (mat.emissive_texture >= 0) {
     glm::vec2 uv = objects[object].uv(mat.emissive_uv, t, u, v);

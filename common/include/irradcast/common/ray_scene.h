@@ -1,11 +1,6 @@
 // Embree acceleration structure over a World: one triangle geometry per object (geomID equals
 // the object index). Single rays for the estimators, 8-wide packets for primary rays.
 //
-// Cut-outs: an object with Mask materials (scene.h) gets Embree intersection and occlusion filter
-// functions that reject hits on its cut-out points (World::cut_out), so every ray, occlusion ray
-// and packet passes through the holes. Objects without Mask materials get no filter: an opaque
-// scene traces exactly as before.
-//
 // An editable scene (scene edits, docs/EDITS.md) is Embree's two-level structure: every object
 // has its own BVH and a top-level BVH sits over them. update() after an object moves refits that
 // object's BVH and rebuilds only the top level; hidden objects are disabled, not removed.

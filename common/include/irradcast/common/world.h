@@ -81,19 +81,10 @@ struct World {
   // changed.
   std::vector<int> update(const Scene& scene);
 
-  // Albedo and emitted radiance at a surface point (textures sampled at the point's UVs). A
-  // cut-out point emits nothing, so light sampling by area sees the holes of an emitter.
+  // Albedo and emitted radiance at a surface point (textures sampled at the point's UVs).
   glm::vec3 albedo(int object, std::uint32_t t, float u, float v) const;
   glm::vec3 emission(int object, std::uint32_t t, float u, float v) const;
   const Material& material(int object, std::uint32_t t) const;
-  // Alpha at a surface point: the base colour factor's alpha x the base colour texture's alpha
-  // (at the material's base_color_uv set).
-  float alpha(int object, std::uint32_t t, float u, float v) const;
-  // The point is cut out: its material is Mask and its alpha is below the cutoff. Rays pass
-  // through it (RayScene) and a lightmap texel sampling it holds no estimate (the G-buffer).
-  bool cut_out(int object, std::uint32_t t, float u, float v) const;
-  // Some triangle of the object has a Mask material (RayScene filters its hits).
-  bool has_cut_outs(int object) const;
 };
 
 // The pose of the camera on a node (glTF cameras look down their local -Z, up +Y).

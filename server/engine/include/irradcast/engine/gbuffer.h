@@ -2,8 +2,7 @@
 // normal and albedo of the surface point it stands for. Texels whose centre lies in a triangle
 // sample that point; texels a triangle only partly covers sample the triangle's point closest to
 // the texel centre (so bilinear lookups at chart borders read real surface values); the rest
-// (gutters, unused space) are empty and filled by dilation of the lightmap values. Texels whose
-// sample point is cut out (alphaMode MASK) are CutOut: no estimate, filled like empty ones.
+// (gutters, unused space) are empty and filled by dilation of the lightmap values.
 #pragma once
 
 #include <cstdint>
@@ -18,16 +17,8 @@ namespace irradcast {
 
 // Empty: no surface. Covered / Conservative: see rasterize_gbuffer. Hidden: a surface point
 // buried inside other geometry (see mark_hidden_texels); it holds no estimate of its own and is
-// filled from its visible neighbours like an empty texel. CutOut: the texel's sample point is cut
-// out (a Mask material's alpha is below its cutoff, World::cut_out): rays pass through it, so no
-// view shows it; it holds no estimate and is filled by dilation like an empty texel.
-enum class TexelKind : std::uint8_t {
-  Empty = 0,
-  Covered = 1,
-  Conservative = 2,
-  Hidden = 3,
-  CutOut = 4
-};
+// filled from its visible neighbours like an empty texel.
+enum class TexelKind : std::uint8_t { Empty = 0, Covered = 1, Conservative = 2, Hidden = 3 };
 inline bool holds_estimate(TexelKind k) {
   return k == TexelKind::Covered || k == TexelKind::Conservative;
 }
@@ -50,9 +41,8 @@ struct TexelGBuffer {
 // on shared edges) is Covered and samples that point; a texel a triangle's footprint overlaps
 // (with positive area) but no triangle's interior contains the centre is Conservative and samples
 // the closest point, in lightmap space, of the nearest such triangle; the texel holding a
-// triangle's lightmap centroid is always valid (zero-area triangles get just that one), unless
-// its sample point is cut out (TexelKind::CutOut). Parallel over objects and bands of rows;
-// deterministic.
+// triangle's lightmap centroid is always valid (zero-area triangles get just that one).
+// Parallel over objects and bands of rows; deterministic.
 std::vector<TexelGBuffer> rasterize_gbuffer(const World& world, const Atlas& atlas);
 // Rasterizes again only the objects with which[o] != 0 (after a scene edit), in place.
 void rasterize_gbuffer(const World& world, const Atlas& atlas, std::vector<TexelGBuffer>& gbuffers,
