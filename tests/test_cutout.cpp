@@ -246,8 +246,8 @@ TEST(Cutout, PacketsAndSingleRaysPassThroughTheHole) {
 // the others are those shadow-edge pixels); each channel's image mean within 2% (0.6%). A
 // compositor that did not see through the hole would show the red plane on the ~15% of the
 // pixels where the reference shows the blue floor. The centre pixel looks through the strip at
-// the sunlit floor: blue. (The default cells mode is 3-6% bright on this open scene, with or
-// without cut-outs: a probe matter, not one of cut-outs.)
+// the sunlit floor: blue. (The default cells mode's image means measured 3-6% bright on this
+// open scene; not investigated here.)
 TEST(Cutout, ComposedViewAgreesWithThePathTracer) {
   Scene scene = sun_through_hole(-1.0f, 2.0f, glm::vec3(0.2f, 0.3f, 0.8f),
                                  glm::vec3(0.8f, 0.3f, 0.2f), 0.5f, Plane::Slab);
