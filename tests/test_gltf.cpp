@@ -19,6 +19,7 @@
 
 #include "gltf_builders.h"
 #include "irradcast/common/builtin.h"
+#include "irradcast/common/cutout.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/gltf.h"
 #include "irradcast/common/scene.h"
@@ -914,6 +915,11 @@ void expect_same_scene(const Scene& a, const Scene& b) {
       expect_near(pa.emission(), pb.emission(), 1e-4f * (1.0f + glm::length(pa.emission())),
                   "emission");
       EXPECT_EQ(pa.double_sided, pb.double_sided);
+      EXPECT_EQ(pa.alpha_mode, pb.alpha_mode);
+      EXPECT_FLOAT_EQ(pa.base_alpha, pb.base_alpha);
+      if (pa.cut_out()) {
+        EXPECT_FLOAT_EQ(pa.alpha_cutoff, pb.alpha_cutoff);
+      }
       EXPECT_EQ(pa.base_color_texture >= 0, pb.base_color_texture >= 0);
       EXPECT_EQ(pa.emissive_texture >= 0, pb.emissive_texture >= 0);
       if (pa.base_color_texture >= 0 && pb.base_color_texture >= 0) {
@@ -1070,3 +1076,109 @@ TEST_F(GltfTest, GltfImageViewPastBufferEnd) {
 }
 
 }  // namespace
+
+// ---- cut-out materials (alphaMode) ---------------------------------------------------------
+
+namespace {
+
+// triangle_model() with the given materials, its primitive using material 0.
+std::string write_material_model(const fs::path& dir, const std::string& name, json materials) {
+  TestModel m = triangle_model();
+  m.gltf["materials"] = std::move(materials);
+  m.gltf["meshes"][0]["primitives"][0]["material"] = 0;
+  return write_model(dir, name, std::move(m), name + ".bin");
+}
+
+}  // namespace
+
+TEST_F(GltfTest, AlphaModeMaskLoadsCutoffAndBaseAlpha) {
+  const std::string p = write_material_model(
+      dir_, "mask",
+      {{{"name", "leaves"},
+        {"alphaMode", "MASK"},
+        {"alphaCutoff", 0.25},
+        {"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.6, 0.7, 0.4}}}}},
+       {{"name", "wall"}, {"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 0.3}}}}},
+       {{"name", "default-cutoff"}, {"alphaMode", "MASK"}}});
+  LoadReport report;
+  Scene s = load_gltf(p, &report);
+  EXPECT_TRUE(report.warnings.empty()) << ::testing::PrintToString(report.warnings);
+  ASSERT_GE(s.materials.size(), 3u);
+  EXPECT_EQ(s.materials[0].alpha_mode, Material::AlphaMode::Mask);
+  EXPECT_FLOAT_EQ(s.materials[0].alpha_cutoff, 0.25f);
+  EXPECT_FLOAT_EQ(s.materials[0].base_alpha, 0.4f);
+  EXPECT_EQ(s.materials[1].alpha_mode, Material::AlphaMode::Opaque);  // alpha kept, not used
+  EXPECT_FLOAT_EQ(s.materials[1].base_alpha, 0.3f);
+  EXPECT_FLOAT_EQ(s.materials[2].alpha_cutoff, 0.5f);  // glTF's default
+  // Alpha 0.4 >= 0.25: the whole triangle stays; at cutoff 0.5 it would all be cut out.
+  World world = World::build(s);
+  EXPECT_FLOAT_EQ(surface_alpha(world, 0, 0, 0.2f, 0.2f), 0.4f);
+  EXPECT_FALSE(cut_out(world, 0, 0, 0.2f, 0.2f));
+  s.materials[0].alpha_cutoff = 0.5f;
+  EXPECT_TRUE(cut_out(world, 0, 0, 0.2f, 0.2f));
+}
+
+TEST_F(GltfTest, AlphaModeBlendLoadsAsMaskAtOneHalfWithOneWarning) {
+  const std::string p =
+      write_material_model(dir_, "blend",
+                           {{{"name", "glass"}, {"alphaMode", "BLEND"}, {"alphaCutoff", 0.1}},
+                            {{"name", "curtain"}, {"alphaMode", "BLEND"}},
+                            {{"name", "opaque"}}});
+  LoadReport report;
+  Scene s = load_gltf(p, &report);
+  ASSERT_EQ(report.warnings.size(), 1u) << ::testing::PrintToString(report.warnings);
+  EXPECT_TRUE(has_warning(report, "BLEND"));
+  EXPECT_TRUE(has_warning(report, "glass"));
+  EXPECT_TRUE(has_warning(report, "curtain"));
+  EXPECT_FALSE(has_warning(report, "opaque"));
+  for (int i : {0, 1}) {
+    EXPECT_EQ(s.materials[i].alpha_mode, Material::AlphaMode::Mask);
+    EXPECT_FLOAT_EQ(s.materials[i].alpha_cutoff, 0.5f);  // the file's alphaCutoff is for MASK
+  }
+  EXPECT_EQ(s.materials[2].alpha_mode, Material::AlphaMode::Opaque);
+}
+
+TEST_F(GltfTest, BadAlphaValuesAreErrors) {
+  expect_load_error(
+      write_material_model(dir_, "neg", {{{"alphaMode", "MASK"}, {"alphaCutoff", -0.5}}}),
+      "invalid alphaCutoff");
+  // 1e999 overflows to infinity in the JSON parser.
+  const std::string inf = write_material_model(dir_, "inf", {{{"alphaMode", "MASK"}}});
+  std::string text;
+  {
+    std::ifstream f(inf);
+    text.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  }
+  const std::size_t at = text.find("\"MASK\"");
+  ASSERT_NE(at, std::string::npos);
+  text.insert(at + 6, ", \"alphaCutoff\": 1e999");
+  write_text(inf, text);
+  try {
+    load_gltf(inf);
+    ADD_FAILURE() << "no error for alphaCutoff 1e999";
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
+  }
+  expect_load_error(write_material_model(dir_, "mode", {{{"alphaMode", "CLIP"}}}),
+                    "unknown alphaMode");
+}
+
+TEST_F(GltfTest, MaskMaterialsRoundTrip) {
+  Scene original = make_test_scene();
+  Material& plain = original.materials[0];  // textured: the texture's alpha counts
+  plain.alpha_mode = Material::AlphaMode::Mask;
+  plain.alpha_cutoff = 0.3f;
+  plain.base_alpha = 0.75f;
+  original.materials[2].base_alpha = 0.5f;  // opaque: alpha carried, not used
+  for (const char* name : {"mask.gltf", "mask.glb"}) {
+    SCOPED_TRACE(name);
+    save_gltf(original, path(name));
+    LoadReport report;
+    Scene loaded = load_gltf(path(name), &report);
+    EXPECT_TRUE(report.warnings.empty()) << ::testing::PrintToString(report.warnings);
+    expect_same_scene(original, loaded);
+  }
+  json j = json::parse(read_bytes(path("mask.gltf")));
+  EXPECT_EQ(j["materials"][0]["alphaMode"], "MASK");
+  EXPECT_FALSE(j["materials"][1].contains("alphaMode"));
+}

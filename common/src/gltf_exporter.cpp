@@ -154,12 +154,14 @@ void Writer::write_materials(json& root) {
   };
   for (std::size_t i = 0; i < s_.materials.size(); ++i) {
     const Material& m = s_.materials[i];
-    if (!finite(m.base_color) || !finite(m.emissive) || !std::isfinite(m.emissive_strength))
+    if (!finite(m.base_color) || !finite(m.emissive) || !std::isfinite(m.emissive_strength) ||
+        !std::isfinite(m.base_alpha) || !std::isfinite(m.alpha_cutoff))
       fail("material " + std::to_string(i) + " has non-finite values");
     json mat = json::object();
     if (!m.name.empty()) mat["name"] = m.name;
     glm::vec3 base = glm::clamp(m.base_color, glm::vec3(0.0f), glm::vec3(1.0f));
-    json pbr = {{"baseColorFactor", {base.x, base.y, base.z, 1.0f}},
+    const float alpha = std::clamp(m.base_alpha, 0.0f, 1.0f);
+    json pbr = {{"baseColorFactor", {base.x, base.y, base.z, alpha}},
                 {"metallicFactor", 0.0f},
                 {"roughnessFactor", 1.0f}};
     if (json t = tex(m.base_color_texture, m.base_color_uv); !t.is_null())
@@ -181,6 +183,10 @@ void Writer::write_materials(json& root) {
       strength_used = true;
     }
     if (m.double_sided) mat["doubleSided"] = true;
+    if (m.cut_out()) {
+      mat["alphaMode"] = "MASK";
+      mat["alphaCutoff"] = std::max(m.alpha_cutoff, 0.0f);
+    }
     materials.push_back(std::move(mat));
   }
   if (!materials.empty()) root["materials"] = std::move(materials);

@@ -1,6 +1,9 @@
 // glTF import: materials and textures. Base colour and emission (factors, textures on
-// TEXCOORD_0 or TEXCOORD_1, KHR_materials_emissive_strength); each used image is converted once
-// to an RGBA8 Scene texture (8- or 16-bit, 1 to 4 channels), an unusable one is warned about.
+// TEXCOORD_0 or TEXCOORD_1, KHR_materials_emissive_strength), alphaMode (MASK with its
+// alphaCutoff; BLEND loads as MASK at 0.5 with one warning per file); each used image is
+// converted once to an RGBA8 Scene texture (8- or 16-bit, 1 to 4 channels), an unusable one is
+// warned about.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -43,6 +46,30 @@ Texture to_rgba8(const tinygltf::Image& img, std::size_t w, std::size_t h, std::
     }
   }
   return tex;
+}
+
+// The material's alphaMode, alphaCutoff and base colour alpha into `mat` (`what` names it in
+// errors). BLEND becomes Mask at 0.5; returns true for it, so the caller can warn once per file.
+bool convert_alpha(Loader& loader, const tinygltf::Material& gm, const std::string& what,
+                   Material& mat) {
+  const auto& factor = gm.pbrMetallicRoughness.baseColorFactor;
+  if (factor.size() >= 4) {
+    if (!std::isfinite(factor[3])) loader.fail(what + " has an invalid baseColorFactor alpha");
+    mat.base_alpha = std::clamp(static_cast<float>(factor[3]), 0.0f, 1.0f);  // glTF: [0, 1]
+  }
+  if (gm.alphaMode.empty() || gm.alphaMode == "OPAQUE") return false;
+  mat.alpha_mode = Material::AlphaMode::Mask;
+  if (gm.alphaMode == "BLEND") {
+    mat.alpha_cutoff = 0.5f;
+    return true;
+  }
+  if (gm.alphaMode != "MASK")
+    loader.fail(what + " has an unknown alphaMode" + quoted(gm.alphaMode) +
+                " (OPAQUE, MASK or BLEND)");
+  if (!std::isfinite(gm.alphaCutoff) || gm.alphaCutoff < 0.0 || gm.alphaCutoff > 1e30)
+    loader.fail(what + " has an invalid alphaCutoff (a finite number >= 0)");
+  mat.alpha_cutoff = static_cast<float>(gm.alphaCutoff);
+  return false;
 }
 
 }  // namespace
@@ -101,6 +128,7 @@ void Loader::convert_materials(Scene& scene) {
   auto finite3 = [](const std::vector<double>& v) {
     return v.size() >= 3 && std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
   };
+  std::vector<std::string> blended;  // BLEND materials, for one warning
   for (std::size_t i = 0; i < m_.materials.size(); ++i) {
     const tinygltf::Material& gm = m_.materials[i];
     const std::string what = "material " + std::to_string(i) + quoted(gm.name);
@@ -130,7 +158,15 @@ void Loader::convert_materials(Scene& scene) {
       mat.emissive_strength = static_cast<float>(s.GetNumberAsDouble());
     }
     mat.double_sided = gm.doubleSided;
+    if (convert_alpha(*this, gm, what, mat)) blended.push_back(std::to_string(i) + quoted(gm.name));
     scene.materials.push_back(std::move(mat));
+  }
+  if (!blended.empty()) {
+    std::string list;
+    for (std::size_t k = 0; k < blended.size() && k < 8; ++k) list += (k ? ", " : "") + blended[k];
+    if (blended.size() > 8) list += " and " + std::to_string(blended.size() - 8) + " more";
+    warn("alphaMode BLEND is not supported; treated as MASK with alphaCutoff 0.5 (material" +
+         std::string(blended.size() > 1 ? "s " : " ") + list + ")");
   }
 }
 

@@ -1,3 +1,8 @@
+// The Embree scene (ray_scene.h). Cut-outs: an object with Mask materials (cutout.h) gets Embree
+// intersection and occlusion filter functions that reject hits on its cut-out points, so every
+// ray, occlusion ray and packet passes through the holes, in the single-level and the two-level
+// (editable) scene alike. Objects without Mask materials get no filter: an opaque scene traces
+// exactly as before.
 #include "irradcast/common/ray_scene.h"
 
 #include <embree3/rtcore.h>
@@ -5,6 +10,7 @@
 #include <cstring>
 #include <string>
 
+#include "irradcast/common/cutout.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 
@@ -54,11 +60,50 @@ void fill_ray(RTCRay& r, const Ray& ray) {
   r.flags = 0;
 }
 
+// What the filter of an object with Mask materials needs to test a hit.
+struct CutOutFilter {
+  const World* world = nullptr;
+  int object = -1;
+};
+
+// Intersection and occlusion filter of such an object: rejects every candidate hit whose point
+// is cut out, so Embree goes on to the next surface along the ray. Called for single rays and
+// packets alike (N lanes, valid[i] == -1 for the active ones).
+void cut_out_filter(const RTCFilterFunctionNArguments* args) {
+  const auto* f = static_cast<const CutOutFilter*>(args->geometryUserPtr);
+  const unsigned n = args->N;
+  for (unsigned i = 0; i < n; ++i) {
+    if (args->valid[i] != -1) continue;
+    if (cut_out(*f->world, f->object, RTCHitN_primID(args->hit, n, i), RTCHitN_u(args->hit, n, i),
+                RTCHitN_v(args->hit, n, i)))
+      args->valid[i] = 0;
+  }
+}
+
+// Makes Embree skip the cut-out points of object `object` (its filter's data: `f`, which must
+// outlive the geometry).
+void attach_cut_out_filter(RTCGeometry geom, const World& world, int object, CutOutFilter& f) {
+  if (!rtcGetDeviceProperty(shared_device(), RTC_DEVICE_PROPERTY_FILTER_FUNCTION_SUPPORTED)) {
+    rtcReleaseGeometry(geom);
+    throw Error(
+        "the scene has cut-out (alphaMode MASK) materials, but this Embree library was "
+        "built without filter functions");
+  }
+  f.world = &world;
+  f.object = object;
+  rtcSetGeometryUserData(geom, &f);
+  rtcSetGeometryIntersectFilterFunction(geom, cut_out_filter);
+  rtcSetGeometryOccludedFilterFunction(geom, cut_out_filter);
+}
+
 }  // namespace
 
 struct RayScene::Impl {
   RTCScene scene = nullptr;
   std::vector<RTCGeometry> geometries;  // per object, retained
+  // Per object with Mask materials, the user data of its filter (sized once: Embree keeps
+  // pointers into it).
+  std::vector<CutOutFilter> filters;
   bool editable = false;
 };
 
@@ -77,6 +122,7 @@ RayScene::RayScene(const World& world, bool editable)
     rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);
     rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
   }
+  impl_->filters.resize(world.objects.size());
   for (const WorldObject& o : world.objects) {
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     if (editable) rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_HIGH);
@@ -91,6 +137,9 @@ RayScene::RayScene(const World& world, bool editable)
     }
     std::memcpy(vb, o.positions.data(), o.positions.size() * sizeof(glm::vec3));
     std::memcpy(ib, tris.data(), tris.size() * sizeof(glm::uvec3));
+    if (has_cut_outs(world, o.object))
+      attach_cut_out_filter(geom, world, o.object,
+                            impl_->filters[static_cast<std::size_t>(o.object)]);
     if (!o.visible) rtcDisableGeometry(geom);
     rtcCommitGeometry(geom);
     rtcAttachGeometryByID(impl_->scene, geom, static_cast<unsigned>(o.object));

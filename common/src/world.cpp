@@ -1,5 +1,7 @@
 #include "irradcast/common/world.h"
 
+#include "irradcast/common/cutout.h"
+
 #include <cmath>
 
 #include <glm/gtc/matrix_inverse.hpp>
@@ -153,6 +155,8 @@ glm::vec3 World::albedo(int object, std::uint32_t t, float u, float v) const {
 glm::vec3 World::emission(int object, std::uint32_t t, float u, float v) const {
   const Material& mat = material(object, t);
   if (!mat.is_emissive()) return glm::vec3(0.0f);
+  // A cut-out point emits nothing (cutout.h).
+  if (mat.cut_out() && cut_out(*this, object, t, u, v)) return glm::vec3(0.0f);
   glm::vec3 e = mat.emission();
   if (mat.emissive_texture >= 0) {
     glm::vec2 uv = objects[object].uv(mat.emissive_uv, t, u, v);

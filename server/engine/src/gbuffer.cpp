@@ -1,5 +1,6 @@
 // Texel G-buffer: rasterises every object's triangles in lightmap space (centre sampling plus
-// conservative coverage), and dilation of lightmap values into empty texels.
+// conservative coverage; texels whose sample point is cut out hold no estimate), and dilation of
+// lightmap values into empty texels.
 #include "irradcast/engine/gbuffer.h"
 
 #include <algorithm>
@@ -10,6 +11,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "irradcast/common/cutout.h"
 #include "irradcast/common/error.h"
 
 namespace irradcast {
@@ -182,10 +184,14 @@ void keep_centroids(const ObjectLightmap& lm, std::size_t n, TexelGBuffer& g, Sa
   }
 }
 
-// Surface attributes of every valid texel, its sample pulled `inset` toward the centroid.
+// Surface attributes of every valid texel, its sample pulled `inset` toward the centroid. A
+// texel whose sample is cut out (cutout.h) becomes Hidden: rays pass through its point, so no
+// view shows it; like a texel inside geometry it holds no estimate, no pass traces it, and
+// dilation fills it from its neighbours without ever reading it as a value.
 void fill_attributes(const World& world, std::size_t oi, float inset, const Samples& s,
                      TexelGBuffer& g) {
   const WorldObject& wo = world.objects[oi];
+  const bool cut_outs = has_cut_outs(world, static_cast<int>(oi));
   tbb::parallel_for(0, g.height, [&](int y) {
     for (int x = 0; x < g.width; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * g.width + x;
@@ -205,6 +211,7 @@ void fill_attributes(const World& world, std::size_t oi, float inset, const Samp
       g.position[i] = wo.position(t, u, v);
       g.normal[i] = wo.shading_normal(t, u, v);
       g.albedo[i] = world.albedo(static_cast<int>(oi), t, u, v);
+      if (cut_outs && cut_out(world, static_cast<int>(oi), t, u, v)) g.kind[i] = TexelKind::Hidden;
     }
   });
 }

@@ -28,17 +28,21 @@ struct LoadReport {
 // Mapping: Scene::nodes and Scene::meshes are index for index the glTF nodes and meshes (a mesh
 // that ends up with no triangles is kept, but nodes drop their reference to it); the roots are
 // the default scene's nodes. Scene::materials are the glTF materials in order, plus one default
-// material (base colour 1) appended if a primitive has none. Scene::textures holds each used glTF
-// image once, as RGBA8. Lights and cameras keep glTF order minus the skipped ones.
+// material (base colour 1) appended if a primitive has none; alphaMode MASK keeps its
+// alphaCutoff (finite and >= 0, else an Error), BLEND loads as MASK at 0.5 with one warning
+// naming the materials, and the base colour factor's alpha is kept (clamped to [0, 1]).
+// Scene::textures holds each used glTF image once, as RGBA8. Lights and cameras keep glTF order
+// minus the skipped ones.
 Scene load_gltf(const std::string& path, LoadReport* report = nullptr,
                 const std::string& root = "");
 
 // Writes the scene as valid glTF 2.0: .glb (binary) or .gltf (JSON with the buffer embedded as a
 // data URI), chosen by the extension. Node matrices, one primitive per material, PNG textures,
 // KHR_lights_punctual, KHR_materials_emissive_strength (emission brighter than glTF's [0, 1]
-// emissiveFactor moves into the strength), perspective cameras. Meshes without triangles are not
-// written. Throws irradcast::Error on another extension, invalid scene data (non-finite values,
-// triangle index out of range) or if the file cannot be written.
+// emissiveFactor moves into the strength), alphaMode MASK with its alphaCutoff, perspective
+// cameras. Meshes without triangles are not written. Throws irradcast::Error on another extension,
+// invalid scene data (non-finite values, triangle index out of range) or if the file cannot be
+// written.
 void save_gltf(const Scene& scene, const std::string& path);
 
 }  // namespace irradcast

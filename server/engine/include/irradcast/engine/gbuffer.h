@@ -16,8 +16,9 @@
 namespace irradcast {
 
 // Empty: no surface. Covered / Conservative: see rasterize_gbuffer. Hidden: a surface point
-// buried inside other geometry (see mark_hidden_texels); it holds no estimate of its own and is
-// filled from its visible neighbours like an empty texel.
+// buried inside other geometry (see mark_hidden_texels) or cut out (a Mask material's alpha is
+// below its cutoff, common/cutout.h: rays pass through it, no view shows it); it holds no
+// estimate of its own and is filled from its visible neighbours like an empty texel.
 enum class TexelKind : std::uint8_t { Empty = 0, Covered = 1, Conservative = 2, Hidden = 3 };
 inline bool holds_estimate(TexelKind k) {
   return k == TexelKind::Covered || k == TexelKind::Conservative;
@@ -41,8 +42,9 @@ struct TexelGBuffer {
 // on shared edges) is Covered and samples that point; a texel a triangle's footprint overlaps
 // (with positive area) but no triangle's interior contains the centre is Conservative and samples
 // the closest point, in lightmap space, of the nearest such triangle; the texel holding a
-// triangle's lightmap centroid is always valid (zero-area triangles get just that one).
-// Parallel over objects and bands of rows; deterministic.
+// triangle's lightmap centroid is always valid (zero-area triangles get just that one). A texel
+// whose sample point is cut out (cutout.h) is Hidden. Parallel over objects and bands of rows;
+// deterministic.
 std::vector<TexelGBuffer> rasterize_gbuffer(const World& world, const Atlas& atlas);
 // Rasterizes again only the objects with which[o] != 0 (after a scene edit), in place.
 void rasterize_gbuffer(const World& world, const Atlas& atlas, std::vector<TexelGBuffer>& gbuffers,
