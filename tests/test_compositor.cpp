@@ -98,3 +98,35 @@ TEST(Compositor, RejectsMismatchedLightmaps) {
   std::vector<Lightmap> none;
   EXPECT_THROW(compose(q.world, *q.rays, q.atlas, none, q.camera, 8, 8), Error);
 }
+
+TEST(Compositor, MissesShowTheSkyInTheirDirection) {
+  QuadScene q(glm::vec3(0.5f), glm::vec3(0.0f));
+  // A map with a different value in every texel, so a wrong direction shows.
+  ImageRGB map(16, 8);
+  for (int y = 0; y < map.height; ++y)
+    for (int x = 0; x < map.width; ++x) map.at(x, y) = glm::vec3(0.1f + x, 0.2f + y, 0.5f + x * y);
+  q.scene.sky.map = map;
+  q.scene.sky.strength = 1.5f;
+  const glm::vec3 e(1.0f);
+  std::vector<Lightmap> maps = {Lightmap(8, 8, e)};
+  const ImageRGB img = compose(q.world, *q.rays, q.atlas, maps, q.camera, 64, 48);
+  int misses = 0;
+  for (int y = 0; y < img.height; ++y)
+    for (int x = 0; x < img.width; ++x) {
+      Ray r = camera_ray(q.camera, img.width, img.height, x + 0.5f, y + 0.5f);
+      if (q.rays->intersect(r).valid()) {
+        for (int c = 0; c < 3; ++c) EXPECT_FLOAT_EQ(img.at(x, y)[c], 0.5f / 3.14159265f);
+        continue;
+      }
+      ++misses;
+      const glm::vec3 want = q.scene.sky.radiance(r.direction);
+      ASSERT_GT(want.x, 0.0f);
+      EXPECT_EQ(img.at(x, y), want) << x << ", " << y;
+    }
+  EXPECT_GT(misses, 100);
+  // A constant sky: its colour times the strength on every miss.
+  q.scene.sky.map = ImageRGB{};
+  q.scene.sky.color = glm::vec3(0.3f, 0.6f, 0.9f);
+  const ImageRGB flat = compose(q.world, *q.rays, q.atlas, maps, q.camera, 64, 48);
+  EXPECT_EQ(flat.at(0, 0), glm::vec3(0.3f, 0.6f, 0.9f) * 1.5f);
+}

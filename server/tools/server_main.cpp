@@ -15,14 +15,14 @@
 
 #include "engine_options.h"
 #include "irradcast/common/builtin.h"
+#include "irradcast/service/engine_host.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
-#include "irradcast/common/progress.h"
-#include "irradcast/engine/vulkan_device.h"
-#include "irradcast/service/engine_host.h"
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/metrics_text.h"
 #include "irradcast/service/net_server.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/engine/vulkan_device.h"
 
 namespace {
 
