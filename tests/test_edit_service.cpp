@@ -139,6 +139,10 @@ TEST(EditService, SkyColourEditRelightsEveryTexelToPiTimesTheNewSky) {
   test::EngineSetup setup(std::move(s), 16.0f);
   EngineParams params;
   params.edit_blend = 0;  // the new estimate at once (no blend from the old value)
+  // Unbiased mode: bounce rays that leave the scene bring nothing (the sky is direct light).
+  // With probes, a plane alone reads its own light back through probes below it (+65 % here;
+  // issue 18 item 3 is about such leaks), which is not what this test is about.
+  params.tracing_range = std::numeric_limits<float>::infinity();
   auto engine = setup.engine(params);
   for (int i = 0; i < 2; ++i) engine->update();
   EXPECT_NEAR(mean_e(engine->lightmaps(), setup.gbuffers[0]), kPi * 0.2, 1e-3 * kPi * 0.2);
@@ -431,6 +435,7 @@ TEST(EditService, ASkyFileEditReachesViewersAsBackgroundAndLight) {
   std::ofstream(dir.parent_path() / "outside.exr") << "x";
 
   EngineHostOptions ho = quick_host();
+  ho.engine.tracing_range = std::numeric_limits<float>::infinity();  // as in the test above
   ho.sky_dir = dir.string();
   EngineHost host(open_plane(), "plane", ho);
   Server server(host, edit_server(kToken));
