@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include "irradcast/client/client_passes.h"
 #include "irradcast/common/camera.h"
 #include "irradcast/common/compositor.h"
 #include "irradcast/common/error.h"
@@ -97,4 +98,69 @@ TEST(Compositor, RejectsMismatchedLightmaps) {
   QuadScene q(glm::vec3(1.0f), glm::vec3(0.0f));
   std::vector<Lightmap> none;
   EXPECT_THROW(compose(q.world, *q.rays, q.atlas, none, q.camera, 8, 8), Error);
+}
+
+TEST(Compositor, MissesShowTheSkyInTheirDirection) {
+  QuadScene q(glm::vec3(0.5f), glm::vec3(0.0f));
+  // A map with a different value in every texel, so a wrong direction shows.
+  ImageRGB map(16, 8);
+  for (int y = 0; y < map.height; ++y)
+    for (int x = 0; x < map.width; ++x) map.at(x, y) = glm::vec3(0.1f + x, 0.2f + y, 0.5f + x * y);
+  q.scene.sky.map = map;
+  q.scene.sky.strength = 1.5f;
+  const glm::vec3 e(1.0f);
+  std::vector<Lightmap> maps = {Lightmap(8, 8, e)};
+  const ImageRGB img = compose(q.world, *q.rays, q.atlas, maps, q.camera, 64, 48);
+  int misses = 0;
+  for (int y = 0; y < img.height; ++y)
+    for (int x = 0; x < img.width; ++x) {
+      Ray r = camera_ray(q.camera, img.width, img.height, x + 0.5f, y + 0.5f);
+      if (q.rays->intersect(r).valid()) {
+        for (int c = 0; c < 3; ++c) EXPECT_FLOAT_EQ(img.at(x, y)[c], 0.5f / 3.14159265f);
+        continue;
+      }
+      ++misses;
+      const glm::vec3 want = q.scene.sky.radiance(r.direction);
+      ASSERT_GT(want.x, 0.0f);
+      EXPECT_EQ(img.at(x, y), want) << x << ", " << y;
+    }
+  EXPECT_GT(misses, 100);
+  // A constant sky: its colour times the strength on every miss.
+  q.scene.sky.map = ImageRGB{};
+  q.scene.sky.color = glm::vec3(0.3f, 0.6f, 0.9f);
+  const ImageRGB flat = compose(q.world, *q.rays, q.atlas, maps, q.camera, 64, 48);
+  EXPECT_EQ(flat.at(0, 0), glm::vec3(0.3f, 0.6f, 0.9f) * 1.5f);
+}
+
+TEST(Compositor, ClientPassesShowTheSameSkyUnoccluded) {
+  // SSAO and reprojection skip misses: the sky pixels of the viewer's passes are compose()'s,
+  // exactly, frame after frame (never darkened, never blended with an old frame).
+  QuadScene q(glm::vec3(0.8f), glm::vec3(0.0f));
+  ImageRGB map(16, 8);
+  for (int y = 0; y < map.height; ++y)
+    for (int x = 0; x < map.width; ++x) map.at(x, y) = glm::vec3(1.0f + x, 2.0f + y, 0.25f);
+  q.scene.sky.map = map;
+  std::vector<Lightmap> maps = {Lightmap(8, 8, glm::vec3(3.0f))};
+  const ImageRGB plain = compose(q.world, *q.rays, q.atlas, maps, q.camera, 48, 32);
+  ClientPassOptions o;
+  o.ssao = true;
+  o.reproject = true;
+  ClientPasses passes(o);
+  for (int frame = 0; frame < 3; ++frame) {
+    CameraPose cam = q.camera;
+    cam.eye.x += 0.01f * static_cast<float>(frame);
+    const ImageRGB want = compose(q.world, *q.rays, q.atlas, maps, cam, 48, 32);
+    const ImageRGB got = passes.compose(q.world, *q.rays, q.atlas, maps, cam, 48, 32);
+    int sky = 0;
+    for (int y = 0; y < got.height; ++y)
+      for (int x = 0; x < got.width; ++x)
+        if (!q.rays->intersect(camera_ray(cam, 48, 32, x + 0.5f, y + 0.5f)).valid()) {
+          ++sky;
+          ASSERT_EQ(got.at(x, y), want.at(x, y))
+              << "frame " << frame << " pixel " << x << ", " << y;
+          ASSERT_GT(got.at(x, y).x, 0.0f);
+        }
+    EXPECT_GT(sky, 100);
+  }
+  EXPECT_NE(plain.at(0, 0), glm::vec3(0.0f));
 }

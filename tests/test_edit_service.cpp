@@ -3,15 +3,18 @@
 // connects after the edit, and the irradcast-edit tool.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <asio.hpp>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <optional>
 #include <string>
 
 #include "cli.h"
+#include "engine_setup.h"
 #include "irradcast/client/camera_message.h"
 #include "irradcast/client/view_client.h"
 #include "irradcast/common/builtin.h"
@@ -22,6 +25,7 @@
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/frame.h"
 #include "irradcast/wire/scene_package.h"
+#include "scene_builders.h"
 #include "service_fixture.h"
 
 using namespace irradcast;
@@ -88,7 +92,76 @@ int node_index(const Scene& s, const std::string& name) {
   return -1;
 }
 
+// An open plane facing up (+Y), 2 x 2 m, albedo 0.5, with no lights: only a sky lights it.
+Scene open_plane() {
+  Scene s;
+  s.name = "plane";
+  const std::uint32_t m = test::add_material(s, glm::vec3(0.5f));
+  test::add_quad_object(s, "plane", {-1, 0, 1}, {1, 0, 1}, {1, 0, -1}, {-1, 0, -1}, m);
+  return s;
+}
+
+// Mean irradiance over the valid texels of object 0 (luminance).
+double mean_e(const std::vector<Lightmap>& maps, const TexelGBuffer& g) {
+  double sum = 0.0;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < maps[0].texels.size(); ++i)
+    if (g.valid(i)) {
+      sum += (maps[0].texels[i].x + maps[0].texels[i].y + maps[0].texels[i].z) / 3.0;
+      ++n;
+    }
+  return n ? sum / static_cast<double>(n) : 0.0;
+}
+
+// Whether the engine's direct pass adds the sky's light yet (LightSampler::sky_irradiance in
+// EmbreeBackend::direct, issue 18: the sky-cpu branch). The lighting checks below need it.
+// TODO(issue 18): remove this guard and its GTEST_SKIPs once the sky-cpu branch is merged.
+bool direct_pass_has_sky() {
+  Scene s = open_plane();
+  s.sky.color = glm::vec3(1.0f);
+  test::EngineSetup setup(std::move(s), 16.0f);
+  auto engine = setup.engine(EngineParams{});
+  engine->update();
+  return mean_e(engine->lightmaps(), setup.gbuffers[0]) > 0.0;
+}
+
 }  // namespace
+
+TEST(EditService, SkyColourEditRelightsEveryTexelToPiTimesTheNewSky) {
+  // Open plane under a constant sky of radiance L: E = pi L at every texel (each cosine ray
+  // escapes, so every sample is exactly pi L; nothing bounces back). After an edit to L' every
+  // texel restarts and converges to pi L', with no trace of L.
+  if (!direct_pass_has_sky()) {
+    GTEST_SKIP() << "the direct pass does not add the sky yet (sky-cpu branch of issue 18)";
+  }
+  Scene s = open_plane();
+  s.sky.color = glm::vec3(0.2f);
+  test::EngineSetup setup(std::move(s), 16.0f);
+  EngineParams params;
+  params.edit_blend = 0;  // the new estimate at once (no blend from the old value)
+  // Unbiased mode: bounce rays that leave the scene bring nothing (the sky is direct light).
+  // With probes, a plane alone reads its own light back through probes below it (+65 % here;
+  // issue 18 item 3 is about such leaks), which is not what this test is about.
+  params.tracing_range = std::numeric_limits<float>::infinity();
+  auto engine = setup.engine(params);
+  for (int i = 0; i < 2; ++i) engine->update();
+  EXPECT_NEAR(mean_e(engine->lightmaps(), setup.gbuffers[0]), kPi * 0.2, 1e-3 * kPi * 0.2);
+  const SceneEdit edit = parse_edit_json(R"({"op": "sky", "color": [1.5, 1.5, 1.5]})");
+  EditReport report;
+  const SceneChange change = setup.prepared.apply(std::span(&edit, 1), &report);
+  EXPECT_TRUE(report.sky);
+  EXPECT_TRUE(change.sky);
+  engine->scene_changed(change, {});
+  EXPECT_EQ(engine->stale_texels(), engine->texel_count()) << "every texel restarts";
+  for (int i = 0; i < 8 && engine->stale_texels() > 0; ++i) engine->update();
+  engine->update();
+  const std::vector<Lightmap> maps = engine->lightmaps();
+  for (std::size_t i = 0; i < maps[0].texels.size(); ++i) {
+    if (!setup.gbuffers[0].valid(i)) continue;
+    for (int c = 0; c < 3; ++c)
+      ASSERT_NEAR(maps[0].texels[i][c], kPi * 1.5, 1e-3 * kPi * 1.5) << "texel " << i;
+  }
+}
 
 TEST(EditService, EditsNeedTheControlToken) {
   EngineHost host(make_cornell_box(), "cornell", quick_host());
@@ -346,4 +419,99 @@ TEST(EditService, IrradcastEditReportsRefusalsAndAppliedEdits) {
   EXPECT_NE(r.output.find("give exactly one edit"), std::string::npos) << r.output;
   server.stop();
   host.stop();
+}
+
+TEST(EditService, ASkyFileEditReachesViewersAsBackgroundAndLight) {
+  // The server's sky folder holds an 8 x 4 map: upper half 0.5, lower half 0.25, one texel of
+  // the upper half brighter (values exact in RGB9E5, so the viewer's copy is the same).
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("irradcast-sky-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  ImageRGB map(8, 4, glm::vec3(0.5f));
+  for (int y = 2; y < 4; ++y)
+    for (int x = 0; x < 8; ++x) map.at(x, y) = glm::vec3(0.25f);
+  map.at(3, 1) = glm::vec3(2.0f, 1.0f, 0.5f);
+  write_exr((dir / "dusk.exr").string(), map);
+  std::ofstream(dir.parent_path() / "outside.exr") << "x";
+
+  EngineHostOptions ho = quick_host();
+  ho.engine.tracing_range = std::numeric_limits<float>::infinity();  // as in the test above
+  ho.sky_dir = dir.string();
+  EngineHost host(open_plane(), "plane", ho);
+  Server server(host, edit_server(kToken));
+  server.start();
+  host.start();
+  ViewClient viewer(test::client_of(server, "viewer"));
+  viewer.connect();
+  CameraPose cam;  // at the plane's edge looking along it: half plane, half sky
+  cam.eye = glm::vec3(0.0f, 0.3f, 3.0f);
+  cam.forward = glm::normalize(glm::vec3(0.0f, -0.05f, -1.0f));
+  cam.yfov = glm::radians(70.0f);
+  const ImageRGB dark = viewer.compose(cam, 32, 24);
+  EXPECT_EQ(dark.at(16, 0), glm::vec3(0.0f)) << "no sky yet: misses are black";
+
+  Raw editor(server.port());
+  // Names outside the folder, absolute paths and missing files are refused by name.
+  for (const char* bad : {"../outside.exr", "/etc/passwd", "missing.exr"}) {
+    const auto [code, message] =
+        refused(editor, std::string(R"({"op": "sky", "file": ")") + bad + "\"}", kToken);
+    EXPECT_EQ(code, wire::BAD_REQUEST) << message;
+    EXPECT_NE(message.find("refused"), std::string::npos) << message;
+  }
+  editor.edit(R"({"op": "sky", "file": "dusk.exr", "strength": 2})", kToken);
+  auto ack = editor.reply();
+  ASSERT_TRUE(ack && ack->has_scene_edit())
+      << (ack && ack->has_error() ? ack->error().message() : std::string("none"));
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  while (viewer.scene_revision() < 1 && std::chrono::steady_clock::now() < deadline)
+    viewer.poll(20ms);
+  ASSERT_EQ(viewer.scene_revision(), 1u);
+  EXPECT_EQ(viewer.scene().sky.source, "dusk.exr");
+  EXPECT_EQ(viewer.scene().sky.map.pixels, map.pixels);
+  EXPECT_EQ(viewer.scene().sky.strength, 2.0f);
+  EXPECT_EQ(host.scene().sky.map.pixels, map.pixels);
+  // The background: every pixel whose ray misses the plane shows the sky in its direction.
+  const ImageRGB lit = viewer.compose(cam, 32, 24);
+  const RayScene rays(viewer.world());
+  int sky_pixels = 0;
+  for (int y = 0; y < lit.height; ++y)
+    for (int x = 0; x < lit.width; ++x) {
+      const Ray r = camera_ray(cam, lit.width, lit.height, x + 0.5f, y + 0.5f);
+      if (rays.intersect(r).valid()) continue;
+      ++sky_pixels;
+      EXPECT_EQ(lit.at(x, y), host.scene().sky.radiance(r.direction)) << x << ", " << y;
+    }
+  EXPECT_GT(sky_pixels, 100);
+  // The light: the plane sees the upper half, mostly 0.5 x 2 = 1 (the bright texel adds a
+  // little): E within [pi x 1, pi x 1.3]. Needs the sky in the direct pass.
+  if (direct_pass_has_sky()) {
+    const auto until = std::chrono::steady_clock::now() + 20s;
+    double e = 0.0;
+    while (std::chrono::steady_clock::now() < until) {
+      viewer.poll(50ms);
+      const Lightmap& m = viewer.lightmaps().at(0);  // its middle texel: inside the chart
+      const glm::vec3 t = m.texels[static_cast<std::size_t>(m.height / 2 * m.width + m.width / 2)];
+      e = (t.x + t.y + t.z) / 3.0;
+      if (e > 0.9 * kPi) break;
+    }
+    EXPECT_GE(e, 0.97 * kPi);
+    EXPECT_LE(e, 1.3 * kPi);
+  }
+  viewer.close();
+  server.stop();
+  host.stop();
+  std::filesystem::remove_all(dir);
+  std::filesystem::remove(dir.parent_path() / "outside.exr");
+}
+
+TEST(EditService, FileSkyEditsAreRefusedWithoutASkyFolder) {
+  EngineHost host(open_plane(), "plane", quick_host());
+  try {
+    host.submit_edit(parse_edit_json(R"({"op": "sky", "file": "dusk.exr"})"));
+    FAIL() << "a file sky edit was accepted without --sky-dir";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("--sky-dir"), std::string::npos) << e.what();
+  }
+  // A colour needs no file: accepted.
+  EXPECT_EQ(host.submit_edit(parse_edit_json(R"({"op": "sky", "color": [1, 1, 1]})")), 1u);
 }

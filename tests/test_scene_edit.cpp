@@ -9,11 +9,11 @@
 
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/builtin.h"
-#include "irradcast/wire/edit_message.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/scene_edit.h"
-#include "irradcast/wire/scene_package.h"
 #include "irradcast/common/world.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast/wire/scene_package.h"
 
 using namespace irradcast;
 
@@ -325,4 +325,114 @@ TEST(SceneEdit, ScenePackageKeepsVisibilityAndRevision) {
   // The revision is part of the package: another revision, another hash.
   EXPECT_NE(wire::make_scene_package(s, atlas, 4).hash, pkg.hash);
   EXPECT_EQ(wire::open_scene_package(wire::make_scene_package(s, atlas).bytes, "").revision, 0u);
+}
+
+TEST(SceneEdit, SkyOpsParseRoundTripAndApply) {
+  const SceneEdit e = parse_edit_json(R"({"ops": [
+    {"op": "sky", "color": [0.5, 0.75, 1.0]},
+    {"op": "sky", "strength": 2.5},
+    {"op": "sky", "file": "dusk.exr", "strength": 0.5}]})");
+  ASSERT_EQ(e.ops.size(), 3u);
+  EXPECT_EQ(e.ops[0].kind, EditOp::Kind::Sky);
+  EXPECT_EQ(e.ops[0].sky_parts, unsigned{EditOp::kSkyColor});
+  EXPECT_EQ(e.ops[0].vector, glm::vec3(0.5f, 0.75f, 1.0f));
+  EXPECT_EQ(e.ops[1].sky_parts, unsigned{EditOp::kSkyStrength});
+  EXPECT_EQ(e.ops[1].value, 2.5f);
+  EXPECT_EQ(e.ops[2].sky_parts, unsigned{EditOp::kSkyFile | EditOp::kSkyStrength});
+  EXPECT_EQ(e.ops[2].target, "dusk.exr");
+  const SceneEdit back = parse_edit_json(edit_to_json(e));
+  ASSERT_EQ(back.ops.size(), 3u);
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_EQ(back.ops[i].sky_parts, e.ops[i].sky_parts);
+    EXPECT_EQ(back.ops[i].target, e.ops[i].target);
+  }
+  EXPECT_EQ(back.ops[0].vector, e.ops[0].vector);
+  EXPECT_EQ(back.ops[2].value, 0.5f);
+
+  // Colour and strength apply; a file needs its map (read by a server), so it is refused here.
+  Scene s = cornell_with_lamp();
+  SceneEdit colour;
+  colour.ops = {e.ops[0], e.ops[1]};
+  const EditEffect fx = apply_edit(s, colour);
+  EXPECT_TRUE(fx.sky);
+  EXPECT_FALSE(fx.empty());
+  EXPECT_EQ(s.sky.color, glm::vec3(0.5f, 0.75f, 1.0f));
+  EXPECT_EQ(s.sky.strength, 2.5f);
+  SceneEdit file;
+  file.ops = {e.ops[2]};
+  EXPECT_NE(validation_error(s, file).find("was not read"), std::string::npos)
+      << validation_error(s, file);
+  file.ops[0].sky_map = std::make_shared<const ImageRGB>(4, 2, glm::vec3(3.0f));
+  apply_edit(s, file);
+  EXPECT_EQ(s.sky.map.width, 4);
+  EXPECT_EQ(s.sky.source, "dusk.exr");
+  EXPECT_EQ(s.sky.strength, 0.5f);
+  EXPECT_EQ(s.sky.radiance(glm::vec3(0, 1, 0)), glm::vec3(1.5f));
+  // A colour drops the map again.
+  apply_edit(s, colour);
+  EXPECT_EQ(s.sky.map.width, 0);
+  EXPECT_EQ(s.sky.source, "");
+}
+
+TEST(SceneEdit, SkyOpWireFormCarriesTheMap) {
+  SceneEdit e = parse_edit_json(R"({"op": "sky", "file": "a.exr", "strength": 3})");
+  ImageRGB map(32, 16);
+  for (std::size_t i = 0; i < map.pixels.size(); ++i)
+    map.pixels[i] = glm::vec3(0.125f * static_cast<float>(i % 16), 0.5f, 2.0f);  // exact in RGB9E5
+  e.ops[0].sky_map = std::make_shared<const ImageRGB>(map);
+  wire::SceneEdit m;
+  wire::to_proto(e, &m);
+  EXPECT_EQ(m.ops(0).kind(), wire::EditOp::SKY);
+  wire::SceneEdit parsed;
+  ASSERT_TRUE(parsed.ParseFromString(m.SerializeAsString()));
+  const SceneEdit back = wire::from_proto(parsed);
+  ASSERT_EQ(back.ops.size(), 1u);
+  EXPECT_EQ(back.ops[0].sky_parts, e.ops[0].sky_parts);
+  EXPECT_EQ(back.ops[0].target, "a.exr");
+  EXPECT_EQ(back.ops[0].value, 3.0f);
+  ASSERT_TRUE(back.ops[0].sky_map);
+  EXPECT_EQ(back.ops[0].sky_map->pixels, map.pixels);
+  // A corrupt map is refused with the op's position.
+  parsed.mutable_ops(0)->mutable_sky_map()->set_data("xx");
+  try {
+    wire::from_proto(parsed);
+    FAIL() << "a corrupt sky map was accepted";
+  } catch (const Error& err) {
+    EXPECT_NE(std::string(err.what()).find("edit op 1"), std::string::npos) << err.what();
+  }
+}
+
+TEST(SceneEdit, BadSkyOpsAreRefusedWithTheReason) {
+  const Scene s = cornell_with_lamp();
+  auto error_of = [&](const char* json) {
+    try {
+      return validation_error(s, parse_edit_json(json));
+    } catch (const Error& err) {
+      return std::string(err.what());
+    }
+  };
+  EXPECT_NE(error_of(R"({"op": "sky"})").find("needs \"color\", \"strength\" or \"file\""),
+            std::string::npos);
+  EXPECT_NE(error_of(R"({"op": "sky", "color": [1, -1, 0]})").find("negative"), std::string::npos);
+  EXPECT_NE(error_of(R"({"op": "sky", "strength": -2})").find("sky strength is negative"),
+            std::string::npos);
+  EXPECT_NE(error_of(R"({"op": "sky", "strength": 1e7})").find("beyond"), std::string::npos);
+  EXPECT_NE(error_of(R"({"op": "sky", "color": [1, 1, 1], "file": "a.exr"})").find("together"),
+            std::string::npos);
+  EXPECT_NE(error_of(R"({"op": "sky", "file": ""})").find("\"file\" must be"), std::string::npos);
+  EXPECT_NE(error_of(R"({"op": "sky", "color": 3})").find("array of 3"), std::string::npos);
+  // Parts from the wire that no JSON makes: none, or unknown bits.
+  SceneEdit e;
+  e.ops.emplace_back().kind = EditOp::Kind::Sky;
+  EXPECT_NE(validation_error(s, e).find("set the sky's colour, strength or file"),
+            std::string::npos);
+  e.ops[0].sky_parts = 8;
+  EXPECT_NE(validation_error(s, e).find("parts 8"), std::string::npos);
+  // A map with a NaN texel (only in-process code could build one: the wire carries RGB9E5).
+  e.ops[0].sky_parts = EditOp::kSkyFile;
+  e.ops[0].target = "n.exr";
+  ImageRGB bad(2, 2, glm::vec3(1.0f));
+  bad.pixels[3].y = std::numeric_limits<float>::quiet_NaN();
+  e.ops[0].sky_map = std::make_shared<const ImageRGB>(bad);
+  EXPECT_NE(validation_error(s, e).find("not finite"), std::string::npos) << validation_error(s, e);
 }

@@ -13,8 +13,10 @@
 #include "irradcast/common/compositor.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/ray_scene.h"
-#include "irradcast/wire/scene_package.h"
 #include "irradcast/common/world.h"
+#include "irradcast/wire/scene_package.h"
+#include "irradcast/wire/sky_message.h"
+#include "irradcast/wire/tile_codec.h"
 
 using namespace irradcast;
 
@@ -400,4 +402,104 @@ TEST(ScenePackage, ChunksReassembleInOrderOnly) {
   wire::SceneAssembler smaller(pkg.hash, 500);
   EXPECT_THROW(smaller.add(make_chunk(0)), irradcast::Error);
   EXPECT_THROW(wire::SceneAssembler(pkg.hash, std::uint64_t{1} << 40), irradcast::Error);
+}
+
+TEST(ScenePackage, SkyAndAlphaFieldsTravelAndTheHashCoversThem) {
+  Prepared p(make_cornell_box());
+  const wire::ScenePackage plain = wire::make_scene_package(p.scene, p.atlas);
+  // Defaults are not written: a sky-less, opaque scene's package holds no sky field at all.
+  wire::SceneData d;
+  ASSERT_TRUE(d.ParseFromString(unzstd(plain.bytes)));
+  EXPECT_FALSE(d.has_sky());
+  EXPECT_FALSE(d.materials(0).has_alpha_cutoff());
+  EXPECT_FALSE(d.materials(0).has_base_alpha());
+
+  p.scene.sky.color = glm::vec3(0.25f, 0.5f, 1.0f);
+  p.scene.sky.strength = 2.5f;
+  p.scene.materials[0].alpha_mode = Material::AlphaMode::Mask;
+  p.scene.materials[0].alpha_cutoff = 0.3f;
+  p.scene.materials[0].base_alpha = 0.75f;
+  const wire::ScenePackage sky = wire::make_scene_package(p.scene, p.atlas);
+  EXPECT_NE(sky.hash, plain.hash);
+  const wire::UnpackedScene u = wire::open_scene_package(sky.bytes, sky.hash);
+  EXPECT_EQ(u.scene.sky.color, p.scene.sky.color);
+  EXPECT_EQ(u.scene.sky.strength, 2.5f);
+  EXPECT_EQ(u.scene.sky.map.width, 0);
+  EXPECT_EQ(u.scene.materials[0].alpha_mode, Material::AlphaMode::Mask);
+  EXPECT_EQ(u.scene.materials[0].alpha_cutoff, 0.3f);
+  EXPECT_EQ(u.scene.materials[0].base_alpha, 0.75f);
+  EXPECT_EQ(u.scene.materials[1].alpha_mode, Material::AlphaMode::Opaque);
+  EXPECT_EQ(u.scene.materials[1].alpha_cutoff, 0.5f);
+  EXPECT_EQ(u.scene.materials[1].base_alpha, 1.0f);
+  // Only the strength differs: another hash.
+  p.scene.sky.strength = 2.0f;
+  EXPECT_NE(wire::make_scene_package(p.scene, p.atlas).hash, sky.hash);
+}
+
+TEST(ScenePackage, ALargeSkyMapTravelsBoxDownsampledToTheViewerLimit) {
+  Prepared p(make_cornell_box());
+  // 2048 x 1024: each 2 x 2 block of the source becomes one texel of the 1024 x 512 map sent,
+  // the block's mean.
+  ImageRGB map(2048, 1024);
+  auto block = [](int tx, int ty) {
+    return glm::vec3(0.01f * static_cast<float>(tx % 97), 0.02f * static_cast<float>(ty % 53),
+                     100.0f + static_cast<float>(tx % 7));
+  };
+  for (int y = 0; y < map.height; ++y)
+    for (int x = 0; x < map.width; ++x)
+      map.at(x, y) = block(x / 2, y / 2) + glm::vec3(x % 2 ? 0.004f : 0.0f, y % 2 ? 0.006f : 0.0f,
+                                                     (x + y) % 2 ? 1.0f : -1.0f);
+  p.scene.sky.map = map;
+  p.scene.sky.source = "big.exr";
+  p.scene.sky.strength = 0.5f;
+  const wire::ScenePackage pkg = wire::make_scene_package(p.scene, p.atlas);
+  RecordProperty("package_bytes_with_sky", std::to_string(pkg.bytes.size()));
+  const Sky s = wire::open_scene_package(pkg.bytes, pkg.hash).scene.sky;
+  ASSERT_EQ(s.map.width, wire::kMaxViewerSkyWidth);
+  ASSERT_EQ(s.map.height, wire::kMaxViewerSkyHeight);
+  EXPECT_EQ(s.source, "big.exr");
+  EXPECT_EQ(s.strength, 0.5f);
+  double worst = 0.0;
+  for (int ty = 0; ty < s.map.height; ++ty)
+    for (int tx = 0; tx < s.map.width; ++tx) {
+      const glm::vec3 want = block(tx, ty) + glm::vec3(0.002f, 0.003f, 0.0f);
+      const float m = std::max(want.x, std::max(want.y, want.z));
+      const float bound =
+          wire::rgb9e5_max_relative_error() * m + wire::tile_absolute_error_floor() + 1e-5f * m;
+      for (int c = 0; c < 3; ++c)
+        worst =
+            std::max(worst, static_cast<double>(std::abs(s.map.at(tx, ty)[c] - want[c]) / bound));
+    }
+  EXPECT_LE(worst, 1.0) << "largest error over the RGB9E5 bound";
+}
+
+TEST(ScenePackage, BadSkiesAreRefusedWithAClearError) {
+  Prepared p(make_cornell_box());
+  p.scene.sky.map = ImageRGB(8, 4, glm::vec3(1.0f));
+  const wire::ScenePackage pkg = wire::make_scene_package(p.scene, p.atlas);
+  wire::SceneData good;
+  ASSERT_TRUE(good.ParseFromString(unzstd(pkg.bytes)));
+  ASSERT_TRUE(good.has_sky());
+  auto check = [&](const char* expected, auto&& tamper) {
+    wire::SceneData d = good;
+    tamper(d);
+    const std::string msg = expect_error(repack(d), "");
+    EXPECT_NE(msg.find(expected), std::string::npos) << msg;
+  };
+  check("sky strength", [](wire::SceneData& d) {
+    d.mutable_sky()->set_strength(std::numeric_limits<float>::quiet_NaN());
+  });
+  check("sky colour", [](wire::SceneData& d) { d.mutable_sky()->mutable_color()->set_y(-1.0f); });
+  check("sky colour", [](wire::SceneData& d) {
+    d.mutable_sky()->mutable_color()->set_x(std::numeric_limits<float>::infinity());
+  });
+  check("4096 x 4", [](wire::SceneData& d) { d.mutable_sky()->mutable_map()->set_width(4096); });
+  check("0 x 4", [](wire::SceneData& d) { d.mutable_sky()->mutable_map()->set_width(0); });
+  check("not zstd of 256 bytes",
+        [](wire::SceneData& d) { d.mutable_sky()->mutable_map()->set_height(8); });
+  check("not zstd", [](wire::SceneData& d) { d.mutable_sky()->mutable_map()->set_data("junk"); });
+  check("unknown alpha mode", [](wire::SceneData& d) {
+    d.mutable_materials(0)->set_alpha_mode(static_cast<wire::AlphaMode>(5));
+  });
+  check("alpha", [](wire::SceneData& d) { d.mutable_materials(0)->set_base_alpha(2.0f); });
 }

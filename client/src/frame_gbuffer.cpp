@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "irradcast/common/camera.h"
+#include "irradcast/common/compositor.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/primary_hits.h"
 #include "irradcast/common/sampling.h"
@@ -49,7 +50,10 @@ FrameGBuffer trace_frame(const World& world, const RayScene& rays, const Atlas& 
   g.normal.assign(n, glm::vec3(0.0f));
   g.depth.assign(n, 0.0f);
   g.diffuse.assign(n, glm::vec3(0.0f));
-  g.emission.assign(n, glm::vec3(0.0f));
+  // Misses keep the sky's radiance here (black without a sky): not diffuse, so SSAO never
+  // darkens it, and no depth, so SSAO and reprojection skip it as they skip any miss.
+  g.emission = world.scene ? sky_background(world.scene->sky, camera, width, height).pixels
+                           : std::vector<glm::vec3>(n, glm::vec3(0.0f));
   // The pixels and the shading of compose().
   for_each_primary_hit(
       rays, camera, width, height, [&](int x, int y, const Ray& ray, const Hit& h) {
@@ -75,7 +79,10 @@ ImageRGB resolve_frame(const FrameGBuffer& g, const std::vector<float>& visibili
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, g.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t i = r.begin(); i < r.end(); ++i) {
-                        if (!g.hit(i)) continue;
+                        if (!g.hit(i)) {
+                          image.pixels[i] = g.emission[i];  // the sky
+                          continue;
+                        }
                         const float v = visibility.empty() ? 1.0f : visibility[i];
                         image.pixels[i] = g.diffuse[i] * v + g.emission[i];
                       }

@@ -1,5 +1,8 @@
 #include "irradcast/common/compositor.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <atomic>
 #include <chrono>
 
@@ -26,6 +29,21 @@ HitShade shade_hit(const World& world, const Atlas& atlas, const std::vector<Lig
   return s;
 }
 
+ImageRGB sky_background(const Sky& sky, const CameraPose& camera, int width, int height) {
+  if (width <= 0 || height <= 0) throw Error("image size must be positive");
+  ImageRGB image(width, height);
+  if (!sky.enabled()) return image;
+  tbb::parallel_for(tbb::blocked_range<int>(0, height, 8), [&](const tbb::blocked_range<int>& r) {
+    for (int y = r.begin(); y < r.end(); ++y)
+      for (int x = 0; x < width; ++x)
+        image.at(x, y) =
+            sky.radiance(camera_ray(camera, width, height, static_cast<float>(x) + 0.5f,
+                                    static_cast<float>(y) + 0.5f)
+                             .direction);
+  });
+  return image;
+}
+
 ImageRGB compose(const World& world, const RayScene& rays, const Atlas& atlas,
                  const std::vector<Lightmap>& lightmaps, const CameraPose& camera, int width,
                  int height, ComposeStats* stats) {
@@ -33,7 +51,8 @@ ImageRGB compose(const World& world, const RayScene& rays, const Atlas& atlas,
   if (atlas.objects.size() != world.objects.size() || lightmaps.size() != world.objects.size())
     throw Error("compositor: lightmaps do not match the scene's objects");
   auto start = std::chrono::steady_clock::now();
-  ImageRGB image(width, height);
+  ImageRGB image = world.scene ? sky_background(world.scene->sky, camera, width, height)
+                               : ImageRGB(width, height);
   for_each_primary_hit(rays, camera, width, height,
                        [&](int x, int y, const Ray& ray, const Hit& h) {
                          const HitShade s = shade_hit(world, atlas, lightmaps, ray, h);

@@ -46,6 +46,8 @@ std::string decode_uri(const std::string& uri) {
   return out;
 }
 
+}  // namespace
+
 // Why `file` may not be read ("" if it may): it must resolve, symlinks followed, to a path under
 // `root` that is a regular file. A file that does not exist is left to tinygltf ("not found").
 std::string refusal(const fs::path& file, const fs::path& root) {
@@ -60,6 +62,8 @@ std::string refusal(const fs::path& file, const fs::path& root) {
   if (!fs::is_regular_file(st)) return "it is not a regular file";
   return "";
 }
+
+namespace {
 
 bool guarded_file_exists(const std::string& file, void* user) {
   auto* g = static_cast<FileGuard*>(user);
@@ -169,3 +173,23 @@ void check_uris(const std::string& path, const nlohmann::json& j, const FileGuar
 }
 
 }  // namespace irradcast::gltf_import
+
+namespace irradcast {
+
+std::string confined_file(const std::string& root, const std::string& name,
+                          const std::string& what) {
+  namespace fs = std::filesystem;
+  using gltf_import::clean;
+  std::error_code ec;
+  const fs::path dir = fs::canonical(root, ec);
+  if (ec || !fs::is_directory(dir, ec))
+    throw Error(what + ": the folder '" + clean(root) + "' is not a directory");
+  std::string why = name.empty()                   ? "no name given"
+                    : fs::path(name).is_absolute() ? "it is an absolute path"
+                                                   : gltf_import::refusal(dir / name, dir);
+  if (why.empty() && !fs::is_regular_file(dir / name, ec)) why = "there is no such file";
+  if (!why.empty()) throw Error(what + " '" + clean(name) + "' is refused: " + why);
+  return fs::canonical(dir / name).string();
+}
+
+}  // namespace irradcast

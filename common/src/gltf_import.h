@@ -54,6 +54,10 @@ FileGuard make_file_guard(const std::string& path, const std::string& root);
 // root or one that is not a regular file.
 void check_uris(const std::string& path, const nlohmann::json& j, const FileGuard& g);
 
+// Why `file` may not be read ("" if it may): it must resolve, symlinks followed, to a path under
+// `root` that is a regular file (a file that does not exist is not refused here).
+std::string refusal(const std::filesystem::path& file, const std::filesystem::path& root);
+
 // tinygltf's file-system callbacks, reading only what `guard` allows (and never writing).
 tinygltf::FsCallbacks guarded_callbacks(FileGuard* guard);
 

@@ -33,9 +33,10 @@ constexpr KindName kKinds[] = {
     {Kind::LightIntensity, "light_intensity"},
     {Kind::MaterialAlbedo, "albedo"},
     {Kind::MaterialEmission, "emission"},
+    {Kind::Sky, "sky"},
 };
 
-enum class Target { Node, Light, Material };
+enum class Target { Node, Light, Material, Sky };
 
 Target target_of(Kind k) {
   switch (k) {
@@ -45,13 +46,18 @@ Target target_of(Kind k) {
     case Kind::MaterialAlbedo:
     case Kind::MaterialEmission:
       return Target::Material;
+    case Kind::Sky:
+      return Target::Sky;
     default:
       return Target::Node;
   }
 }
 
 const char* target_name(Target t) {
-  return t == Target::Node ? "node" : t == Target::Light ? "light" : "material";
+  return t == Target::Node    ? "node"
+         : t == Target::Light ? "light"
+         : t == Target::Sky   ? "sky"
+                              : "material";
 }
 
 // Index of the named item, or of "#N"; -1 if none.
@@ -74,8 +80,10 @@ bool finite(glm::vec3 v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
+// The op's node, light or material (0 for the sky, the scene's only one).
 int resolve(const Scene& scene, const EditOp& op, const std::string& where) {
   const Target t = target_of(op.kind);
+  if (t == Target::Sky) return 0;
   if (op.target.empty()) throw Error(where + ": no " + target_name(t) + " named");
   const int i = t == Target::Node    ? find(scene.nodes, op.target)
                 : t == Target::Light ? find(scene.lights, op.target)
@@ -88,6 +96,30 @@ int resolve(const Scene& scene, const EditOp& op, const std::string& where) {
                 std::to_string(count) + " " + target_name(t) + "s; name one or give #index)");
   }
   return i;
+}
+
+// A Sky op's parts (its numbers are finite and within +-1e6 already).
+void check_sky_op(const EditOp& op, const std::string& where) {
+  constexpr unsigned kAll = EditOp::kSkyColor | EditOp::kSkyStrength | EditOp::kSkyFile;
+  const unsigned parts = op.sky_parts;
+  if (parts == 0 || (parts & ~kAll) != 0)
+    throw Error(where + ": set the sky's colour, strength or file (parts " + std::to_string(parts) +
+                ")");
+  if ((parts & EditOp::kSkyColor) && (parts & EditOp::kSkyFile))
+    throw Error(where + ": a sky colour and a sky file together (a colour replaces the map)");
+  if ((parts & EditOp::kSkyColor) && glm::any(glm::lessThan(op.vector, glm::vec3(0.0f))))
+    throw Error(where + ": a sky colour component is negative");
+  if ((parts & EditOp::kSkyStrength) && op.value < 0.0f)
+    throw Error(where + ": the sky strength is negative");
+  if (!(parts & EditOp::kSkyFile)) return;
+  if (op.target.empty()) throw Error(where + ": no sky file named");
+  if (!op.sky_map)
+    throw Error(where + ": the sky file '" + op.target +
+                "' was not read (a server reads sky files from its --sky-dir)");
+  Sky probe;  // the map's checks: size, finite and non-negative texels
+  probe.map = *op.sky_map;
+  validate_sky(probe, where + " (sky file '" + op.target + "')");
+  if (probe.map.pixels.empty()) throw Error(where + ": the sky file '" + op.target + "' is empty");
 }
 
 void check_op(const Scene& scene, const EditOp& op, const std::string& where) {
@@ -133,6 +165,9 @@ void check_op(const Scene& scene, const EditOp& op, const std::string& where) {
     case Kind::MaterialEmission:
       if (glm::any(glm::lessThan(op.vector, glm::vec3(0.0f))) || op.value < 0.0f)
         throw Error(where + ": the emission colour or strength is negative");
+      break;
+    case Kind::Sky:
+      check_sky_op(op, where);
       break;
     default:
       break;
@@ -272,6 +307,19 @@ void validate_edit(const Scene& scene, const SceneEdit& edit) {
 
 namespace {
 
+void apply_sky(Sky& sky, const EditOp& op) {
+  if (op.sky_parts & EditOp::kSkyColor) {
+    sky.color = op.vector;
+    sky.map = ImageRGB{};
+    sky.source.clear();
+  }
+  if (op.sky_parts & EditOp::kSkyFile) {
+    sky.map = *op.sky_map;
+    sky.source = op.target;
+  }
+  if (op.sky_parts & EditOp::kSkyStrength) sky.strength = op.value;
+}
+
 // Applies one op to its resolved target i and returns the effect list that records it.
 std::vector<int>& apply_op(Scene& scene, const EditOp& op, int i, EditEffect& effect) {
   switch (op.kind) {
@@ -298,6 +346,8 @@ std::vector<int>& apply_op(Scene& scene, const EditOp& op, int i, EditEffect& ef
       scene.materials[i].emissive = op.vector;
       scene.materials[i].emissive_strength = op.value;
       return effect.materials;
+    case Kind::Sky:
+      break;  // apply_edit applies it
   }
   throw Error("edit: unknown op kind");
 }
@@ -308,6 +358,11 @@ EditEffect apply_edit(Scene& scene, const SceneEdit& edit) {
   validate_edit(scene, edit);
   EditEffect effect;
   for (const EditOp& op : edit.ops) {
+    if (op.kind == Kind::Sky) {
+      apply_sky(scene.sky, op);
+      effect.sky = true;
+      continue;
+    }
     const int i = resolve(scene, op, "");
     add_unique(apply_op(scene, op, i, effect), i);
   }
@@ -344,14 +399,39 @@ const Json& need(const Json& op, const std::string& where, const char* key) {
   return *it;
 }
 
+// {"op": "sky"} with any of "color" or "file" (not both) and "strength".
+EditOp sky_op_from_json(const Json& j, const std::string& where) {
+  EditOp op;
+  op.kind = Kind::Sky;
+  if (j.contains("color")) {
+    op.vector = vec3_of(j["color"], where, "color");
+    op.sky_parts |= EditOp::kSkyColor;
+  }
+  if (j.contains("strength")) {
+    op.value = number_of(j["strength"], where, "strength");
+    op.sky_parts |= EditOp::kSkyStrength;
+  }
+  if (j.contains("file")) {
+    if (!j["file"].is_string() || j["file"].get<std::string>().empty())
+      throw Error(where +
+                  ": \"file\" must be the name of a sky map (.exr) in the server's sky folder");
+    op.target = j["file"].get<std::string>();
+    op.sky_parts |= EditOp::kSkyFile;
+  }
+  if (op.sky_parts == 0)
+    throw Error(where + ": a sky op needs \"color\", \"strength\" or \"file\"");
+  return op;
+}
+
 EditOp op_from_json(const Json& j, const std::string& where) {
   if (!j.is_object()) throw Error(where + ": an operation must be a JSON object");
   if (!j.contains("op") || !j["op"].is_string())
     throw Error(where +
                 ": missing \"op\" (move, rotate, scale, transform, show, hide, "
-                "light_color, light_intensity, albedo, emission)");
+                "light_color, light_intensity, albedo, emission, sky)");
   EditOp op;
   op.kind = parse_edit_kind(j["op"].get<std::string>());
+  if (op.kind == Kind::Sky) return sky_op_from_json(j, where);
   const char* key = target_name(target_of(op.kind));
   const Json& t = need(j, where, key);
   if (t.is_string())
@@ -400,6 +480,8 @@ EditOp op_from_json(const Json& j, const std::string& where) {
       op.vector = vec3_of(need(j, where, "color"), where, "color");
       op.value = j.contains("strength") ? number_of(j["strength"], where, "strength") : 1.0f;
       break;
+    case Kind::Sky:
+      break;
   }
   return op;
 }
@@ -407,8 +489,14 @@ EditOp op_from_json(const Json& j, const std::string& where) {
 Json op_to_json(const EditOp& op) {
   Json j;
   j["op"] = edit_kind_name(op.kind);
-  j[target_name(target_of(op.kind))] = op.target;
   auto vec = [](glm::vec3 v) { return Json::array({v.x, v.y, v.z}); };
+  if (op.kind == Kind::Sky) {
+    if (op.sky_parts & EditOp::kSkyColor) j["color"] = vec(op.vector);
+    if (op.sky_parts & EditOp::kSkyFile) j["file"] = op.target;
+    if (op.sky_parts & EditOp::kSkyStrength) j["strength"] = op.value;
+    return j;
+  }
+  j[target_name(target_of(op.kind))] = op.target;
   switch (op.kind) {
     case Kind::Move:
     case Kind::Scale:
@@ -437,6 +525,8 @@ Json op_to_json(const EditOp& op) {
     case Kind::MaterialEmission:
       j["color"] = vec(op.vector);
       j["strength"] = op.value;
+      break;
+    case Kind::Sky:
       break;
   }
   return j;

@@ -29,6 +29,7 @@ namespace {
 struct Options {
   std::string scene = "cornell";
   std::string scene_root;
+  std::string sky_dir;
   float detail = 1.0f;
   std::string bind = "0.0.0.0";
   int port = 7450;
@@ -95,6 +96,7 @@ int run(const Options& o, sigset_t signals) {
   ho.tiles.refresh_ratio = o.tile_refresh;
   ho.engine_nice = o.engine_nice;
   ho.max_updates = o.max_updates;
+  ho.sky_dir = o.sky_dir;
   if (!token.empty() && token.size() < kMinTokenLength)
     throw Error("the control token from " + token_source + " has " + std::to_string(token.size()) +
                 " characters; it needs at least " + std::to_string(kMinTokenLength) +
@@ -217,6 +219,10 @@ int main(int argc, char** argv) {
   app.add_option(
       "--scene-root", o.scene_root,
       "folder a glTF scene may read buffers and images from (default: the scene file's folder)");
+  app.add_option("--sky-dir", o.sky_dir,
+                 "folder that sky edits may name EXR maps in (default: none, file sky edits are "
+                 "refused; docs/EDITS.md)")
+      ->check(CLI::ExistingDirectory);
   app.add_option("--bind", o.bind, "address to listen on");
   app.add_option("--port", o.port, "TCP port (0 = any free port)")->check(CLI::Range(0, 65535));
   app.add_option("--io-threads", o.io_threads, "network threads")->check(CLI::Range(1, 64));

@@ -1,8 +1,10 @@
 #include "irradcast/wire/edit_message.h"
 
+#include <memory>
 #include <string>
 
 #include "irradcast/common/error.h"
+#include "irradcast/wire/sky_message.h"
 
 namespace irradcast::wire {
 namespace {
@@ -24,6 +26,7 @@ constexpr KindPair kKinds[] = {
     {Kind::LightIntensity, EditOp::LIGHT_INTENSITY},
     {Kind::MaterialAlbedo, EditOp::MATERIAL_ALBEDO},
     {Kind::MaterialEmission, EditOp::MATERIAL_EMISSION},
+    {Kind::Sky, EditOp::SKY},
 };
 
 }  // namespace
@@ -41,6 +44,10 @@ void to_proto(const irradcast::SceneEdit& edit, SceneEdit* out) {
     o->set_value(op.value);
     if (op.kind == Kind::SetTransform)
       for (int i = 0; i < 16; ++i) o->add_matrix(op.matrix[i / 4][i % 4]);
+    if (op.kind == Kind::Sky) {
+      o->set_sky_parts(op.sky_parts);
+      if (op.sky_map) sky_map_to_proto(*op.sky_map, o->mutable_sky_map());
+    }
   }
 }
 
@@ -66,6 +73,11 @@ irradcast::SceneEdit from_proto(const SceneEdit& msg) {
                              " values (16 expected, column-major)");
     if (o.matrix_size() == 16)
       for (int j = 0; j < 16; ++j) op.matrix[j / 4][j % 4] = o.matrix(j);
+    if (op.kind == Kind::Sky) {
+      op.sky_parts = o.sky_parts();
+      if (o.has_sky_map())
+        op.sky_map = std::make_shared<const ImageRGB>(sky_map_from_proto(o.sky_map(), where));
+    }
     edit.ops.push_back(std::move(op));
   }
   return edit;

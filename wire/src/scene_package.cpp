@@ -11,6 +11,7 @@
 #include <utility>
 
 #include "irradcast/common/error.h"
+#include "irradcast/wire/sky_message.h"
 
 namespace irradcast::wire {
 namespace {
@@ -77,7 +78,11 @@ void validate_scene(const Scene& s) {
     if (m.emissive_texture != -1 && !in(m.emissive_texture, s.textures.size()))
       fail(idx("material", i) + " refers to texture " + std::to_string(m.emissive_texture) +
            ", which does not exist");
+    if (!finite(m.alpha_cutoff) || !finite(m.base_alpha) || m.base_alpha < 0.0f ||
+        m.base_alpha > 1.0f)
+      fail(idx("material", i) + " has a non-finite alpha cutoff or an alpha outside [0, 1]");
   }
+  validate_sky(s.sky, "scene package");
   for (std::size_t i = 0; i < s.textures.size(); ++i) {
     const Texture& t = s.textures[i];
     if (t.width < 0 || t.height < 0 || t.width > kMaxTextureSize || t.height > kMaxTextureSize ||
@@ -213,6 +218,10 @@ void put_materials(SceneData& d, const Scene& s) {
     o->set_emissive_uv(static_cast<std::uint32_t>(m.emissive_uv));
     o->set_emissive_strength(m.emissive_strength);
     o->set_double_sided(m.double_sided);
+    // Defaults are left out: a package of opaque materials keeps the bytes (and hash) it had.
+    if (m.alpha_mode == Material::AlphaMode::Mask) o->set_alpha_mode(ALPHA_MASK);
+    if (m.alpha_cutoff != Material{}.alpha_cutoff) o->set_alpha_cutoff(m.alpha_cutoff);
+    if (m.base_alpha != Material{}.base_alpha) o->set_base_alpha(m.base_alpha);
   }
 }
 
@@ -281,6 +290,8 @@ SceneData to_proto(const Scene& s, const Atlas& atlas, std::uint64_t revision) {
   put_lights(d, s);
   put_cameras(d, s);
   put_layouts(d, atlas);
+  // No sky: no field, so a sky-less package keeps the bytes (and hash) it had.
+  if (!is_default_sky(s.sky)) sky_to_proto(s.sky, d.mutable_sky());
   return d;
 }
 
@@ -343,6 +354,18 @@ void get_materials(const SceneData& d, Scene& s) {
     m.emissive_uv = o.emissive_uv() == 1 ? 1 : 0;
     m.emissive_strength = o.emissive_strength();
     m.double_sided = o.double_sided();
+    switch (o.alpha_mode()) {
+      case ALPHA_OPAQUE:
+        m.alpha_mode = Material::AlphaMode::Opaque;
+        break;
+      case ALPHA_MASK:
+        m.alpha_mode = Material::AlphaMode::Mask;
+        break;
+      default:
+        fail(idx("material", i) + " has an unknown alpha mode " + std::to_string(o.alpha_mode()));
+    }
+    if (o.has_alpha_cutoff()) m.alpha_cutoff = o.alpha_cutoff();
+    if (o.has_base_alpha()) m.base_alpha = o.base_alpha();
     s.materials.push_back(std::move(m));
   }
 }
@@ -440,6 +463,7 @@ UnpackedScene from_proto(const SceneData& d) {
   get_lights(d, s);
   get_cameras(d, s);
   get_layouts(d, out.atlas);
+  if (d.has_sky()) s.sky = sky_from_proto(d.sky(), "scene package");
   validate_scene(s);
   validate_layout(s, out.atlas);
   return out;

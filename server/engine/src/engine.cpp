@@ -437,7 +437,7 @@ std::vector<std::uint8_t> Engine::priorities(const SceneChange& change,
       r.tmax = std::max(0.0f, glm::length(q - r.origin) - 2.0f * rays_->epsilon());
       return !rays_->occluded(r);
     };
-    bool affected = change.distance(p) <= margin;
+    bool affected = change.sky || change.distance(p) <= margin;
     for (std::size_t l = 0; !affected && l < change.light_points.size(); ++l)
       affected = sees(change.light_points[l]);
     for (std::size_t l = 0; !affected && l < change.other_lights.size(); ++l)
@@ -480,8 +480,8 @@ void Engine::restart(const Before& before, const std::vector<std::int32_t>& old_
   const auto keep = static_cast<std::uint32_t>(params_.edit_keep);
   for (std::size_t i = 0; i < n; ++i) {
     const std::int32_t j = old_of[i];
-    // A changed light changes the indirect light everywhere it reaches: all restart then.
-    if (tier[i] < 2 || j < 0 || keep == 0 || !change.light_points.empty()) continue;
+    // A changed light (or sky) changes the indirect light everywhere it reaches: all restart.
+    if (tier[i] < 2 || j < 0 || keep == 0 || !change.light_points.empty() || change.sky) continue;
     const auto k = static_cast<std::size_t>(j);
     const std::uint32_t had = before.samples[k];
     if (had == 0) continue;

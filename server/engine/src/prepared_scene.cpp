@@ -202,6 +202,7 @@ SceneChange PreparedScene::apply(std::span<const SceneEdit> edits, EditReport* r
       append(effect.nodes, e.nodes);
       append(effect.lights, e.lights);
       append(effect.materials, e.materials);
+      effect.sky = effect.sky || e.sky;
     } catch (const std::exception& ex) {
       outcome.error = ex.what();
       continue;
@@ -217,10 +218,12 @@ SceneChange PreparedScene::apply(std::span<const SceneEdit> edits, EditReport* r
   lap.lap("world");
   s.rays->update(moved);
   lap.lap("ray scene");
+  // Emitters, punctual lights and the sky's sampling tables (Scene::sky) from the edited scene.
   *s.lights = LightSampler(s.world);
   SceneChange change;
   change.geometry = !moved.empty();
   change.surfaces = !effect.materials.empty();
+  change.sky = effect.sky;
   if (change.geometry || change.surfaces) {
     // Hidden texels are marked again on exactly the objects drawn again.
     const std::vector<std::uint8_t> which =
@@ -235,6 +238,7 @@ SceneChange PreparedScene::apply(std::span<const SceneEdit> edits, EditReport* r
   r.moved = moved.size();
   r.lights = effect.lights.size();
   r.materials = effect.materials.size();
+  r.sky = effect.sky;
   r.timings = lap.text();
   return change;
 }

@@ -338,7 +338,7 @@ void VplMethod::scene_changed(const SceneChange& change, const Lap& lap) {
   // (one ray per VPL; the texels' gather is what costs). Otherwise seed 000 Algorithm 2: a VPL
   // in a changed region, or whose segment from its parent (the light or the VPL before it) is
   // now occluded, is invalid with every VPL after it on its path.
-  const bool all = change.surfaces || !change.light_points.empty();
+  const bool all = change.surfaces || change.sky || !change.light_points.empty();
   const float pad = 1e-3f * world_->bounds.max_extent();
   tbb::parallel_for(std::size_t(0), paths, [&](std::size_t p) {
     if (all) {  // including paths that found no light before: the edit may have turned one on

@@ -4,6 +4,7 @@
 #include <chrono>
 
 #include "irradcast/common/error.h"
+#include "irradcast/common/gltf.h"
 #include "irradcast/common/lap_timer.h"
 #include "irradcast/common/log.h"
 #include "irradcast/engine/engine.h"
@@ -38,6 +39,32 @@ PreparedScene prepare(Scene scene, const std::string& scene_id, const EngineHost
   if (prepared.lights().empty())
     log::warn("engine", scene_id + " has no lights: every tile will be black");
   return prepared;
+}
+
+// `edit` with the map of every sky op that names a file read from `sky_dir` (the name confined
+// to it like a glTF URI, the map checked by validate_sky); any map the sender put in is dropped.
+SceneEdit read_sky_files(SceneEdit edit, const std::string& sky_dir) {
+  for (std::size_t i = 0; i < edit.ops.size(); ++i) {
+    EditOp& op = edit.ops[i];
+    if (op.kind != EditOp::Kind::Sky) continue;
+    op.sky_map.reset();
+    if (!(op.sky_parts & EditOp::kSkyFile)) continue;
+    const std::string where = "edit op " + std::to_string(i + 1) + " (sky)";
+    if (sky_dir.empty())
+      throw Error(where + ": this server reads no sky files (start it with --sky-dir DIR)");
+    const std::string path = confined_file(sky_dir, op.target, where + ": the sky file");
+    Sky sky;
+    try {
+      sky.map = read_exr(path);
+    } catch (const Error& e) {
+      std::string why = e.what();  // "<path>: cannot read EXR: ...": the client sees no path
+      if (why.rfind(path, 0) == 0) why = why.substr(std::min(why.size(), path.size() + 2));
+      throw Error(where + ": the sky file '" + op.target + "': " + why);
+    }
+    validate_sky(sky, where + ": the sky file '" + op.target + "'");
+    op.sky_map = std::make_shared<const ImageRGB>(std::move(sky.map));
+  }
+  return edit;
 }
 
 std::uint64_t now_us() {
@@ -130,6 +157,8 @@ std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
   // against the transforms the edits before it lead to (13 edits of scale 1000 each are refused
   // like one edit of 13). Under its own lock, so validation order is revision order and the
   // engine thread is not held up.
+  // Sky files are read before the lock: another edit's validation need not wait for them.
+  const SceneEdit loaded = read_sky_files(edit, options_.sky_dir);
   std::lock_guard validation(validation_mutex_);
   {
     std::lock_guard lock(mutex_);
@@ -137,10 +166,10 @@ std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
       throw Error("the engine has " + std::to_string(pending_edits_.size()) +
                   " edits waiting; send this one again later");
   }
-  apply_edit(validation_scene_, edit);  // validates first: unchanged when it throws
+  apply_edit(validation_scene_, loaded);  // validates first: unchanged when it throws
   std::lock_guard lock(mutex_);
   const std::uint64_t revision = ++submitted_revision_;
-  pending_edits_.emplace_back(revision, edit);
+  pending_edits_.emplace_back(revision, loaded);
   stats_.idle = false;  // refining again from now on: nobody waits for an idle that is stale
   cv_.notify_all();
   return revision;
@@ -216,12 +245,12 @@ void EngineHost::publish_edits(QueuedEdits& queued, const EditReport& report, La
     updates_since_edit_ = 0;
     listener = edit_listener_;
   }
-  log::info("engine", "applied edit " + std::to_string(revision) + " (" +
-                          std::to_string(report.moved) + " objects moved or shown/hidden, " +
-                          std::to_string(report.lights) + " lights, " +
-                          std::to_string(report.materials) + " materials) in " +
-                          std::to_string(static_cast<int>(ms)) + " ms; " +
-                          std::to_string(impl_->engine->stale_texels()) + " texels to refresh");
+  log::info("engine",
+            "applied edit " + std::to_string(revision) + " (" + std::to_string(report.moved) +
+                " objects moved or shown/hidden, " + std::to_string(report.lights) + " lights, " +
+                std::to_string(report.materials) + " materials" + (report.sky ? ", the sky" : "") +
+                ") in " + std::to_string(static_cast<int>(ms)) + " ms; " +
+                std::to_string(impl_->engine->stale_texels()) + " texels to refresh");
   log::info("engine", "edit " + std::to_string(revision) + " took: " + lap.text());
   const std::uint64_t at = now_us();
   for (AppliedEdit& a : applied) {

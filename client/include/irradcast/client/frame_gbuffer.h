@@ -45,7 +45,7 @@ struct FrameGBuffer {
   std::vector<glm::vec3> normal;    // unit shading normal, turned towards the eye
   std::vector<float> depth;         // view-axis depth; 0 on misses
   std::vector<glm::vec3> diffuse;   // albedo / pi * E (the term SSAO attenuates)
-  std::vector<glm::vec3> emission;  // added after SSAO
+  std::vector<glm::vec3> emission;  // added after SSAO; on misses the sky (sky_background)
 
   std::size_t size() const { return depth.size(); }
   bool hit(std::size_t i) const { return depth[i] > 0.0f; }
@@ -62,8 +62,8 @@ FrameGBuffer trace_frame(const World& world, const RayScene& rays, const Atlas& 
                          const std::vector<Lightmap>& lightmaps, const CameraPose& camera,
                          int width, int height);
 
-// radiance = diffuse * visibility + emission per pixel (black on misses); `visibility` empty
-// means 1 everywhere.
+// radiance = diffuse * visibility + emission per pixel (the sky on misses: never occluded);
+// `visibility` empty means 1 everywhere.
 ImageRGB resolve_frame(const FrameGBuffer& g, const std::vector<float>& visibility);
 
 }  // namespace irradcast

@@ -45,4 +45,11 @@ Scene load_gltf(const std::string& path, LoadReport* report = nullptr,
 // written.
 void save_gltf(const Scene& scene, const std::string& path);
 
+// The path of the file `name` in the folder `root`, confined the way glTF URIs are
+// (gltf_files.cpp): `name` is relative and resolves, symlinks followed, to an existing regular
+// file under `root`. Throws irradcast::Error naming `what` and the reason otherwise. Used for the
+// sky files a client may name in an edit (irradcast-server --sky-dir).
+std::string confined_file(const std::string& root, const std::string& name,
+                          const std::string& what);
+
 }  // namespace irradcast

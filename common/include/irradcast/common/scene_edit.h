@@ -5,6 +5,7 @@
 // whole: the scene does not change.
 #pragma once
 
+#include <memory>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -27,6 +28,13 @@ struct EditOp {
     LightIntensity,    // punctual light: intensity = `value`
     MaterialAlbedo,    // material: base colour factor = `vector`
     MaterialEmission,  // material: emissive factor = `vector`, emissive strength = `value`
+    Sky,               // the sky: the parts `sky_parts` names (colour, strength, map file)
+  };
+  // The parts of the sky a Sky op sets.
+  enum SkyPart : unsigned {
+    kSkyColor = 1,     // constant radiance = `vector` (drops the map)
+    kSkyStrength = 2,  // strength = `value`
+    kSkyFile = 4,      // map = `sky_map`, read from the file `target` (in the server's sky folder)
   };
   Kind kind = Kind::Move;
   // A node, light or material, by name, or by index as "#3".
@@ -34,6 +42,10 @@ struct EditOp {
   glm::vec3 vector{0.0f};
   float value = 0.0f;
   glm::mat4 matrix{1.0f};
+  unsigned sky_parts = 0;  // Sky: SkyPart bits
+  // Sky with kSkyFile: the map. Only a server reads the file (from its --sky-dir, before it
+  // accepts the edit); viewers get the map with the edit (wire: at most 1024 x 512).
+  std::shared_ptr<const ImageRGB> sky_map;
 };
 
 struct SceneEdit {
@@ -45,18 +57,20 @@ struct EditEffect {
   std::vector<int> nodes;      // nodes whose local transform or visibility changed
   std::vector<int> lights;     // punctual lights whose colour or intensity changed
   std::vector<int> materials;  // materials whose albedo or emission changed
-  bool empty() const { return nodes.empty() && lights.empty() && materials.empty(); }
+  bool sky = false;            // the sky changed (it lights everything that sees out)
+  bool empty() const { return nodes.empty() && lights.empty() && materials.empty() && !sky; }
 };
 
 // The lowercase names used on the command line and in JSON ("move", "rotate", "scale",
-// "transform", "show", "hide", "light_color", "light_intensity", "albedo", "emission").
+// "transform", "show", "hide", "light_color", "light_intensity", "albedo", "emission", "sky").
 const char* edit_kind_name(EditOp::Kind kind);
 // Throws irradcast::Error naming the valid kinds.
 EditOp::Kind parse_edit_kind(std::string_view name);
 
 // Throws irradcast::Error with a message that names the operation (by position and kind) and
 // what is wrong: an empty edit, an unknown target, a non-finite number, a zero rotation axis or
-// scale factor, a matrix that is not affine or not invertible, a negative intensity or colour.
+// scale factor, a matrix that is not affine or not invertible, a negative intensity or colour, a
+// sky op with no part or with both a colour and a file, or a file whose map was not loaded.
 // The transforms the edit leads to are checked too, ops composed in order: each node's local
 // transform within +-1e9 after every op, and (a parent's scale multiplying its children's) the
 // world transforms below a moved node finite, their objects' vertices within +-1e18 in world
@@ -67,7 +81,9 @@ void validate_edit(const Scene& scene, const SceneEdit& edit);
 EditEffect apply_edit(Scene& scene, const SceneEdit& edit);
 
 // The JSON form (docs/EDITS.md): an object {"ops": [op, ...]} or a single op object, where an op
-// is {"op": "move", "node": "tall_block", "by": [x, y, z]} and so on. Throws irradcast::Error
+// is {"op": "move", "node": "tall_block", "by": [x, y, z]} and so on; a sky op has no target:
+// {"op": "sky", "color": [r, g, b]}, {"op": "sky", "file": "dusk.exr", "strength": 2}, any of
+// "color" or "file" (not both) and "strength". Throws irradcast::Error
 // on bad JSON or a bad op (with the op's position).
 SceneEdit parse_edit_json(std::string_view text);
 std::string edit_to_json(const SceneEdit& edit);

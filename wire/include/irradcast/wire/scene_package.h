@@ -1,5 +1,6 @@
 // The scene download payload: everything a client needs to render its own view (nodes, meshes,
-// materials, textures, lights, cameras: the irradcast::Scene model, stored exactly) plus the
+// materials, textures, lights, cameras: the irradcast::Scene model, stored exactly; the sky, with
+// a map at most 1024 x 512 in RGB9E5 for the background only: sky_message.h) plus the
 // lightmap layout of every object (irradcast::Atlas), as a zstd-compressed SceneData message
 // (proto/irradcast.proto). Identified by the SHA-256 of the compressed bytes, so a client can
 // cache it and skip the download when Welcome.scene_hash matches.
@@ -30,8 +31,7 @@ struct ScenePackage {
 // Throws irradcast::Error if the atlas does not match the scene's objects or the scene holds
 // invalid data (indices out of range, non-finite positions). `revision` counts the scene edits
 // applied since the scene was loaded (docs/EDITS.md).
-ScenePackage make_scene_package(const Scene& scene, const Atlas& atlas,
-                                std::uint64_t revision = 0);
+ScenePackage make_scene_package(const Scene& scene, const Atlas& atlas, std::uint64_t revision = 0);
 
 struct UnpackedScene {
   Scene scene;

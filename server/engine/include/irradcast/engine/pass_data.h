@@ -116,6 +116,9 @@ struct Probes {
 struct SceneChange {
   bool geometry = false;  // objects moved, shown or hidden: texels, probes and visibility change
   bool surfaces = false;  // albedo changed somewhere: texel albedo is read from the G-buffers
+  // The sky changed (colour, strength or map): its light reaches every texel that sees out, so
+  // every texel restarts, as after a changed light.
+  bool sky = false;
   // World-space boxes where it happened: moved objects before and after, changed lights and
   // emitters. Texels near one (within the tracing range or a cell) are affected.
   std::vector<Bounds> regions;

@@ -55,6 +55,7 @@ struct EditReport {
   std::size_t moved = 0;       // objects moved, shown or hidden
   std::size_t lights = 0;      // punctual lights whose colour or intensity changed
   std::size_t materials = 0;   // materials whose albedo or emission changed
+  bool sky = false;            // the sky changed
   std::string timings;         // "world 0 ms, ray scene 1 ms, ..." (LapTimer::text)
 };
 

@@ -52,6 +52,9 @@ struct EngineHostOptions {
   // Nice value of the engine thread and its TBB workers while the host runs (0 = as the
   // process): the network threads come first (see thread_priority.h).
   int engine_nice = 10;
+  // The folder sky edits may name map files in (irradcast-server --sky-dir); empty: edits that
+  // name a sky file are refused. A name is confined to it like a glTF URI (confined_file).
+  std::string sky_dir;
 };
 
 // One engine pass (direct, or a bounce's probe gather or scatter): the last update's time and
@@ -107,7 +110,9 @@ class EngineHost {
   // thread applies queued edits before its next update (waking up if it was idle) and then
   // refines the affected texels first. Returns the revision the scene will have once it is
   // applied. Throws irradcast::Error with a clear message on an invalid edit (nothing queued).
-  // Any thread.
+  // A sky op that names a file gets its map here, read from options.sky_dir (validate_sky), and
+  // carries it to the engine and, with the broadcast, to the viewers; a map in `edit` itself is
+  // never used. Any thread.
   std::uint64_t submit_edit(const SceneEdit& edit);
   // Called on the engine thread once per applied edit, before the tiles that show it are
   // published: the server sends the edit to every viewer from here.
