@@ -1,7 +1,8 @@
 // The sky and the sun in the CPU estimators (docs/ENGINE.md "Sky and sun"): the engine's direct
 // pass on Embree, the reference path tracer (with and without next-event estimation), the VPL
 // method and the irradiance cache, against analytic irradiance and the reference lightmaps; and
-// the tools' --sky / --sky-strength / --sun options (scene_options.h).
+// the tools' --sky / --sky-strength / --sun options (scene_options.h). The path tracer's two
+// modes under a sky: tests/test_path_tracer.cpp.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -333,33 +334,6 @@ TEST(SkyEngine, MapSkyMatchesTheReferenceLightmaps) {
     EXPECT_LT(e, c.rel_mse) << c.name;
     EXPECT_NEAR(mean, 1.0, c.mean) << c.name;
     EXPECT_NEAR(eb / rb, 1.0, c.bounce) << c.name;
-  }
-}
-
-// Next-event estimation and pure cosine-sampled paths (which find the sky by leaving the scene)
-// agree on a sky-lit view: two independent estimators of the same integral.
-TEST(SkyEngine, NextEventEstimationAgreesWithPurePathTracingUnderASky) {
-  Scene scene = courtyard();
-  Sky sky = map_sky();
-  for (glm::vec3& px : sky.map.pixels)
-    px = glm::min(px, glm::vec3(1.0f));  // smooth: fewer outliers
-  scene.sky = sky;
-  EngineSetup s(std::move(scene), 8.0f);
-  CameraPose cam;
-  cam.eye = glm::vec3(0.0f, 2.5f, 3.5f);
-  cam.forward = glm::normalize(glm::vec3(0.0f, -0.6f, -1.0f));
-  cam.up = glm::normalize(glm::cross(glm::cross(cam.forward, glm::vec3(0, 1, 0)), cam.forward));
-  PathTracerOptions with{2, true, 3}, without{2, false, 4};
-  PathTracer a(s.world, s.rays, s.lights, with), b(s.world, s.rays, s.lights, without);
-  const ImageRGB ia = a.render(cam, 16, 16, 128), ib = b.render(cam, 16, 16, 1024);
-  glm::dvec3 ma(0.0), mb(0.0);
-  for (std::size_t i = 0; i < ia.pixels.size(); ++i) {
-    ma += glm::dvec3(ia.pixels[i]);
-    mb += glm::dvec3(ib.pixels[i]);
-  }
-  for (int c = 0; c < 3; ++c) {
-    RecordProperty("relative_difference", std::to_string(ma[c] / mb[c] - 1.0));
-    EXPECT_NEAR(ma[c], mb[c], 0.03 * mb[c]) << "channel " << c;
   }
 }
 

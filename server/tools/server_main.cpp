@@ -79,6 +79,17 @@ std::pair<std::string, std::string> control_token(const Options& o) {
   return {"", ""};
 }
 
+// The scene with the --sky and --sun of the options; logs what lights it.
+irradcast::Scene load_lit_scene(const Options& o) {
+  using namespace irradcast;
+  log::info("server", "loading " + o.scene);
+  Scene scene = load_scene(o.scene, o.detail, o.scene_root);
+  tools::SceneOptions lighting = o.lighting;
+  lighting.apply(scene);
+  log::info("server", "lit by " + lighting.describe(scene));
+  return scene;
+}
+
 int run(const Options& o, sigset_t signals) {
   using namespace irradcast;
   log::set_level(log::parse_level(o.log_level));
@@ -101,12 +112,7 @@ int run(const Options& o, sigset_t signals) {
     throw Error("the control token from " + token_source + " has " + std::to_string(token.size()) +
                 " characters; it needs at least " + std::to_string(kMinTokenLength) +
                 " (e.g. head -c 18 /dev/urandom | base64)");
-  log::info("server", "loading " + o.scene);
-  Scene scene = load_scene(o.scene, o.detail, o.scene_root);
-  tools::SceneOptions lighting = o.lighting;
-  lighting.apply(scene);
-  log::info("server", "lit by " + lighting.describe(scene));
-  EngineHost host(std::move(scene), o.scene, ho);
+  EngineHost host(load_lit_scene(o), o.scene, ho);
 
   ServerOptions so;
   so.bind = o.bind;
