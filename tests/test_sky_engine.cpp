@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <limits>
 #include <string>
 #include <vector>
@@ -374,6 +375,23 @@ TEST(SkyEngine, SceneOptionsParseAndRefuseBadValues) {
     EXPECT_NE(line.find("sun"), std::string::npos) << line;
     EXPECT_NE(line.find("sky 0.5,1,2 x 3"), std::string::npos) << line;
   }
+  // A map larger than the sky takes is refused from its header, before its pixels are read.
+  const std::string big =
+      (std::filesystem::temp_directory_path() / "irradcast_sky_big.exr").string();
+  write_exr(big, ImageRGB(kMaxSkyWidth + 1, 2));
+  const std::string tiny =
+      (std::filesystem::temp_directory_path() / "irradcast_sky_ok.exr").string();
+  write_exr(tiny, ImageRGB(4, 2));
+  {
+    tools::SceneOptions o;
+    o.sky = tiny;
+    o.sky_strength = 0.5f;
+    Scene scene = open_plane(glm::vec3(0.5f));
+    o.apply(scene);
+    EXPECT_EQ(scene.sky.map.width, 4);
+    EXPECT_EQ(scene.sky.source, tiny);
+    EXPECT_NE(o.describe(scene).find("sky map"), std::string::npos);
+  }
   struct Case {
     std::string sky, sun;
     float strength;
@@ -392,7 +410,8 @@ TEST(SkyEngine, SceneOptionsParseAndRefuseBadValues) {
                                          {"", "0,-1,0", 1.0f, "--sun"},
                                          {"", "0,-1,0,-3", 1.0f, "--sun"},
                                          {"", "0,-1,0,inf", 1.0f, "--sun"},
-                                         {"", "0,-1e30,1e30,1", 1.0f, "--sun"}}) {
+                                         {"", "0,-1e30,1e30,1", 1.0f, "--sun"},
+                                         {big, "", 1.0f, "4097x2"}}) {
     tools::SceneOptions o;
     o.sky = c.sky;
     o.sun = c.sun;
@@ -403,6 +422,12 @@ TEST(SkyEngine, SceneOptionsParseAndRefuseBadValues) {
       ADD_FAILURE() << c.sky << " " << c.sun << " accepted";
     } catch (const Error& e) {
       EXPECT_NE(std::string(e.what()).find(c.expect), std::string::npos) << e.what();
+      EXPECT_EQ(std::string(e.what()).find("--sky") == std::string::npos &&
+                    std::string(e.what()).find("--sun") == std::string::npos,
+                false)
+          << e.what();
     }
   }
+  std::filesystem::remove(big);
+  std::filesystem::remove(tiny);
 }

@@ -105,6 +105,8 @@ struct SceneOptions {
 
   // Puts the sky and the sun into `scene`. Throws irradcast::Error naming the bad option.
   void apply(Scene& scene) {
+    if (sky == "none") sky.clear();  // the defaults --help shows
+    if (sun == "none") sun.clear();
     if (!std::isfinite(sky_strength) || sky_strength < 0.0f)
       throw Error("--sky-strength must be a finite number >= 0, not " +
                   std::to_string(sky_strength));
@@ -114,7 +116,7 @@ struct SceneOptions {
       if (ends_with_nocase(sky, ".exr")) {
         sky_from_file = true;
         try {
-          s.map = read_exr(sky);
+          s.map = read_exr(sky, kMaxSkyWidth, kMaxSkyHeight);
         } catch (const Error& e) {
           throw Error("--sky " + sky + ": " + e.what());
         }

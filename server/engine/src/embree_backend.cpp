@@ -97,21 +97,22 @@ glm::vec3 radiance_at(const RadianceField& f, const Hit& h) {
 
 glm::vec3 EmbreeBackend::sky_direct(const PassInput& in, std::uint32_t i,
                                     std::uint64_t* traced) const {
-  // The mean of direct_samples sky estimates, from a stream of their own; each sample's first
-  // direction (the map's, or the cosine ray of a constant sky) and the map's cosine ray are
-  // stratified in their first coordinate.
+  // The mean of direct_samples sky estimates, from a stream of their own, stratified in the
+  // coordinate that matters most: the map sample's row (its u.y; elevation), and the cosine
+  // rays' sin^2 theta (their u.x, in the reverse order of strata for a map's second ray).
   const int n = in.params.direct_samples;
   const float inv = 1.0f / static_cast<float>(n);
+  const bool map = lights_->sky_distribution().valid();
   Rng rng = texel_rng(in.params, i, in.update, kSky, 0);
   glm::vec3 sum(0.0f);
   for (int s = 0; s < n; ++s) {
     const float a = (static_cast<float>(s) + rng.next_float()) * inv;
     const float b = rng.next_float();
-    const int t = n - 1 - s;  // the second ray takes the strata in the other order
-    const float c = (static_cast<float>(t) + rng.next_float()) * inv;
+    const float c = (static_cast<float>(n - 1 - s) + rng.next_float()) * inv;
+    const glm::vec4 u =
+        map ? glm::vec4(b, a, c, rng.next_float()) : glm::vec4(a, b, c, rng.next_float());
     sum += lights_->sky_irradiance(*rays_, in.texels.position[i], in.texels.normal[i],
-                                   in.texels.geo_normal[i], glm::vec4(a, b, c, rng.next_float()),
-                                   traced);
+                                   in.texels.geo_normal[i], u, traced);
   }
   return sum * inv;
 }
