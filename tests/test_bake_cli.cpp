@@ -2,10 +2,12 @@
 #include <nlohmann/json.hpp>
 
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "cli.h"
 #include "irradcast/common/image.h"
@@ -100,7 +102,8 @@ TEST(BakeCli, EveryMethodBakesAndNamesItself) {
     fs::path out = temp_dir(std::string("method_") + method);
     Result r = run_bake(std::string("--scene cornell --out ") + out.string() +
                         " --width 24 --height 24 --updates 2 --lightmap-spp 2"
-                        " --texels-per-scene 24 --quiet --method " + method);
+                        " --texels-per-scene 24 --quiet --method " +
+                        method);
     ASSERT_EQ(r.status, 0) << method << "\n" << r.output;
     std::ifstream f(out / "report.json");
     const nlohmann::json report = nlohmann::json::parse(f);
@@ -116,4 +119,68 @@ TEST(BakeCli, HelpListsTheOptions) {
   for (const char* opt :
        {"--scene", "--out", "--reference", "--camera", "--export-gltf", "--width"})
     EXPECT_NE(r.output.find(opt), std::string::npos) << opt;
+}
+
+// --sky (a colour or an EXR map), --sky-strength and --sun light a scene without lights, the
+// report records them, and bad values fail naming the option.
+TEST(BakeCli, SkyAndSunLightASceneFromTheCommandLine) {
+  fs::path out = temp_dir("sky");
+  fs::create_directories(out);
+  irradcast::ImageRGB map(8, 4);
+  for (glm::vec3& p : map.pixels) p = glm::vec3(0.5f, 0.7f, 1.0f);
+  const std::string exr = (out / "sky.exr").string();
+  irradcast::write_exr(exr, map);
+  // The Cornell box keeps its emitter; the sky and the sun come on top (what they light is
+  // tests/test_sky_engine.cpp's part): the log line and the report are what this checks.
+  for (const std::string& sky : {std::string("0.2,0.3,0.5"), exr}) {
+    fs::path dir = out / (sky == exr ? "map" : "colour");
+    Result r = run_bake("--scene cornell --out " + dir.string() + " --sky " + sky +
+                        " --sky-strength 2 --sun 0.3,-1,0.2,5 --width 16 --height 16"
+                        " --updates 1 --texels-per-scene 16");
+    ASSERT_EQ(r.status, 0) << r.output;
+    EXPECT_NE(r.output.find("lit by"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("sun travelling"), std::string::npos) << r.output;
+    std::ifstream f(dir / "report.json");
+    const nlohmann::json report = nlohmann::json::parse(f);
+    const nlohmann::json& scene = report["scene"];
+    EXPECT_EQ(scene["sky"]["strength"], 2.0) << scene.dump();
+    if (sky == exr) {
+      EXPECT_EQ(scene["sky"]["file"], exr) << scene.dump();
+      EXPECT_EQ(scene["sky"]["width"], 8);
+    } else {
+      EXPECT_NEAR(scene["sky"]["color"][2].get<double>(), 0.5, 1e-6) << scene.dump();
+    }
+    EXPECT_NEAR(scene["sun"]["irradiance"].get<double>(), 5.0, 1e-6) << scene.dump();
+    EXPECT_NEAR(scene["sun"]["direction"][1].get<double>(), -1.0 / std::sqrt(1.13), 1e-5);
+    EXPECT_EQ(scene["punctual_lights"], 1);
+  }
+  Result plain = run_bake("--scene cornell --out " + (out / "plain").string() +
+                          " --width 8 --height 8 --updates 1 --texels-per-scene 16");
+  ASSERT_EQ(plain.status, 0) << plain.output;
+  std::ifstream f(out / "plain" / "report.json");
+  const nlohmann::json report = nlohmann::json::parse(f);
+  EXPECT_TRUE(report["scene"]["sky"].is_null());
+  EXPECT_TRUE(report["scene"]["sun"].is_null());
+  struct Case {
+    std::string args, expect;
+  };
+  for (const Case& c : std::vector<Case>{
+           {"--sky 1,2", "--sky"},
+           {"--sky red", "--sky"},
+           {"--sky 1,-1,1", "--sky"},
+           {"--sky /nonexistent/sky.exr", "--sky"},
+           {"--sky 1,1,1 --sky-strength -2", "--sky-strength"},
+           {"--sky-strength 2", "--sky-strength"},
+           {"--sun 0,0,0,1", "--sun"},
+           {"--sun 0,-1,0", "--sun"},
+           {"--sun 0,-1,0,-5", "--sun"},
+       }) {
+    Result r = run_bake("--scene cornell --out " + (out / "bad").string() + " " + c.args);
+    EXPECT_NE(r.status, 0) << c.args;
+    EXPECT_NE(r.output.find(c.expect), std::string::npos) << c.args << "\n" << r.output;
+  }
+  Result help = run_bake("--help");
+  for (const char* opt : {"--sky", "--sky-strength", "--sun"})
+    EXPECT_NE(help.output.find(opt), std::string::npos) << opt;
+  fs::remove_all(out);
 }

@@ -8,6 +8,7 @@
 #include <stb_image_write.h>
 
 #include <cmath>
+#include <cstdint>
 #include <exception>
 
 #include "irradcast/common/error.h"
@@ -33,11 +34,17 @@ void write_exr(const std::string& path, const ImageRGB& image) {
   }
 }
 
-ImageRGB read_exr(const std::string& path) {
+ImageRGB read_exr(const std::string& path, int max_width, int max_height) {
   try {
     Imf::InputFile file(path.c_str());
     Imath::Box2i dw = file.header().dataWindow();
-    int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
+    const std::int64_t w64 = std::int64_t{dw.max.x} - dw.min.x + 1,
+                       h64 = std::int64_t{dw.max.y} - dw.min.y + 1;
+    if (w64 <= 0 || h64 <= 0 || w64 > max_width || h64 > max_height)
+      throw Error(path + ": EXR is " + std::to_string(w64) + "x" + std::to_string(h64) +
+                  " pixels, outside 1x1 .. " + std::to_string(max_width) + "x" +
+                  std::to_string(max_height));
+    const int w = static_cast<int>(w64), h = static_cast<int>(h64);
     ImageRGB image(w, h);
     Imf::FrameBuffer fb;
     char* base =
@@ -51,6 +58,8 @@ ImageRGB read_exr(const std::string& path) {
     file.setFrameBuffer(fb);
     file.readPixels(dw.min.y, dw.max.y);
     return image;
+  } catch (const Error&) {
+    throw;
   } catch (const std::exception& e) {
     throw Error(path + ": cannot read EXR: " + e.what());
   }

@@ -33,6 +33,7 @@
 #include "irradcast/engine/prepared_scene.h"
 #include "irradcast/engine/reference_lightmaps.h"
 #include "params_json.h"
+#include "scene_options.h"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
@@ -55,6 +56,7 @@ struct Options {
   int updates = 8;
   int lightmap_spp = 64;
   tools::EngineOptions engine;
+  tools::SceneOptions lighting;
   std::string tonemap = "reinhard";
   std::string exposure = "auto";
   int threads = 0;
@@ -119,8 +121,12 @@ ToneMapOptions tone_map_options(const Options& o) {
 // report (steps time themselves with `sw`).
 struct Bake {
   explicit Bake(const Options& options)
-      : o(options), ep(options.engine.params()), bo(options.engine.backend_options()) {}
+      : o(options),
+        lighting(options.lighting),
+        ep(options.engine.params()),
+        bo(options.engine.backend_options()) {}
   const Options& o;
+  tools::SceneOptions lighting;  // --sky, --sun: applied to the scene by load()
   const EngineParams ep;
   const BackendOptions bo;
   json report;
@@ -140,9 +146,11 @@ struct Bake {
 bool load(Bake& b, Scene& scene) {
   const Options& o = b.o;
   scene = load_scene(o.scene, o.detail, o.scene_root);
+  b.lighting.apply(scene);
   b.timings["load"] = b.sw.lap();
   log::info("bake", "scene '" + o.scene + "': " + std::to_string(scene.objects().size()) +
                         " objects, " + std::to_string(scene.triangle_count()) + " triangles");
+  log::info("bake", "lit by " + b.lighting.describe(scene));
   if (!o.export_gltf.empty()) {
     save_gltf(scene, o.export_gltf);
     log::info("bake", "exported the scene to " + o.export_gltf);
@@ -348,6 +356,24 @@ void compare_with_reference(Bake& b, const ImageRGB& view, const ImageRGB& ref,
                         std::to_string(err.rel_mse));
 }
 
+// The report's sky: null without one, else its colour or map file and its strength.
+json sky_json(const Sky& sky) {
+  if (!sky.enabled()) return nullptr;
+  json j = {{"strength", sky.strength}};
+  if (sky.map.width > 0)
+    j["file"] = sky.source, j["width"] = sky.map.width, j["height"] = sky.map.height;
+  else
+    j["color"] = {sky.color.x, sky.color.y, sky.color.z};
+  return j;
+}
+
+// The report's --sun: null without one, else its direction of travel and irradiance.
+json sun_json(const tools::SceneOptions& l) {
+  if (!l.has_sun) return nullptr;
+  return {{"direction", {l.sun_direction.x, l.sun_direction.y, l.sun_direction.z}},
+          {"irradiance", l.sun_irradiance}};
+}
+
 // Writes DIR/report.json: the scene, settings, atlas, timings and rays.
 void write_report(Bake& b, const PreparedScene& p, const ImageRGB& view, const ToneMapOptions& tm,
                   json lightmaps) {
@@ -358,7 +384,9 @@ void write_report(Bake& b, const PreparedScene& p, const ImageRGB& view, const T
                      {"objects", p.world().objects.size()},
                      {"triangles", p.scene().triangle_count()},
                      {"emissive_triangles", p.lights().emissive_triangles().size()},
-                     {"punctual_lights", p.world().lights.size()}};
+                     {"punctual_lights", p.world().lights.size()},
+                     {"sky", sky_json(p.scene().sky)},
+                     {"sun", sun_json(b.lighting)}};
   report["settings"] = {
       {"exposure_ev", std::log2(exposure_scale(view, tm))},
       {"width", o.width},
@@ -444,6 +472,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 1 << 20));
   app.add_option("--lightmap-spp", o.lightmap_spp, "reference method: samples per texel")
       ->check(CLI::Range(1, 1 << 20));
+  o.lighting.add_to(app);
   o.engine.add_to(app);
   app.add_option("--tonemap", o.tonemap, "reinhard | aces | clamp");
   app.add_option("--exposure", o.exposure, "auto (key 0.18) or exposure in stops");

@@ -15,14 +15,15 @@
 
 #include "engine_options.h"
 #include "irradcast/common/builtin.h"
-#include "irradcast/service/engine_host.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/engine/vulkan_device.h"
+#include "irradcast/service/engine_host.h"
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/metrics_text.h"
 #include "irradcast/service/net_server.h"
-#include "irradcast/common/progress.h"
-#include "irradcast/engine/vulkan_device.h"
+#include "scene_options.h"
 
 namespace {
 
@@ -51,6 +52,7 @@ struct Options {
   std::uint32_t max_clients = irradcast::ServerOptions().max_clients;
   std::uint32_t max_clients_per_peer = irradcast::ServerOptions().max_clients_per_peer;
   irradcast::tools::EngineOptions engine;
+  irradcast::tools::SceneOptions lighting;
 };
 
 // The control token for scene edits (docs/EDITS.md) and where it came from, for the log (the
@@ -78,6 +80,17 @@ std::pair<std::string, std::string> control_token(const Options& o) {
   return {"", ""};
 }
 
+// The scene with the --sky and --sun of the options; logs what lights it.
+irradcast::Scene load_lit_scene(const Options& o) {
+  using namespace irradcast;
+  log::info("server", "loading " + o.scene);
+  Scene scene = load_scene(o.scene, o.detail, o.scene_root);
+  tools::SceneOptions lighting = o.lighting;
+  lighting.apply(scene);
+  log::info("server", "lit by " + lighting.describe(scene));
+  return scene;
+}
+
 int run(const Options& o, sigset_t signals) {
   using namespace irradcast;
   log::set_level(log::parse_level(o.log_level));
@@ -101,8 +114,7 @@ int run(const Options& o, sigset_t signals) {
     throw Error("the control token from " + token_source + " has " + std::to_string(token.size()) +
                 " characters; it needs at least " + std::to_string(kMinTokenLength) +
                 " (e.g. head -c 18 /dev/urandom | base64)");
-  log::info("server", "loading " + o.scene);
-  EngineHost host(load_scene(o.scene, o.detail, o.scene_root), o.scene, ho);
+  EngineHost host(load_lit_scene(o), o.scene, ho);
 
   ServerOptions so;
   so.bind = o.bind;
@@ -279,6 +291,7 @@ int main(int argc, char** argv) {
   bool list_devices = false;
   app.add_flag("--list-devices", list_devices,
                "list the compute devices (Vulkan) and exit; the engine runs on Embree (CPU)");
+  o.lighting.add_to(app);
   o.engine.add_to(app);
   try {
     app.parse(argc, argv);

@@ -95,12 +95,35 @@ glm::vec3 radiance_at(const RadianceField& f, const Hit& h) {
   return f.world->albedo(h.object, h.triangle, h.u, h.v) * kInvPi * e;
 }
 
+glm::vec3 EmbreeBackend::sky_direct(const PassInput& in, std::uint32_t i,
+                                    std::uint64_t* traced) const {
+  // The mean of direct_samples sky estimates, from a stream of their own, stratified in the
+  // coordinate that matters most: the map sample's row (its u.y; elevation), and the cosine
+  // rays' sin^2 theta (their u.x, in the reverse order of strata for a map's second ray).
+  const int n = in.params.direct_samples;
+  const float inv = 1.0f / static_cast<float>(n);
+  const bool map = lights_->sky_distribution().valid();
+  Rng rng = texel_rng(in.params, i, in.update, kSky, 0);
+  glm::vec3 sum(0.0f);
+  for (int s = 0; s < n; ++s) {
+    const float a = (static_cast<float>(s) + rng.next_float()) * inv;
+    const float b = rng.next_float();
+    const float c = (static_cast<float>(n - 1 - s) + rng.next_float()) * inv;
+    const glm::vec4 u =
+        map ? glm::vec4(b, a, c, rng.next_float()) : glm::vec4(a, b, c, rng.next_float());
+    sum += lights_->sky_irradiance(*rays_, in.texels.position[i], in.texels.normal[i],
+                                   in.texels.geo_normal[i], u, traced);
+  }
+  return sum * inv;
+}
+
 PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& out) {
   auto start = Clock::now();
   out.assign(in.texels.size(), glm::vec3(0.0f));
   const int n = in.params.direct_samples;
   const bool area = !lights_->emissive_triangles().empty();
   const std::uint64_t punctual = in.world.lights.size();
+  const bool sky = lights_->has_sky();
   PassResult r;
   r.rays = for_each_texel(in, [&](std::uint32_t i) -> std::uint64_t {
     const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
@@ -116,8 +139,10 @@ PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& ou
       }
       e += sum / static_cast<float>(n);
     }
+    std::uint64_t traced = punctual + (area ? static_cast<std::uint64_t>(n) : 0u);
+    if (sky) e += sky_direct(in, i, &traced);
     out[i] = e;
-    return punctual + (area ? static_cast<std::uint64_t>(n) : 0u);
+    return traced;
   });
   r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return r;

@@ -39,6 +39,11 @@ glm::vec3 PathTracer::direct(glm::vec3 p, glm::vec3 n, glm::vec3 ng, Rng& rng,
     e += lights_->area_irradiance(*rays_, p, n, ng, glm::vec3(a, rng.next_float()));
     if (ray_count) *ray_count += 1;
   }
+  if (lights_->has_sky()) {
+    // Drawn only with a sky, so that sky-less paths keep their random numbers.
+    const glm::vec2 a = rng.next_2d(), b = rng.next_2d();
+    e += lights_->sky_irradiance(*rays_, p, n, ng, glm::vec4(a, b), ray_count);
+  }
   return e;
 }
 
@@ -56,7 +61,12 @@ glm::vec3 PathTracer::irradiance(glm::vec3 p, glm::vec3 n, glm::vec3 ng, int bou
   ray.origin = rays_->offset(p, ng, ray.direction);
   Hit h = rays_->intersect(ray);
   if (ray_count) *ray_count += 1;
-  if (!h.valid()) return e;
+  if (!h.valid()) {
+    // Without next-event estimation the sky is found by the rays that leave the scene.
+    if (!options_.next_event && lights_->has_sky())
+      e += kPi * lights_->sky()->radiance(ray.direction);
+    return e;
+  }
   // Cosine-weighted sampling: E = pi * L_in, one sample.
   glm::vec3 l_in = reflected(h, -ray.direction, bounces - 1, rng, ray_count);
   if (!options_.next_event) l_in += emitted(*world_, h, ray.direction);
@@ -83,7 +93,8 @@ glm::vec3 PathTracer::reflected(const Hit& h, glm::vec3 wo, int bounces, Rng& rn
 glm::vec3 PathTracer::radiance(const Ray& ray, Rng& rng, std::uint64_t* ray_count) const {
   Hit h = rays_->intersect(ray);
   if (ray_count) *ray_count += 1;
-  if (!h.valid()) return glm::vec3(0.0f);
+  if (!h.valid())
+    return lights_->has_sky() ? lights_->sky()->radiance(ray.direction) : glm::vec3(0.0f);
   return emitted(*world_, h, ray.direction) +
          reflected(h, -ray.direction, options_.indirect_bounces, rng, ray_count);
 }

@@ -27,6 +27,22 @@ glm::vec3 uniform_sphere(glm::vec2 u) {
   return {r * std::cos(phi), r * std::sin(phi), z};
 }
 
+// The integral of the sky's luminance over the sphere of directions (sr x W m^-2 sr^-1): 4 pi L
+// for a constant sky, the sum of luminance x solid angle over a map's texels.
+double sky_luminance_integral(const Sky& sky) {
+  if (sky.map.width <= 0 || sky.map.height <= 0)
+    return 4.0 * kPi * static_cast<double>(luminance(sky.color * sky.strength));
+  const int w = sky.map.width, h = sky.map.height;
+  const double texel = (2.0 * kPi / w) * (kPi / h);  // dphi dtheta
+  double sum = 0.0;
+  for (int y = 0; y < h; ++y) {
+    double row = 0.0;
+    for (int x = 0; x < w; ++x) row += luminance(sky.map.at(x, y));
+    sum += row * std::sin(kPi * (y + 0.5) / h);
+  }
+  return sum * texel * sky.strength;
+}
+
 bool inside(const Bounds& b, glm::vec3 p, float pad) {
   return p.x >= b.lo.x - pad && p.y >= b.lo.y - pad && p.z >= b.lo.z - pad && p.x <= b.hi.x + pad &&
          p.y <= b.hi.y + pad && p.z <= b.hi.z + pad;
@@ -50,7 +66,8 @@ VplMethod::VplMethod(const EngineParams& params, const World& world, const RaySc
 
 void VplMethod::build_emitters() {
   // Emitted flux (luminance) of every light: pi L A per side of an area triangle, 4 pi I for a
-  // point or spot light, E pi r^2 for a directional light through the scene's bounding sphere.
+  // point or spot light, E pi r^2 for a directional light through the scene's bounding sphere,
+  // and for the sky the integral of L over directions x pi r^2.
   std::vector<double> power;
   const auto& tris = lights_->emissive_triangles();
   const float total_area = lights_->total_area_power();  // sum of luminance(L) A (sides)
@@ -62,6 +79,8 @@ void VplMethod::build_emitters() {
     const double lum = luminance(l.intensity);
     power.push_back(l.type == Light::Type::Directional ? lum * kPi * r * r : lum * 4.0 * kPi);
   }
+  // The sky, last: its radiance through the disc across the scene's bounding sphere.
+  if (lights_->has_sky()) power.push_back(sky_luminance_integral(*lights_->sky()) * kPi * r * r);
   emitter_cdf_.assign(power.size(), 0.0f);
   emitter_pdf_.assign(power.size(), 0.0f);
   double total = 0.0;
@@ -86,6 +105,70 @@ float VplMethod::dim(std::uint64_t index, int d) const {
   return rng.next_float();
 }
 
+VplMethod::PathOrigin VplMethod::emit(std::size_t e, float pdf, float side_u, glm::vec2 up,
+                                      glm::vec2 ud) const {
+  PathOrigin o;
+  glm::vec3 &origin = o.origin, &direction = o.direction, &flux = o.flux;
+  // A point on the disc of radius r across the scene's bounding sphere, facing `direction`.
+  const float r = 0.5f * glm::length(world_->bounds.extent()) * 1.01f;
+  auto disc = [&] {
+    const Frame f(-direction);
+    const float rad = r * std::sqrt(up.x), phi = 2.0f * kPi * up.y;
+    origin = world_->bounds.center() - direction * r + f.t * (rad * std::cos(phi)) +
+             f.b * (rad * std::sin(phi));
+  };
+  if (e < area_count_) {
+    const EmissiveTriangle& t = lights_->emissive_triangles()[e];
+    const glm::vec2 b = uniform_triangle(up);
+    origin = t.p0 + b.x * t.e1 + b.y * t.e2;
+    glm::vec3 n = t.normal;
+    float sides = 1.0f;
+    if (t.double_sided) {
+      sides = 2.0f;
+      if (side_u >= 0.5f) n = -n;
+    }
+    direction = Frame(n).to_world(cosine_hemisphere(ud));
+    // L cos / (pick pdf x 1/A x cos/pi x 1/sides)
+    flux = world_->emission(t.object, t.triangle, b.x, b.y) * (kPi * t.area * sides / pdf);
+    origin = rays_->offset(origin, n, direction);
+  } else if (e >= area_count_ + world_->lights.size()) {
+    // The sky: a direction toward it by the map's luminance (uniform for a constant sky), the
+    // path travelling the other way from the disc: L / (pick pdf x direction pdf x 1/(pi r^2)).
+    const Sky& sky = *lights_->sky();
+    const SkyDistribution& dist = lights_->sky_distribution();
+    glm::vec3 to_sky = uniform_sphere(ud);
+    float dir_pdf = 1.0f / (4.0f * kPi);
+    if (dist.valid()) {
+      const SkyDistribution::Sample s = dist.sample(ud);
+      to_sky = s.direction;
+      dir_pdf = s.pdf;
+    }
+    if (!(dir_pdf > 0.0f)) return o;  // no flux: the path ends at once
+    direction = -to_sky;
+    disc();
+    flux = sky.radiance(to_sky) * (kPi * r * r / (pdf * dir_pdf));
+  } else {
+    const WorldLight* punctual = &world_->lights[e - area_count_];
+    if (punctual->type == Light::Type::Directional) {
+      direction = punctual->direction;
+      disc();
+      flux = punctual->intensity * (kPi * r * r / pdf);
+    } else {
+      o.point = punctual;
+      origin = punctual->position;
+      direction = uniform_sphere(ud);
+      flux = punctual->intensity * (4.0f * kPi / pdf);
+      if (punctual->type == Light::Type::Spot) {
+        const float cd = glm::dot(punctual->direction, direction);
+        const float denom = std::max(1e-4f, punctual->cos_inner - punctual->cos_outer);
+        const float t = glm::clamp((cd - punctual->cos_outer) / denom, 0.0f, 1.0f);
+        flux *= t * t;
+      }
+    }
+  }
+  return o;
+}
+
 std::uint64_t VplMethod::shoot(std::size_t p, std::uint64_t index) {
   const auto k0 = p * static_cast<std::size_t>(depth_);
   for (int k = 0; k < depth_; ++k) vpls_[k0 + static_cast<std::size_t>(k)] = VirtualPointLight{};
@@ -104,47 +187,10 @@ std::uint64_t VplMethod::shoot(std::size_t p, std::uint64_t index) {
   const float side_u = (u - below) / pdf;
   const glm::vec2 up(dim(index, kPoint), dim(index, kPoint + 1));
   const glm::vec2 ud(dim(index, kDirection), dim(index, kDirection + 1));
-
-  glm::vec3 origin, direction, flux;
-  bool point_light = false;
-  const WorldLight* punctual = nullptr;
-  if (e < area_count_) {
-    const EmissiveTriangle& t = lights_->emissive_triangles()[e];
-    const glm::vec2 b = uniform_triangle(up);
-    origin = t.p0 + b.x * t.e1 + b.y * t.e2;
-    glm::vec3 n = t.normal;
-    float sides = 1.0f;
-    if (t.double_sided) {
-      sides = 2.0f;
-      if (side_u >= 0.5f) n = -n;
-    }
-    direction = Frame(n).to_world(cosine_hemisphere(ud));
-    // L cos / (pick pdf x 1/A x cos/pi x 1/sides)
-    flux = world_->emission(t.object, t.triangle, b.x, b.y) * (kPi * t.area * sides / pdf);
-    origin = rays_->offset(origin, n, direction);
-  } else {
-    punctual = &world_->lights[e - area_count_];
-    if (punctual->type == Light::Type::Directional) {
-      const float r = 0.5f * glm::length(world_->bounds.extent()) * 1.01f;
-      direction = punctual->direction;
-      const Frame f(-direction);
-      const float rad = r * std::sqrt(up.x), phi = 2.0f * kPi * up.y;
-      origin = world_->bounds.center() - direction * r + f.t * (rad * std::cos(phi)) +
-               f.b * (rad * std::sin(phi));
-      flux = punctual->intensity * (kPi * r * r / pdf);
-    } else {
-      point_light = true;
-      origin = punctual->position;
-      direction = uniform_sphere(ud);
-      flux = punctual->intensity * (4.0f * kPi / pdf);
-      if (punctual->type == Light::Type::Spot) {
-        const float cd = glm::dot(punctual->direction, direction);
-        const float denom = std::max(1e-4f, punctual->cos_inner - punctual->cos_outer);
-        const float t = glm::clamp((cd - punctual->cos_outer) / denom, 0.0f, 1.0f);
-        flux *= t * t;
-      }
-    }
-  }
+  const PathOrigin from = emit(e, pdf, side_u, up, ud);
+  glm::vec3 origin = from.origin, direction = from.direction, flux = from.flux;
+  const bool point_light = from.point != nullptr;
+  const WorldLight* punctual = from.point;
   starts_[p].origin = origin;
   starts_[p].live = true;
   std::uint64_t traced = 0;

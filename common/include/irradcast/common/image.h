@@ -25,7 +25,9 @@ struct ImageRGB {
 
 // Throws irradcast::Error naming the file on failure.
 void write_exr(const std::string& path, const ImageRGB& image);
-ImageRGB read_exr(const std::string& path);
+// Throws irradcast::Error naming `path` if the file is not a readable EXR or (checked before
+// anything is allocated) its size is not positive or exceeds max_width x max_height.
+ImageRGB read_exr(const std::string& path, int max_width = 1 << 30, int max_height = 1 << 30);
 // rgb8: width * height * 3 bytes, sRGB encoded.
 void write_png(const std::string& path, int width, int height,
                const std::vector<std::uint8_t>& rgb8);

@@ -12,8 +12,9 @@ namespace irradcast {
 // (bench/engine does, to time them through raw Embree).
 namespace embree_sampling {
 
-// Stream ids keep each pass's random numbers independent of the others'.
-enum Stream : std::uint64_t { kDirect = 1, kProbe = 2, kScatter = 3, kProbePick = 4 };
+// Stream ids keep each pass's random numbers independent of the others'. kSky: the direct pass's
+// sky samples, drawn only when the scene has a sky (so sky-less results do not change).
+enum Stream : std::uint64_t { kDirect = 1, kProbe = 2, kScatter = 3, kProbePick = 4, kSky = 5 };
 
 // The random stream of one texel (or probe) in one pass of one update.
 Rng texel_rng(const EngineParams& p, std::uint64_t index, std::uint32_t update, Stream stream,
@@ -44,6 +45,10 @@ class EmbreeBackend final : public TraceBackend {
                      std::vector<glm::vec3>& out) override;
 
  private:
+  // Texel i's direct irradiance from the sky (the mean of direct_samples sky_irradiance
+  // estimates); adds the rays it traced to *traced.
+  glm::vec3 sky_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced) const;
+
   const RayScene* rays_;
   const LightSampler* lights_;
 };

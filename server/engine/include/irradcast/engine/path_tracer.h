@@ -1,7 +1,7 @@
 // The reference path tracer: per-viewpoint Monte Carlo path tracing of the same Lambertian scene
 // with the same lights and the same bounce count as the GI engine (1 direct + K indirect), with
-// next-event estimation at every vertex. It is the ground truth of the quality tests and the
-// per-user baseline of the scaling benchmark.
+// next-event estimation at every vertex (area lights, punctual lights and the sky). It is the
+// ground truth of the quality tests and the per-user baseline of the scaling benchmark.
 #pragma once
 
 #include <cstdint>
@@ -19,8 +19,9 @@ namespace irradcast {
 
 struct PathTracerOptions {
   int indirect_bounces = 2;  // K: paths carry 1 direct + K indirect bounces
-  bool next_event = true;    // false: pure cosine-sampled paths that must hit the emitters
-                             // (area lights only; an independent estimator for cross-checks)
+  bool next_event = true;    // false: pure cosine-sampled paths that must hit the emitters or
+                             // leave the scene to the sky (area lights and sky only; an
+                             // independent estimator for cross-checks)
   std::uint64_t seed = 1;
 };
 
@@ -30,7 +31,8 @@ class PathTracer {
              PathTracerOptions options = {});
 
   // One-sample estimate of the radiance arriving along `ray` (emission at the first hit plus
-  // its reflected light with the configured bounces). Rays traced are added to *ray_count.
+  // its reflected light with the configured bounces; the sky's radiance if it hits nothing).
+  // Rays traced are added to *ray_count.
   glm::vec3 radiance(const Ray& ray, Rng& rng, std::uint64_t* ray_count = nullptr) const;
 
   // One-sample estimate of the irradiance at surface point p (unit normal n, geometric normal

@@ -1,6 +1,7 @@
 // Instant radiosity / instant global illumination (seeds 003 and 000; docs/METHODS.md): light
-// paths from the lights leave virtual point lights (VPLs) where they hit surfaces, and every
-// texel gathers the VPLs with shadow rays. Bounce k is the light of the VPLs k hits from a light.
+// paths from the lights (emitters, punctual lights, the sky) leave virtual point lights (VPLs)
+// where they hit surfaces, and every texel gathers the VPLs with shadow rays. Bounce k is the light
+// of the VPLs k hits from a light.
 //   - Quasi-random paths: a scrambled Halton sequence picks the light, the point, the direction
 //     and each bounce's direction (seed 003 section 8.3.5, Keller's instant radiosity).
 //   - A pool of EngineParams::vpl_paths paths in strided temporal sets, one gathered per update
@@ -53,7 +54,13 @@ class VplMethod final : public IndirectMethod {
     glm::vec3 origin{0.0f};  // the point on the light (the first VPL's parent)
     bool live = false;
   };
+  // Where a path leaves emitter e (picked with probability pdf): its first ray and flux.
+  struct PathOrigin {
+    glm::vec3 origin{0.0f}, direction{0.0f, 0.0f, -1.0f}, flux{0.0f};
+    const WorldLight* point = nullptr;  // a point or spot light (its range window applies)
+  };
   void build_emitters();
+  PathOrigin emit(std::size_t e, float pdf, float side_u, glm::vec2 up, glm::vec2 ud) const;
   // Traces path `p` with Halton index `index` and fills its VPLs; returns the rays traced.
   std::uint64_t shoot(std::size_t p, std::uint64_t index);
   float dim(std::uint64_t index, int d) const;
@@ -64,7 +71,8 @@ class VplMethod final : public IndirectMethod {
   const RayScene* rays_;
   const LightSampler* lights_;
   int depth_ = 1;  // VPLs per path = indirect bounces
-  // Emitters: area triangles (by LightSampler index) and punctual lights, picked by power.
+  // Emitters: area triangles (by LightSampler index), punctual lights and the sky (last, when
+  // there is one), picked by power.
   std::vector<float> emitter_cdf_, emitter_pdf_;
   std::size_t area_count_ = 0;
   std::vector<float> shifts_;  // Cranley-Patterson rotation per Halton dimension
