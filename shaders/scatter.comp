@@ -1,9 +1,9 @@
 #version 450
 #extension GL_GOOGLE_include_directive : require
 // One indirect bounce per texel: cosine-weighted hemisphere rays within the tracing range read
-// the previous bounce at their hits; rays that reach the range read one of the texel's probes,
-// picked by weight, and a texel that sees no probe traces its rays to their hit
-// (EmbreeBackend::scatter).
+// the previous bounce at their hits; rays that reach the range inside the scene read one of the
+// texel's probes, picked by weight, rays that leave the scene bring nothing, and a texel that
+// sees no probe traces its rays to their hit (EmbreeBackend::scatter, embree_sampling::scatter_miss).
 #include "common.glsl"
 
 const uint STREAM_SCATTER = 3u, STREAM_PROBE_PICK = 4u;
@@ -24,14 +24,15 @@ vec3 sample_probe(uint probe, vec3 dir) {
   return mix(top, bottom, a.y);
 }
 
-vec3 exit_point(vec3 p, vec3 d) {
+// embree_sampling::exit_distance: how far p + t d runs inside the (slightly enlarged) bounds.
+float exit_distance(vec3 p, vec3 d) {
   vec3 pad = 1e-3 * max(pc.bounds_hi - pc.bounds_lo, vec3(1e-6));
   float t = 3.4e38;
   for (int k = 0; k < 3; ++k) {
     if (d[k] > 0.0) t = min(t, (pc.bounds_hi[k] + pad[k] - p[k]) / d[k]);
     if (d[k] < 0.0) t = min(t, (pc.bounds_lo[k] - pad[k] - p[k]) / d[k]);
   }
-  return p + max(t, 0.0) * d;
+  return max(t, 0.0);
 }
 
 void main() {
@@ -55,7 +56,10 @@ void main() {
     if (h.object >= 0) {
       sum += radiance_at(h);
     } else if (use_probes && count > 0u) {
-      vec3 q = fixed_distance ? p + pc.extent * d : exit_point(p, d);
+      // A ray that left the scene within the range brings nothing (embree_sampling::scatter_miss).
+      float exit = exit_distance(p, d);
+      if (exit <= pc.range) continue;
+      vec3 q = fixed_distance ? p + pc.extent * d : p + exit * d;
       float u = next_float(pick);
       float acc = 0.0;
       uint k = count - 1u;

@@ -113,27 +113,12 @@ double mean_e(const std::vector<Lightmap>& maps, const TexelGBuffer& g) {
   return n ? sum / static_cast<double>(n) : 0.0;
 }
 
-// Whether the engine's direct pass adds the sky's light yet (LightSampler::sky_irradiance in
-// EmbreeBackend::direct, issue 18: the sky-cpu branch). The lighting checks below need it.
-// TODO(issue 18): remove this guard and its GTEST_SKIPs once the sky-cpu branch is merged.
-bool direct_pass_has_sky() {
-  Scene s = open_plane();
-  s.sky.color = glm::vec3(1.0f);
-  test::EngineSetup setup(std::move(s), 16.0f);
-  auto engine = setup.engine(EngineParams{});
-  engine->update();
-  return mean_e(engine->lightmaps(), setup.gbuffers[0]) > 0.0;
-}
-
 }  // namespace
 
 TEST(EditService, SkyColourEditRelightsEveryTexelToPiTimesTheNewSky) {
   // Open plane under a constant sky of radiance L: E = pi L at every texel (each cosine ray
   // escapes, so every sample is exactly pi L; nothing bounces back). After an edit to L' every
   // texel restarts and converges to pi L', with no trace of L.
-  if (!direct_pass_has_sky()) {
-    GTEST_SKIP() << "the direct pass does not add the sky yet (sky-cpu branch of issue 18)";
-  }
   Scene s = open_plane();
   s.sky.color = glm::vec3(0.2f);
   test::EngineSetup setup(std::move(s), 16.0f);
@@ -483,20 +468,18 @@ TEST(EditService, ASkyFileEditReachesViewersAsBackgroundAndLight) {
     }
   EXPECT_GT(sky_pixels, 100);
   // The light: the plane sees the upper half, mostly 0.5 x 2 = 1 (the bright texel adds a
-  // little): E within [pi x 1, pi x 1.3]. Needs the sky in the direct pass.
-  if (direct_pass_has_sky()) {
-    const auto until = std::chrono::steady_clock::now() + 20s;
-    double e = 0.0;
-    while (std::chrono::steady_clock::now() < until) {
-      viewer.poll(50ms);
-      const Lightmap& m = viewer.lightmaps().at(0);  // its middle texel: inside the chart
-      const glm::vec3 t = m.texels[static_cast<std::size_t>(m.height / 2 * m.width + m.width / 2)];
-      e = (t.x + t.y + t.z) / 3.0;
-      if (e > 0.9 * kPi) break;
-    }
-    EXPECT_GE(e, 0.97 * kPi);
-    EXPECT_LE(e, 1.3 * kPi);
+  // little): E within [pi x 1, pi x 1.3].
+  const auto until = std::chrono::steady_clock::now() + 20s;
+  double e = 0.0;
+  while (std::chrono::steady_clock::now() < until) {
+    viewer.poll(50ms);
+    const Lightmap& m = viewer.lightmaps().at(0);  // its middle texel: inside the chart
+    const glm::vec3 t = m.texels[static_cast<std::size_t>(m.height / 2 * m.width + m.width / 2)];
+    e = (t.x + t.y + t.z) / 3.0;
+    if (e > 0.9 * kPi) break;
   }
+  EXPECT_GE(e, 0.97 * kPi);
+  EXPECT_LE(e, 1.3 * kPi);
   viewer.close();
   server.stop();
   host.stop();

@@ -112,9 +112,17 @@ TEST(Leaks, ClosedBoxUnderTheSunIsBlackInside) {
     return n.y > 0.9f && p.y < 1e-3f && std::abs(p.x) > 3.0f;
   });
   ASSERT_GT(inside.texels, 300u);
-  // No path leads inside: any light there is a leak. The sunlit ground is lit as it should be.
+  // No path leads inside: any light there is a leak.
   EXPECT_EQ(inside.max, 0.0) << "mean " << inside.mean;
-  EXPECT_GT(ground.mean, 0.9 * kSunIrradiance * -kSunTravel.y);
+  // The ground (partly in the box's shadow) is lit as the unbiased mode lights it: the sun and
+  // the little the box reflects; rays that leave the scene bring nothing (measured 1.361 against
+  // 1.345 at 2 updates; before such rays stopped reading probes it was over 1.389).
+  EngineParams unbiased;
+  unbiased.tracing_range = std::numeric_limits<float>::infinity();
+  const Group traced = group(s, bake(s, 2, unbiased), [](glm::vec3 p, glm::vec3 n) {
+    return n.y > 0.9f && p.y < 1e-3f && std::abs(p.x) > 3.0f;
+  });
+  EXPECT_NEAR(ground.mean, traced.mean, 0.02 * traced.mean);
 }
 
 TEST(Leaks, BoxWithAWindowIsLitOnlyThroughIt) {

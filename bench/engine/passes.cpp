@@ -129,13 +129,12 @@ Capture capture_probes(const PassInput& in) {
 Capture capture_scatter(const RayScene& rays, const PassInput& in) {
   Capture c;
   const int n = in.params.indirect_samples;
-  const float extent = in.world.bounds.max_extent();
-  const float range = in.params.unbiased() ? 3.4e38f : in.params.tracing_range * extent;
   c.rays.reserve(in.texels.size() * static_cast<std::size_t>(n));
   for_each_texel_in_order(in, [&](std::uint32_t i) {
     const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
                     ng = in.texels.geo_normal[i];
     Rng rng = texel_rng(in.params, i, in.update, kScatter, in.bounce);
+    const float range = scatter_range(in, i);
     Frame frame(nrm);
     for (int s = 0; s < n; ++s) {
       glm::vec3 dir = frame.to_world(cosine_hemisphere(rng.next_2d()));
@@ -253,9 +252,6 @@ void shade_scatter(const RayScene& rays, const PassInput& in, const RadianceFiel
                    std::vector<glm::vec3>& est) {
   std::vector<Hit> hits = intersect_all(rays, c);
   const int n = in.params.indirect_samples;
-  const float extent = in.world.bounds.max_extent();
-  const bool unbiased = in.params.unbiased();
-  const bool fixed = in.params.distant_point == DistantPoint::FixedDistance;
   est.assign(in.texels.size(), glm::vec3(0.0f));
   for (std::size_t r0 = 0; r0 < c.rays.size(); r0 += static_cast<std::size_t>(n)) {
     const std::uint32_t i = c.owner[r0];
@@ -264,19 +260,8 @@ void shade_scatter(const RayScene& rays, const PassInput& in, const RadianceFiel
     glm::vec3 sum(0.0f);
     for (int s = 0; s < n; ++s) {
       const Hit& h = hits[r0 + s];
-      const glm::vec3 d = c.rays[r0 + s].dir;
-      if (h.valid()) {
-        sum += radiance_at(prev, h);
-      } else if (!unbiased && !in.probe_weights.empty()) {
-        // One probe picked by weight from the texel's own stream (EmbreeBackend::scatter).
-        glm::vec3 q = fixed ? p + extent * d : exit_point(in.world.bounds, p, d);
-        const ProbeWeights& w = in.probe_weights[i];
-        const int k = pick_probe(w, pick.next_float());
-        glm::vec3 dd = q - in.probes.position[w.probe[k]];
-        float len = glm::length(dd);
-        if (len > 0.0f)
-          sum += sample_probe(probe_radiance, w.probe[k], in.probes.resolution, dd / len);
-      }
+      sum += h.valid() ? radiance_at(prev, h)
+                       : scatter_miss(in, probe_radiance, i, p, c.rays[r0 + s].dir, pick);
     }
     est[i] = sum * (kPi / static_cast<float>(n));
   }

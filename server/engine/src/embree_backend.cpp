@@ -33,14 +33,45 @@ glm::vec3 sample_probe(const std::vector<glm::vec3>& radiance, std::size_t probe
                   glm::mix(at(x, y + 1), at(x + 1, y + 1), a.x), a.y);
 }
 
-glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d) {
+float exit_distance(const Bounds& b, glm::vec3 p, glm::vec3 d) {
   glm::vec3 pad = 1e-3f * glm::max(b.extent(), glm::vec3(1e-6f));
   float t = 3.4e38f;
   for (int a = 0; a < 3; ++a) {
     if (d[a] > 0.0f) t = std::min(t, (b.hi[a] + pad[a] - p[a]) / d[a]);
     if (d[a] < 0.0f) t = std::min(t, (b.lo[a] - pad[a] - p[a]) / d[a]);
   }
-  return p + std::max(t, 0.0f) * d;
+  return std::max(t, 0.0f);
+}
+
+glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d) {
+  return p + exit_distance(b, p, d) * d;
+}
+
+float scatter_range(const PassInput& in, std::uint32_t i) {
+  const bool probes =
+      !in.params.unbiased() && !in.probe_weights.empty() && in.probe_weights[i].count > 0;
+  return probes ? in.params.tracing_range * in.world.bounds.max_extent() : 3.4e38f;
+}
+
+glm::vec3 scatter_miss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance,
+                       std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng& pick) {
+  if (in.params.unbiased() || in.probe_weights.empty() || in.probe_weights[i].count == 0)
+    return glm::vec3(0.0f);
+  const float range = in.params.tracing_range * in.world.bounds.max_extent();
+  const float exit = exit_distance(in.world.bounds, p, d);
+  if (exit <= range) return glm::vec3(0.0f);  // it left the scene: nothing out there
+  // One probe, picked with probability equal to its interpolation weight: the same expectation
+  // as the weighted sum over all (up to 8) of them, at one lookup instead of eight; over many
+  // rays and updates the choice averages out.
+  const glm::vec3 q = in.params.distant_point == DistantPoint::FixedDistance
+                          ? p + in.world.bounds.max_extent() * d
+                          : p + exit * d;
+  const ProbeWeights& w = in.probe_weights[i];
+  const int k = pick_probe(w, pick.next_float());
+  const glm::vec3 to = q - in.probes.position[w.probe[k]];
+  const float len = glm::length(to);
+  return len > 0.0f ? sample_probe(probe_radiance, w.probe[k], in.probes.resolution, to / len)
+                    : glm::vec3(0.0f);
 }
 
 glm::vec3 probe_direction(std::size_t t, int res, glm::vec2 jitter) {
@@ -185,11 +216,6 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
   auto start = Clock::now();
   out.assign(in.texels.size(), glm::vec3(0.0f));
   const int n = in.params.indirect_samples;
-  const float extent = in.world.bounds.max_extent();
-  const bool unbiased = in.params.unbiased();
-  const float range = unbiased ? 3.4e38f : in.params.tracing_range * extent;
-  const bool fixed = in.params.distant_point == DistantPoint::FixedDistance;
-  const int res = in.probes.resolution;
   PassResult r;
   r.rays = for_each_texel(in, [&](std::uint32_t i) -> std::uint64_t {
     const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
@@ -198,31 +224,17 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
     // A stream of its own for probe choices, so the ray directions do not depend on which rays
     // missed.
     Rng pick = texel_rng(in.params, i, in.update, kProbePick, in.bounce);
-    // A texel that sees no probe (ProbeWeights::count 0) traces its rays to their hit.
-    const bool weighed = !unbiased && !in.probe_weights.empty();
-    const bool probes = weighed && in.probe_weights[i].count > 0;
+    const float range = scatter_range(in, i);
     Frame frame(nrm);
     glm::vec3 sum(0.0f);
     for (int s = 0; s < n; ++s) {
       Ray ray;
       ray.direction = frame.to_world(cosine_hemisphere(rng.next_2d()));
       ray.origin = rays_->offset(p, ng, ray.direction);
-      ray.tmax = weighed && !probes ? 3.4e38f : range;
+      ray.tmax = range;
       Hit h = rays_->intersect(ray);
-      if (h.valid()) {
-        sum += radiance_at(prev, h);
-      } else if (probes) {
-        // One probe, picked with probability equal to its interpolation weight: the same
-        // expectation as the weighted sum over all (up to 8) of them, at one lookup instead of
-        // eight; over many rays and updates the choice averages out.
-        glm::vec3 q =
-            fixed ? p + extent * ray.direction : exit_point(in.world.bounds, p, ray.direction);
-        const ProbeWeights& w = in.probe_weights[i];
-        const int k = pick_probe(w, pick.next_float());
-        glm::vec3 d = q - in.probes.position[w.probe[k]];
-        float len = glm::length(d);
-        if (len > 0.0f) sum += sample_probe(probe_radiance, w.probe[k], res, d / len);
-      }
+      sum += h.valid() ? radiance_at(prev, h)
+                       : scatter_miss(in, probe_radiance, i, p, ray.direction, pick);
     }
     // Cosine-weighted sampling: E = pi / N * sum L.
     out[i] = sum * (kPi / static_cast<float>(n));

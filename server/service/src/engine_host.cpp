@@ -55,7 +55,7 @@ SceneEdit read_sky_files(SceneEdit edit, const std::string& sky_dir) {
     const std::string path = confined_file(sky_dir, op.target, where + ": the sky file");
     Sky sky;
     try {
-      sky.map = read_exr(path);
+      sky.map = read_exr(path, kMaxSkyWidth, kMaxSkyHeight);
     } catch (const Error& e) {
       std::string why = e.what();  // "<path>: cannot read EXR: ...": the client sees no path
       if (why.rfind(path, 0) == 0) why = why.substr(std::min(why.size(), path.size() + 2));

@@ -22,8 +22,19 @@ Rng texel_rng(const EngineParams& p, std::uint64_t index, std::uint32_t update, 
 // A probe's radiance in direction dir, bilinear in its octahedral map (res x res per probe).
 glm::vec3 sample_probe(const std::vector<glm::vec3>& radiance, std::size_t probe, int res,
                        glm::vec3 dir);
-// Where a ray leaving p along d leaves the scene's bounds (slightly enlarged).
+// How far a ray from p along d runs until it leaves the scene's bounds (slightly enlarged), and
+// the point where it does.
+float exit_distance(const Bounds& b, glm::vec3 p, glm::vec3 d);
 glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d);
+// The length of texel i's scatter rays: the tracing range, or unbounded where no probe stands in
+// for what lies beyond it (the unbiased mode; a texel that sees no probe).
+float scatter_range(const PassInput& in, std::uint32_t i);
+// What a scatter ray of texel i from p along d that hit nothing within scatter_range() brings:
+// nothing if it left the scene's bounds within that length (nothing lies out there: a sky is
+// direct light, counted by the direct pass), else the radiance toward the distant point of one
+// of the texel's probes, picked by weight with `pick`.
+glm::vec3 scatter_miss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance,
+                       std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng& pick);
 // The direction of a probe's gather ray for octahedral texel t (res x res), jittered.
 glm::vec3 probe_direction(std::size_t t, int res, glm::vec2 jitter);
 // One of a texel's probes, chosen with probability equal to its weight (u uniform in [0, 1)).
