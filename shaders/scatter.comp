@@ -2,8 +2,8 @@
 #extension GL_GOOGLE_include_directive : require
 // One indirect bounce per texel: cosine-weighted hemisphere rays within the tracing range read
 // the previous bounce at their hits; rays that reach the range read one of the texel's probes,
-// picked by weight, and a texel that sees no probe traces its rays to their hit
-// (EmbreeBackend::scatter).
+// picked by weight (rays that leave the scene's bounds within the range are true misses), and a
+// texel that sees no probe traces its rays to their hit (EmbreeBackend::scatter).
 #include "common.glsl"
 
 const uint STREAM_SCATTER = 3u, STREAM_PROBE_PICK = 4u;
@@ -55,7 +55,10 @@ void main() {
     if (h.object >= 0) {
       sum += radiance_at(h);
     } else if (use_probes && count > 0u) {
-      vec3 q = fixed_distance ? p + pc.extent * d : exit_point(p, d);
+      // A ray that leaves the bounds within the range is a true miss (EmbreeBackend::scatter).
+      vec3 exit_p = exit_point(p, d);
+      if (dot(exit_p - p, d) <= pc.range) continue;
+      vec3 q = fixed_distance ? p + pc.extent * d : exit_p;
       float u = next_float(pick);
       float acc = 0.0;
       uint k = count - 1u;

@@ -187,11 +187,15 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
       if (h.valid()) {
         sum += radiance_at(prev, h);
       } else if (probes) {
+        // A ray that leaves the scene's bounds within the range has passed everything it could
+        // hit: a true miss (no bounce radiance), not the probes' business. Looking a probe up
+        // here lit the faces next to an opening (cornell's front) with the probes' view inside.
+        const glm::vec3 exit = exit_point(in.world.bounds, p, ray.direction);
+        if (glm::dot(exit - p, ray.direction) <= range) continue;
         // One probe, picked with probability equal to its interpolation weight: the same
         // expectation as the weighted sum over all (up to 8) of them, at one lookup instead of
         // eight; over many rays and updates the choice averages out.
-        glm::vec3 q =
-            fixed ? p + extent * ray.direction : exit_point(in.world.bounds, p, ray.direction);
+        glm::vec3 q = fixed ? p + extent * ray.direction : exit;
         const ProbeWeights& w = in.probe_weights[i];
         const int k = pick_probe(w, pick.next_float());
         glm::vec3 d = q - in.probes.position[w.probe[k]];
