@@ -453,7 +453,9 @@ int main(int argc, char** argv) {
       "--reference, DIR/reference.exr and DIR/reference.png.",
       "irradcast-bake"};
   app.option_defaults()->always_capture_default();
-  app.add_option("--scene", o.scene, "cornell | rooms:N | FILE.gltf | FILE.glb");
+  app.add_option("--scene", o.scene,
+                 "cornell | rooms:N | sponza (the shared sample data, with a sky and a sun) | "
+                 "FILE.gltf | FILE.glb");
   app.add_option(
       "--scene-root", o.scene_root,
       "folder a glTF scene may read buffers and images from (default: the scene file's folder)");

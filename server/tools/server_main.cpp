@@ -226,7 +226,9 @@ int main(int argc, char** argv) {
       "token it also takes live scene edits (irradcast-edit, docs/EDITS.md).",
       "irradcast-server"};
   app.option_defaults()->always_capture_default();
-  app.add_option("--scene", o.scene, "cornell | rooms:N | FILE.gltf | FILE.glb");
+  app.add_option("--scene", o.scene,
+                 "cornell | rooms:N | sponza (the shared sample data, with a sky and a sun) | "
+                 "FILE.gltf | FILE.glb");
   app.add_option("--detail", o.detail, "tessellation of rooms:N")->check(CLI::PositiveNumber);
   app.add_option(
       "--scene-root", o.scene_root,
