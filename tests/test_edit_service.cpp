@@ -468,15 +468,16 @@ TEST(EditService, ASkyFileEditReachesViewersAsBackgroundAndLight) {
     }
   EXPECT_GT(sky_pixels, 100);
   // The light: the plane sees the upper half, mostly 0.5 x 2 = 1 (the bright texel adds a
-  // little): E within [pi x 1, pi x 1.3].
-  const auto until = std::chrono::steady_clock::now() + 20s;
+  // little): E within [pi x 1, pi x 1.3], once the restarted texels have blended from the old
+  // sky's value to the new estimate (a slow machine, ASan, shows the blend on the way).
+  const auto until = std::chrono::steady_clock::now() + 30s;
   double e = 0.0;
   while (std::chrono::steady_clock::now() < until) {
     viewer.poll(50ms);
     const Lightmap& m = viewer.lightmaps().at(0);  // its middle texel: inside the chart
     const glm::vec3 t = m.texels[static_cast<std::size_t>(m.height / 2 * m.width + m.width / 2)];
     e = (t.x + t.y + t.z) / 3.0;
-    if (e > 0.9 * kPi) break;
+    if (e >= 0.97 * kPi) break;
   }
   EXPECT_GE(e, 0.97 * kPi);
   EXPECT_LE(e, 1.3 * kPi);
