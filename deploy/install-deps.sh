@@ -11,7 +11,12 @@ PACKAGES=(
   libglm-dev libasio-dev libssl-dev libprotobuf-dev protobuf-compiler libzstd-dev libcli11-dev
   # Vulkan compute backend: loader, lavapipe, shader compiler, validation layers
   libvulkan-dev mesa-vulkan-drivers glslang-tools glslang-dev spirv-tools vulkan-validationlayers
-  # tests and benchmarks
+  # distribution over machines (NATS with JetStream), HTTP/WebSocket for the browser viewer
+  nats-server libnats-dev libboost-dev libwebsocketpp-dev
+  # relocatable bundle (deploy/bundle.sh)
+  patchelf
+  # tests and benchmarks (Chromium: the browser viewer's tests)
+  chromium
   libgtest-dev libgmock-dev libbenchmark-dev
   # libFuzzer targets (deploy/fuzz.sh)
   clang libclang-rt-14-dev
