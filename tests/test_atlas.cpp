@@ -363,7 +363,7 @@ void expect_valid_gbuffer(const World& world, std::size_t oi, const ObjectLightm
       }
       auto t = static_cast<std::uint32_t>(g.triangle[i]);
       const glm::vec2* c = &lm.corner_uv[3 * t];
-      glm::dvec3 w;
+      glm::dvec3 w(0.0);  // set by barycentric(); GCC 12 -O3 cannot tell
       bool nondegenerate = barycentric(c, glm::dvec2(x + 0.5, y + 0.5), w);
       bool centre_inside = nondegenerate && w.x >= -1e-5 && w.y >= -1e-5 && w.z >= -1e-5;
       if (g.kind[i] == TexelKind::Covered) {
