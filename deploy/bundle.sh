@@ -51,14 +51,18 @@ if [ -z "$build" ]; then
   if [ ! -f "$build/CMakeCache.txt" ] && command -v ninja >/dev/null; then generator=(-G Ninja); fi
   cmake -S "$src" -B "$build" "${generator[@]}" -DCMAKE_BUILD_TYPE=Release \
     -DIRRADCAST_BUILD_TESTS=ON -DIRRADCAST_BUILD_BENCH=ON "${launcher[@]}" >/dev/null
-  targets=("${required[@]}")
-  known=$(cmake --build "$build" --target help)
-  for t in "${optional[@]}"; do
-    if grep -Eq "(^|\.\.\. )$t(:| |\$)" <<<"$known"; then targets+=("$t"); fi
-  done
-  cmake --build "$build" --parallel "$(nproc)" --target "${targets[@]}"
 fi
 build=$(cd "$build" && pwd)
+# The optional programs this tree has as targets (a stale binary of an earlier configuration,
+# tests since turned off say, is not bundled).
+known=$(cmake --build "$build" --target help)
+targets=("${required[@]}")
+for t in "${optional[@]}"; do
+  if grep -Eq "(^|\.\.\. )$t(:| |\$)" <<<"$known"; then targets+=("$t"); fi
+done
+if [ -z "${2:-}" ]; then
+  cmake --build "$build" --parallel "$(nproc)" --target "${targets[@]}"
+fi
 
 hash=$(git -C "$src" rev-parse --short HEAD 2>/dev/null || echo unknown)
 name=irradcast-bundle-$hash-x86_64
@@ -75,7 +79,7 @@ find_program() {
 }
 
 programs=()
-for p in "${required[@]}" "${optional[@]}"; do
+for p in "${targets[@]}"; do
   path=$(find_program "$p")
   if [ -z "$path" ]; then
     for r in "${required[@]}"; do
