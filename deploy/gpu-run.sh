@@ -12,7 +12,8 @@
 #          tests.xml (gtest, with the parity tests' recorded numbers), backend.json and
 #          backend_rays.png (irradcast-bench-backend), load-vulkan.json and load-embree.json
 #          (irradcast-load), servers.log (both servers' logs and /metrics scrapes)
-# --quick  small sizes (lavapipe on the 2-core VM: about 3 minutes) to check the script itself.
+# --quick  small sizes (lavapipe on the 2-core VM: about 2 minutes) to check the script itself.
+# IRRADCAST_GPU_STEPS=tests,bench,load (the default) picks steps 3-5, to split a run over calls.
 # Steps, each under its own time limit so that one hang loses only itself (about 6 minutes on a
 # 16-core GPU machine):
 #  1. the machine: GPU (nvidia-smi), glibc, the bundle's libraries all found (ldd);
@@ -98,7 +99,7 @@ else
   tests_filter+=':Vulkan.OpensTheBestDeviceWithValidationAndNoMessages'
   bench_args=(--updates 5 --warmup 1 --reference-spp 16)
   server_args=
-  users=64 duration=30 limit_tests=150 limit_bench=200 limit_load=90
+  users=64 duration=30 limit_tests=120 limit_bench=180 limit_load=80
 fi
 
 # step NAME LIMIT_S COMMAND...: runs it under `timeout` (which ends the command's whole process
@@ -147,7 +148,11 @@ list_devices() {
 export -f list_devices
 step list-devices 60 list_devices && note "  $(grep -E '^(vulkan: \[|--backend auto)' "$tmp/devices.txt" | tr '\n' ' ')"
 
-if [ -x "$bin/irradcast_tests" ]; then
+want() { [[ ",${IRRADCAST_GPU_STEPS:-tests,bench,load}," == *",$1,"* ]]; }
+
+if ! want tests; then
+  :
+elif [ -x "$bin/irradcast_tests" ]; then
   step vulkan-tests "$limit_tests" "$bin/irradcast_tests" --gtest_filter="$tests_filter" \
     --gtest_output="xml:$out/tests.xml"
   grep -E '^\[  (PASSED|FAILED|  SKIPPED) ' "$out/gpu-run.log" | sed 's/^/  /' >>"$summary"
@@ -156,7 +161,9 @@ else
   failures=$((failures + 1))
 fi
 
-if [ -x "$bin/irradcast-bench-backend" ]; then
+if ! want bench; then
+  :
+elif [ -x "$bin/irradcast-bench-backend" ]; then
   step bench-backend "$limit_bench" "$bin/irradcast-bench-backend" \
     --scenes cornell,rooms:4,sponza --backends embree,vulkan --threads 0 "${bench_args[@]}" \
     --out "$out" --json "$out/backend.json"
@@ -219,7 +226,9 @@ serve() {
   return "$ok"
 }
 export -f scrape metric serve
-for backend in vulkan embree; do
+backends=(vulkan embree)
+want load || backends=()
+for backend in "${backends[@]}"; do
   step "server-$backend+load" "$limit_load" serve "$backend"
   if [ -f "$out/load-$backend.json" ] && command -v python3 >/dev/null; then
     python3 - "$out/load-$backend.json" >>"$summary" <<'EOF'
