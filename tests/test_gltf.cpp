@@ -71,7 +71,7 @@ struct TestModel {
 TestModel triangle_model() {
   TestModel m;
   const float pos[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
-  m.bin.resize(44, 0);
+  m.bin.assign(44, 0);  // not resize(): GCC 12 -O3 -Warray-bounds misfires in it
   std::memcpy(m.bin.data(), pos, sizeof pos);
   put<std::uint16_t>(m.bin, 36, 0);
   put<std::uint16_t>(m.bin, 38, 1);
