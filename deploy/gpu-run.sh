@@ -184,7 +184,7 @@ metric() { awk -v m="$1" '$1 == m {print $2}' "$2"; }
 # serve BACKEND: a server on the Sponza, $users simulated users for $duration s, the metrics
 # before and after.
 serve() {
-  local backend=$1 log=$tmp/server-$1.log port= mport= i server_pid
+  local backend=$1 log=$tmp/server-$1.log port='' mport='' i server_pid
   "$bin/irradcast-server" --scene sponza --backend "$backend" --bind 127.0.0.1 --port 0 \
     --metrics-port 0 --max-clients-per-peer 0 --status-every 5 $server_args >"$log" 2>&1 &
   server_pid=$!
@@ -215,7 +215,7 @@ serve() {
       cat "$tmp/metrics-$backend-$i.txt" 2>/dev/null
     done
   } >>"$out/servers.log"
-  local u0 u1 s0 s1 t0 t1
+  local u0 u1 s0 s1
   u0=$(metric irradcast_engine_updates_total "$tmp/metrics-$backend-0.txt")
   u1=$(metric irradcast_engine_updates_total "$tmp/metrics-$backend-1.txt")
   s0=$(metric irradcast_engine_seconds_total "$tmp/metrics-$backend-0.txt")
