@@ -80,9 +80,9 @@ if [ -z "${VK_DRIVER_FILES:-}" ] && [ -z "${VK_ICD_FILENAMES:-}" ] && [ -f "$nvi
   export VK_DRIVER_FILES=$nvidia_icd
 fi
 # The ICD names its library without a folder; the driver's folder may not be in ld.so.cache.
-if [ -d /usr/local/nvidia/lib64 ]; then
-  export LD_LIBRARY_PATH=/usr/local/nvidia/lib64${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
-fi
+for d in /usr/local/nvidia/lib /usr/local/nvidia/lib64; do
+  if [ -d "$d" ]; then export LD_LIBRARY_PATH=$d${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}; fi
+done
 # The bundle's validation layer (the tests open Vulkan with it).
 if [ -d "$root/share/vulkan/explicit_layer.d" ]; then
   export VK_LAYER_PATH=$root/share/vulkan/explicit_layer.d
