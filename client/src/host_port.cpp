@@ -1,6 +1,7 @@
 // HOST:PORT and --connect's failover list (host_port.h).
 #include "irradcast/client/host_port.h"
 
+#include <cctype>
 #include <stdexcept>
 
 #include "irradcast/common/error.h"
@@ -23,6 +24,11 @@ HostPort parse_host_port(const std::string& spec, const std::string& flag) {
     throw Error(prefix(flag) + log::quote(spec, 80) + " is not HOST:PORT");
   HostPort hp;
   hp.host = spec.substr(0, colon);
+  // A name or an address: letters, digits, '.', '-', '_', and ':' '%' of IPv6 (a zone).
+  for (const char c : hp.host)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '.' && c != '-' && c != '_' &&
+        c != ':' && c != '%')
+      throw Error(prefix(flag) + log::quote(hp.host, 80) + " is not a host name or address");
   try {
     std::size_t used = 0;
     const int port = std::stoi(spec.substr(colon + 1), &used);
