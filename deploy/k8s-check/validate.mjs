@@ -4,8 +4,9 @@
 // then the references between the objects are checked (selectors against pod labels, Service
 // target ports against container ports, HPA and PDB targets, StatefulSet governing Services,
 // ConfigMaps and Secrets used by pods, kustomization resources), and the irradcast programs'
-// options against their --help when a folder of programs is given.
-//   node deploy/k8s-check/validate.mjs deploy/k8s [PROGRAM_DIR...]
+// options in the containers' args (and in the commands of a Compose file) against their --help
+// when a folder of programs is given.
+//   node deploy/k8s-check/validate.mjs [--compose FILE] deploy/k8s [PROGRAM_DIR...]
 // Limitation: the schemas do not forbid unknown fields (as `kubeconform -strict` would), so a
 // misspelt optional field passes the schema part; the reference checks catch the misspellings
 // that break a deployment (a label, a port name, a target). Exit 0: valid; 1: the errors, one a
@@ -15,8 +16,14 @@ import fs from "node:fs";
 import path from "node:path";
 import { parseAllDocuments } from "yaml";
 
-const dir = process.argv[2];
-const programDirs = process.argv.slice(3);
+const argv = process.argv.slice(2);
+let composeFile = null;
+if (argv[0] === "--compose") {
+  composeFile = argv[1];
+  argv.splice(0, 2);
+}
+const dir = argv[0];
+const programDirs = argv.slice(1);
 if (!dir) {
   console.error("usage: node validate.mjs MANIFEST_DIR [PROGRAM_DIR...]");
   process.exit(2);
@@ -145,24 +152,31 @@ if (kustomization) {
     if (!fs.existsSync(path.join(dir, r))) errors.push(`kustomization.yaml: resource '${r}' does not exist`);
 }
 
-// --- the programs' options: every --flag in a container's args must be in the program's --help ---
-for (const w of workloads) {
-  for (const c of containers(w)) {
-    const args = [...(c.command ?? []), ...(c.args ?? [])];
-    const program = args[0];
-    if (!program || !program.startsWith("irradcast-") || programDirs.length === 0) continue;
-    const exe = programDirs.map((d) => path.join(d, program)).find((p) => fs.existsSync(p));
-    if (!exe) {
-      console.log(`note: ${program} is not built here; its options in ${where(w)} are not checked`);
-      continue;
-    }
-    const help = execFileSync(exe, ["--help"], { encoding: "utf8" });
-    for (const a of args.slice(1)) {
-      const flag = a.startsWith("--") ? a.split("=")[0] : null;
-      if (flag && !new RegExp(`(^|[\\s,])${flag.replace(/[-]/g, "\\-")}([\\s,=]|$)`, "m").test(help))
-        errors.push(`${where(w)}: ${program} has no option ${flag}`);
-    }
+// --- the programs' options: every --flag of a command line must be in the program's --help ---
+const helps = new Map();
+function checkCommand(args, what) {
+  const program = args[0];
+  if (typeof program !== "string" || !program.startsWith("irradcast-") || programDirs.length === 0)
+    return;
+  const exe = programDirs.map((d) => path.join(d, program)).find((p) => fs.existsSync(p));
+  if (!exe) {
+    console.log(`note: ${program} is not built here; its options in ${what} are not checked`);
+    return;
   }
+  if (!helps.has(exe)) helps.set(exe, execFileSync(exe, ["--help"], { encoding: "utf8" }));
+  for (const a of args.slice(1)) {
+    const flag = typeof a === "string" && a.startsWith("--") ? a.split("=")[0] : null;
+    if (flag && !new RegExp(`(^|[\\s,])${flag.replace(/[-]/g, "\\-")}([\\s,=]|$)`, "m").test(helps.get(exe)))
+      errors.push(`${what}: ${program} has no option ${flag}`);
+  }
+}
+for (const w of workloads)
+  for (const c of containers(w)) checkCommand([...(c.command ?? []), ...(c.args ?? [])], where(w));
+if (composeFile) {
+  const compose = parseAllDocuments(fs.readFileSync(composeFile, "utf8"), { merge: true })[0].toJS();
+  for (const [name, service] of Object.entries(compose?.services ?? {}))
+    if (Array.isArray(service.command))
+      checkCommand(service.command, `${path.basename(composeFile)}: service ${name}`);
 }
 
 if (errors.length) {
