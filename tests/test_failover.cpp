@@ -295,3 +295,32 @@ TEST(Failover, EditorSkipsADeadAddress) {
   EXPECT_NE(none.output.find("no server of --connect answered"), std::string::npos) << none.output;
   EXPECT_NE(none.output.find("127.0.0.1:" + dead1), std::string::npos) << none.output;
 }
+
+// A server lost between two edits of a script: the second goes to the next server of the list.
+TEST(Failover, EditorMovesToTheNextServerBetweenEdits) {
+  const std::string token = "failover-token-0123456789";
+  auto a = start_server(test::quick_host(), token);
+  auto b = start_server(test::quick_host(), token);
+  const fs::path script = temp_path("script.json");
+  {
+    std::ofstream f(script);
+    f << R"([{"op": "hide", "node": "short_block"},
+             {"after_ms": 1500, "op": "hide", "node": "tall_block"}])";
+  }
+  test::Process edit(test::command(IRRADCAST_EDIT_EXE, "--connect " + a->address().text() + "," +
+                                                           b->address().text() + " --token " +
+                                                           token + " --script " + script.string()),
+                     temp_path("edit.log"));
+  // The first edit applied on A: stop A while the editor waits for the second.
+  const auto deadline = Clock::now() + 20s;
+  while (a->host->stats().revision < 1 && Clock::now() < deadline)
+    std::this_thread::sleep_for(10ms);
+  ASSERT_EQ(a->host->stats().revision, 1u) << edit.output();
+  a->stop();
+  const std::optional<int> status = edit.wait_for(30s);
+  ASSERT_TRUE(status) << edit.output();
+  EXPECT_EQ(*status, 0) << edit.output();
+  EXPECT_EQ(b->host->stats().revision, 1u);  // the second edit, and only it
+  EXPECT_NE(edit.output().find("trying the next server"), std::string::npos) << edit.output();
+  fs::remove(script);
+}

@@ -179,7 +179,7 @@ class Connection {
     irradcast::connect_stream(io_, socket_, hp.host, hp.port, timeout, ec, what);
     if (ec && ec.category() == asio::error::get_ssl_category())
       throw irradcast::Error("cannot connect to " + hp.text() + ": " + what);
-    if (ec) throw Lost("cannot connect to " + hp.text() + ": " + what);
+    if (ec) throw Lost(what);
     timeout_ = timeout;
   }
 
@@ -191,12 +191,15 @@ class Connection {
     last_send_ = Clock::now();
   }
 
-  // The next frame before `deadline` (nullopt on timeout). An Error frame throws Refused.
+  // The next frame before `deadline` (nullopt on timeout). An Error frame throws Refused, or Lost
+  // for one after which the server closes (shutting down, full, idle): another server may do.
   std::optional<irradcast::wire::Envelope> read(Clock::time_point deadline) {
     irradcast::wire::Envelope e;
     for (;;) {
       const irradcast::wire::DecodeStatus st = decoder_.next(e);
       if (st == irradcast::wire::DecodeStatus::Frame) {
+        if (e.has_error() && irradcast::server_error_is_transient(e.error().code()))
+          throw Lost("the server says: " + e.error().message());
         if (e.has_error()) throw Refused(e.error().code(), e.error().message());
         if (e.has_ping()) {
           irradcast::wire::Envelope pong;
@@ -289,7 +292,7 @@ class Session {
 
   // The first server that answers, trying each once from the one after the current (the
   // first: from the start of the list). An Error frame that ends the session (server full,
-  // shutting down) counts as no answer; the last failure is the error.
+  // shutting down) counts as no answer; every failure is in the error.
   void connect() {
     using namespace irradcast;
     std::string failures;
@@ -301,11 +304,8 @@ class Session {
                                           tools::tls_of(o_.tls));
         hello();
         return;
-      } catch (const Refused& e) {
-        if (!server_error_is_transient(e.code)) throw;
-        failures += "; " + server().text() + ": the server says: " + e.what();
       } catch (const Lost& e) {
-        failures += "; " + std::string(e.what());
+        failures += "; " + server().text() + ": " + e.what();
       }
     }
     c_.reset();
