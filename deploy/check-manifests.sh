@@ -6,8 +6,9 @@
 #   deploy/check-manifests.sh --self-test [PROGRAM_DIR...]   broken copies must be refused
 # PROGRAM_DIR: folders with the built irradcast-server / irradcast-gateway, whose --help the
 # options in the manifests are checked against.
-# 1. deploy/k8s/*.yaml: the Kubernetes JSON schema of every object (kubernetes-models + ajv) and
-#    the references between them (deploy/k8s-check/validate.mjs).
+# 1. deploy/k8s/*.yaml: the Kubernetes JSON schema of every object (kubernetes-models + ajv),
+#    unknown fields refused (strict), and the references between them
+#    (deploy/k8s-check/validate.mjs).
 # 2. deploy/compose.yaml: `docker-compose config -q` (the Compose file schema; no daemon needed),
 #    and its irradcast commands' options against the programs' --help (validate.mjs --compose).
 set -euo pipefail
@@ -61,6 +62,9 @@ expect_refused() {
   fi
 }
 expect_refused type "replicas must be integer" k8s/gateway.yaml 's/^  replicas: 2$/  replicas: two/'
+expect_refused unknown-field "spec.replcas: unknown field" k8s/gateway.yaml 's/^  replicas: 2$/  replcas: 2/'
+expect_refused nested-field "securityContext.readOnlyRootFilesytem: unknown field" k8s/origin.yaml 's/readOnlyRootFilesystem/readOnlyRootFilesytem/'
+expect_refused inline-field "volumeClaimTemplates\[0\].spec.accesModes: unknown field" k8s/nats.yaml 's/accessModes/accesModes/'
 expect_refused required "must have required property containers" k8s/origin.yaml 's/^      containers:$/      containerz:/'
 expect_refused pdb "PodDisruptionBudget/irradcast-gateway: its selector matches no" k8s/gateway.yaml '/minAvailable: 1/{n;n;n;s/irradcast-gateway/irradcast-gw/}'
 expect_refused kind "unknown apiVersion/kind" k8s/nats.yaml 's/^kind: StatefulSet$/kind: StatefulSett/'

@@ -7,10 +7,10 @@
 // options in the containers' args (and in the commands of a Compose file) against their --help
 // when a folder of programs is given.
 //   node deploy/k8s-check/validate.mjs [--compose FILE] deploy/k8s [PROGRAM_DIR...]
-// Limitation: the schemas do not forbid unknown fields (as `kubeconform -strict` would), so a
-// misspelt optional field passes the schema part; the reference checks catch the misspellings
-// that break a deployment (a label, a port name, a target). Exit 0: valid; 1: the errors, one a
-// line.
+// The compiled schemas accept unknown fields; a strict pass (as `kubeconform -strict`) walks each
+// object along the field lists of kubernetes-models' type declarations (*.d.ts, generated from
+// the same OpenAPI document) and refuses a field they do not have, so `replcas: 2` is an error.
+// Exit 0: valid; 1: the errors, one a line.
 import { execFileSync } from "node:child_process";
 import fs from "node:fs";
 import path from "node:path";
@@ -44,6 +44,75 @@ async function modelOf(apiVersion, kind) {
   }
 }
 
+// --- strict fields: the interfaces of kubernetes-models' .d.ts files ---
+const nodeModules = path.join(path.dirname(new URL(import.meta.url).pathname), "node_modules");
+const declarations = new Map();  // .d.ts file -> { fields: Map(name -> type text), imports, file }
+// The members of an interface body or an inline object type: "name"?: TYPE; at depth 0 (TYPE
+// may hold braces, angle brackets and semicolons inside them).
+function members(body) {
+  const fields = new Map();
+  let d = 0, member = "";
+  for (const c of body) {
+    if (c === "{" || c === "<") d++;
+    if (c === "}" || c === ">") d--;
+    if (c === ";" && d === 0) {
+      const m = member.trim().match(/^"([^"]+)"\??:\s*([\s\S]+)$/);
+      if (m) fields.set(m[1], m[2].trim());
+      member = "";
+    } else member += c;
+  }
+  return fields;
+}
+function declaration(file) {
+  if (declarations.has(file)) return declarations.get(file);
+  let result = null;
+  if (fs.existsSync(file)) {
+    const text = fs.readFileSync(file, "utf8").replace(/\/\*[\s\S]*?\*\//g, "");
+    const start = text.indexOf("export interface ");
+    if (start >= 0) {
+      const imports = new Map();
+      for (const m of text.matchAll(/import \{ ([^}]+) \} from "([^"]+)";/g))
+        for (const name of m[1].split(",")) imports.set(name.trim(), m[2]);
+      let depth = 0, i = text.indexOf("{", start);
+      const from = i;
+      for (; i < text.length; ++i) {  // the interface's body, nested braces and all
+        if (text[i] === "{") depth++;
+        if (text[i] === "}" && --depth === 0) break;
+      }
+      result = { fields: members(text.slice(from + 1, i)), imports, file };
+    }
+  }
+  declarations.set(file, result);
+  return result;
+}
+// The declaration a field's type names: an imported interface, or an inline object type; null
+// for a primitive, a union or a map ({ [key: string]: ... }), whose keys are free.
+function typeOf(type, decl) {
+  if (type.startsWith("{")) {
+    const inner = type.slice(1, type.lastIndexOf("}"));
+    if (/^\s*\[key: string\]/.test(inner)) return null;
+    return { fields: members(inner), imports: decl.imports, file: decl.file };
+  }
+  if (!/^\w+$/.test(type) || !decl.imports.has(type)) return null;
+  const spec = decl.imports.get(type);
+  return declaration(spec.startsWith(".") ? path.resolve(path.dirname(decl.file), spec + ".d.ts")
+                                          : path.join(nodeModules, spec + ".d.ts"));
+}
+function strict(value, decl, at, out) {
+  if (!decl || value === null || typeof value !== "object" || Array.isArray(value)) return;
+  for (const [key, v] of Object.entries(value)) {
+    const type = decl.fields.get(key);
+    if (type === undefined) {
+      out.push(`${at}.${key}: unknown field`);
+      continue;
+    }
+    const element = type.match(/^Array<([\s\S]+)>$/);
+    const inner = typeOf(element ? element[1].trim() : type, decl);
+    if (element && Array.isArray(v)) v.forEach((x, n) => strict(x, inner, `${at}.${key}[${n}]`, out));
+    else if (!element) strict(v, inner, `${at}.${key}`, out);
+  }
+}
+
 const files = fs.readdirSync(dir).filter((f) => f.endsWith(".yaml") || f.endsWith(".yml")).sort();
 if (files.length === 0) errors.push(`${dir}: no manifests`);
 let kustomization = null;
@@ -72,6 +141,14 @@ for (const file of files) {
       new Model(obj).validate();
     } catch (e) {
       errors.push(`${file}: ${obj.kind}/${obj.metadata?.name ?? "?"}: ${e.message.replace(/\n/g, "; ")}`);
+      continue;
+    }
+    const unknown = [];
+    const dts = path.join(nodeModules, "kubernetes-models", obj.apiVersion, `${obj.kind}.d.ts`);
+    if (!declaration(dts)) errors.push(`${file}: ${obj.kind}: no type declaration ${dts}`);
+    strict(obj, declaration(dts), "", unknown);
+    if (unknown.length) {
+      for (const u of unknown) errors.push(`${file}: ${obj.kind}/${obj.metadata?.name ?? "?"}: ${u.slice(1)}`);
       continue;
     }
     objects.push({ file, index, obj });
