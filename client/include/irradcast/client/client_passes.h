@@ -8,12 +8,12 @@
 #include <cstdint>
 #include <vector>
 
-#include "irradcast/client/reprojection.h"
-#include "irradcast/client/ssao.h"
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/lightmap.h"
 #include "irradcast/common/ray_scene.h"
+#include "irradcast/client/reprojection.h"
+#include "irradcast/client/ssao.h"
 #include "irradcast/common/world.h"
 
 namespace irradcast {
