@@ -15,6 +15,8 @@ PACKAGES=(
   nats-server libnats-dev libboost-dev libwebsocketpp-dev
   # relocatable bundle (deploy/bundle.sh)
   patchelf
+  # the deployment files' offline check (deploy/check-manifests.sh): `docker-compose config`
+  docker-compose
   # tests and benchmarks (Chromium: the browser viewer's tests)
   chromium
   libgtest-dev libgmock-dev libbenchmark-dev
@@ -29,15 +31,30 @@ for p in "${PACKAGES[@]}"; do
   fi
 done
 
+# node and npm (Debian 12: node 18) for deploy/k8s-check, unless a node is installed already.
+command -v node >/dev/null 2>&1 || missing+=(nodejs)
+command -v npm >/dev/null 2>&1 || missing+=(npm)
+
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#PACKAGES[@]} packages present"
-  exit 0
+else
+  echo "install-deps: installing ${missing[*]}"
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+  echo "install-deps: done"
 fi
 
-echo "install-deps: installing ${missing[*]}"
-SUDO=""
-if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
-export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -qq
-$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
-echo "install-deps: done"
+# npm packages of the manifests' schema check (kubernetes-models: the Kubernetes JSON schemas
+# compiled for ajv; yaml), exactly as deploy/k8s-check/package-lock.json pins them; only when
+# node_modules is missing or older than the lock file.
+k8s_check="$(cd "$(dirname "$0")" && pwd)/k8s-check"
+stamp="$k8s_check/node_modules/.package-lock.json"
+# (The container image's dependency layer has this script alone, without the lock file.)
+if [ -f "$k8s_check/package-lock.json" ] &&
+  { [ ! -f "$stamp" ] || [ "$k8s_check/package-lock.json" -nt "$stamp" ]; }; then
+  echo "install-deps: npm ci in deploy/k8s-check"
+  (cd "$k8s_check" && npm ci --no-audit --no-fund --loglevel=error)
+fi

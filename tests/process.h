@@ -2,6 +2,7 @@
 // stdout and stderr to a log file, no other descriptor of the test's), signalled (kill -9 a
 // server), waited for with a limit, and always killed and reaped by the destructor, so a failed
 // test leaves nothing running (the log stays for a failed test, and is removed otherwise).
+// command() makes its argument vector from a line of words.
 #pragma once
 
 #include <fcntl.h>
@@ -25,6 +26,14 @@
 extern char** environ;
 
 namespace irradcast::test {
+
+// An argument vector: `exe` and the words of `args`.
+inline std::vector<std::string> command(const std::string& exe, const std::string& args) {
+  std::vector<std::string> v = {exe};
+  std::istringstream ss(args);
+  for (std::string w; ss >> w;) v.push_back(w);
+  return v;
+}
 
 class Process {
  public:

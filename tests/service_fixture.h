@@ -48,6 +48,13 @@ inline EngineHostOptions quick_host(std::uint32_t max_updates = 1) {
   return host_options(32.0f, max_updates);
 }
 
+// A port nobody listens on (bound and released by the kernel's choice).
+inline std::uint16_t free_port() {
+  asio::io_context io;
+  asio::ip::tcp::acceptor a(io, asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), 0));
+  return a.local_endpoint().port();
+}
+
 // A server on 127.0.0.1, on any free port (Server::port()).
 inline ServerOptions loopback(std::chrono::milliseconds idle = ServerOptions{}.idle_timeout) {
   ServerOptions o;

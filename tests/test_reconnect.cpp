@@ -15,14 +15,14 @@
 #include <sstream>
 
 #include "irradcast/client/backoff.h"
-#include "irradcast/common/builtin.h"
-#include "irradcast/service/engine_host.h"
-#include "irradcast/common/error.h"
-#include "irradcast/wire/frame.h"
-#include "irradcast/common/log.h"
-#include "irradcast/service/net_server.h"
-#include "irradcast/common/progress.h"
 #include "irradcast/client/view_client.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/wire/frame.h"
 #include "process.h"
 #include "service_fixture.h"
 
@@ -34,16 +34,12 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
+using test::command;
+using test::free_port;
+
 fs::path temp_path(const std::string& name) {
   return fs::temp_directory_path() /
          ("irradcast_reconnect_" + std::to_string(::getpid()) + "_" + name);
-}
-
-// A port nobody listens on (bound and released by the kernel's choice).
-std::uint16_t free_port() {
-  asio::io_context io;
-  tcp::acceptor a(io, tcp::endpoint(asio::ip::make_address("127.0.0.1"), 0));
-  return a.local_endpoint().port();
 }
 
 // An in-process server for `port`: cornell, small lightmaps, final after 2 updates.
@@ -64,14 +60,6 @@ struct LocalServer {
   std::unique_ptr<EngineHost> host;
   std::unique_ptr<Server> server;
 };
-
-// An argument vector: `exe` and the words of `args`.
-std::vector<std::string> command(const std::string& exe, const std::string& args) {
-  std::vector<std::string> v = {exe};
-  std::istringstream ss(args);
-  for (std::string w; ss >> w;) v.push_back(w);
-  return v;
-}
 
 std::vector<std::string> viewer_args(std::uint16_t port, const fs::path& out, int timeout_s) {
   return command(IRRADCAST_VIEW_EXE,

@@ -58,13 +58,14 @@ class SceneCache {
   std::map<std::string, std::shared_ptr<ClientScene>> scenes_;
 };
 
-// What all users share: options, the io_context, the resolved server, and live counters.
+// What all users share: options, the io_context, the resolved servers, and live counters.
 struct Run {
-  explicit Run(const LoadOptions& o) : options(o) {}
+  explicit Run(const LoadOptions& o) : options(o), servers(servers_or(o.servers, o.host, o.port)) {}
   const LoadOptions& options;
+  const std::vector<HostPort> servers;  // the failover list
   asio::io_context io;
-  tcp::resolver::results_type endpoints;
-  std::shared_ptr<asio::ssl::context> tls;  // null: plain TCP
+  std::vector<tcp::resolver::results_type> endpoints;  // one per server
+  std::shared_ptr<asio::ssl::context> tls;             // null: plain TCP
   Clock::time_point start = Clock::now();
   Clock::time_point end = Clock::time_point::max();  // users retry connections until then
   SceneCache scenes;
@@ -110,6 +111,7 @@ class User : public std::enable_shared_from_this<User> {
         ping_timer_(strand_),
         frame_timer_(strand_),
         close_timer_(strand_),
+        server_(static_cast<std::size_t>(index) % run.servers.size()),
         backoff_(run.options.backoff,
                  mix64(run.options.seed ^ mix64(static_cast<std::uint64_t>(index) + 1))),
         core_(session_options(run.options, index),
@@ -171,9 +173,9 @@ class User : public std::enable_shared_from_this<User> {
   void open_connection() {
     state_ = State::Connecting;
     conn_ = std::make_shared<Connection>(strand_, run_.tls.get());
-    conn_->socket.expect_server_name(run_.options.host);
+    conn_->socket.expect_server_name(run_.servers[server_].host);
     asio::async_connect(
-        conn_->socket.socket(), run_.endpoints,
+        conn_->socket.socket(), run_.endpoints[server_],
         [self = shared_from_this(), c = conn_](std::error_code ec, const tcp::endpoint&) {
           if (c == self->conn_) self->on_connect(ec);
         });
@@ -221,10 +223,11 @@ class User : public std::enable_shared_from_this<User> {
     read();
   }
 
-  // The next connection attempt after a back-off delay; none when the run ends first (then
-  // do_finish records the user as failed).
+  // The next connection attempt, to the next server of the list, after a back-off delay; none
+  // when the run ends first (then do_finish records the user as failed).
   void retry_later() {
     state_ = State::Waiting;
+    server_ = (server_ + 1) % run_.servers.size();
     const auto delay = backoff_.next_before(Clock::now(), run_.end);
     if (!delay) return;
     retry_timer_.expires_after(*delay);
@@ -547,6 +550,7 @@ class User : public std::enable_shared_from_this<User> {
   ConnPtr conn_;  // null between connections
   asio::steady_timer retry_timer_, reply_timer_, camera_timer_, ping_timer_, frame_timer_,
       close_timer_;
+  std::size_t server_;  // index into run_.servers: users spread their first attempt over them
   Backoff backoff_;
   bool finishing_ = false, closed_ = false;
   bool lost_ = false;  // a connection dropped since the last session was set up
@@ -580,11 +584,11 @@ void prepare(Run& run) {
   const LoadOptions& options = run.options;
   if (options.camera_path != "orbit" && options.camera_path != "random-walk")
     run.keyframes = load_camera_keyframes(options.camera_path);
-  {
-    tcp::resolver resolver(run.io);
+  tcp::resolver resolver(run.io);
+  for (const HostPort& server : run.servers) {
     std::error_code ec;
-    run.endpoints = resolver.resolve(options.host, std::to_string(options.port), ec);
-    if (ec) throw Error("cannot resolve '" + options.host + "': " + ec.message());
+    run.endpoints.push_back(resolver.resolve(server.host, std::to_string(server.port), ec));
+    if (ec) throw Error("cannot resolve '" + server.host + "': " + ec.message());
   }
   run.tls = make_tls_context(options.tls);
 }

@@ -126,7 +126,9 @@ LoadReport LoadReport::of(const LoadOptions& options, double elapsed,
 std::string LoadReport::text() const {
   std::ostringstream s;
   s << "irradcast-load: " << users << (options.render ? " render" : " thin") << " users for "
-    << fixed(elapsed_s) << " s against " << options.host << ":" << options.port;
+    << fixed(elapsed_s) << " s against";
+  for (const HostPort& server : servers_or(options.servers, options.host, options.port))
+    s << " " << server.text();
   if (options.render) s << " (" << options.width << "x" << options.height << ")";
   s << "\n";
   s << "  users             " << connected << " connected, " << failed << " failed, " << full_image
@@ -158,8 +160,12 @@ std::string LoadReport::text() const {
 
 std::string LoadReport::json(bool per_user_details) const {
   nlohmann::json j;
-  j["options"] = {{"host", options.host},
-                  {"port", options.port},
+  const std::vector<HostPort> servers = servers_or(options.servers, options.host, options.port);
+  std::vector<std::string> addresses;
+  for (const HostPort& server : servers) addresses.push_back(server.text());
+  j["options"] = {{"host", servers[0].host},
+                  {"port", servers[0].port},
+                  {"servers", addresses},
                   {"users", options.users},
                   {"duration_s", options.duration_s},
                   {"mode", options.render ? "render" : "thin"},

@@ -48,6 +48,7 @@ struct ViewClient::Net {
 
 ViewClient::ViewClient(ViewClientOptions options)
     : options_(std::move(options)),
+      servers_(servers_or(options_.servers, options_.host, options_.port)),
       tls_(make_tls_context(options_.tls)),
       backoff_(options_.backoff,
                options_.backoff_seed != 0 ? options_.backoff_seed : std::random_device{}()),
@@ -70,11 +71,18 @@ void ViewClient::establish(bool after_loss) {
   const auto start = Clock::now();
   const auto deadline = options_.deadline != Clock::time_point{} ? options_.deadline
                                                                  : start + options_.connect_timeout;
-  const std::string where = options_.host + ":" + std::to_string(options_.port);
+  std::string where = servers_[0].text();
+  for (std::size_t i = 1; i < servers_.size(); ++i) where += "," + servers_[i].text();
   backoff_.reset();
   std::string last_error;
-  for (int attempt = 0;; ++attempt) {
-    if (attempt > 0 || after_loss) {
+  const std::size_t n = servers_.size();
+  for (std::size_t attempt = 0;; ++attempt) {
+    // After a loss the next address first; one back-off delay per round over the list.
+    if (n > 1 && (attempt > 0 || after_loss)) {
+      current_ = (current_ + 1) % n;
+      ++failovers_;
+    }
+    if ((attempt > 0 && attempt % n == 0) || (attempt == 0 && after_loss)) {
       const auto delay = backoff_.next_before(Clock::now(), deadline);
       if (!delay) {
         const double waited = std::chrono::duration<double>(Clock::now() - start).count();
@@ -90,14 +98,14 @@ void ViewClient::establish(bool after_loss) {
       open_connection(deadline);
       handshake();
       if (attempt > 0 || after_loss)
-        log::info("view", "connected to " + where + " after " + std::to_string(attempt + 1) +
-                              " attempt(s)");
+        log::info("view", "connected to " + server().text() + " after " +
+                              std::to_string(attempt + 1) + " attempt(s)");
       return;
     } catch (const ConnectionLost& lost) {
-      last_error = lost.what();
+      last_error = server().text() + ": " + lost.what();
       drop_connection();
-      log::debug("view", "connection attempt " + std::to_string(attempt + 1) + " to " + where +
-                             " failed: " + last_error);
+      log::debug("view", "connection attempt " + std::to_string(attempt + 1) + " to " +
+                             server().text() + " failed: " + lost.what());
     }
   }
 }
@@ -112,13 +120,12 @@ void ViewClient::open_connection(Clock::time_point deadline) {
                Clock::duration(std::chrono::milliseconds(100))));
   std::error_code ec;
   std::string what;
-  connect_stream(net_->io, net_->socket, options_.host, options_.port, limit, ec, what);
+  connect_stream(net_->io, net_->socket, server().host, server().port, limit, ec, what);
   if (!ec) return;
   // A certificate the client does not trust, or a server that does not speak TLS, will not
   // change by trying again: a clear error. A connection cut during the handshake is retried.
   if (ec.category() == asio::error::get_ssl_category())
-    throw Error("cannot connect to " + options_.host + ":" + std::to_string(options_.port) + ": " +
-                what);
+    throw Error("cannot connect to " + server().text() + ": " + what);
   throw ConnectionLost(what);
 }
 
@@ -372,6 +379,7 @@ ViewClientCounters ViewClient::counters() const {
   c.connections = connections_;
   c.connections_lost = connections_lost_;
   c.connect_attempts = connect_attempts_;
+  c.failovers = failovers_;
   c.scene_from_cache = p.scene_from_cache;
   c.errors_received = p.errors_received;
   c.edits_applied = p.edits_applied;

@@ -2,7 +2,10 @@
 // control token. One edit from the command line (JSON or a shorthand flag) or a script of timed
 // edits; prints a line per edit once the engine applied it (or, with --no-wait, once the server
 // queued it). Exit status: 0 when every edit was accepted, 2 when the server refused the token,
-// 1 on any other error (a bad edit: the server's message is printed).
+// 1 on any other error (a bad edit: the server's message is printed). With a failover list
+// (--connect A,B,...) it connects to the first server that answers, and a connection lost
+// between edits moves on to the next; an edit whose answer was cut off is not sent again (edits
+// are not idempotent: a move twice moves twice), the error says so.
 #include <CLI/CLI.hpp>
 #include <asio.hpp>
 
@@ -12,12 +15,14 @@
 #include <csignal>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "irradcast/client/backoff.h"
 #include "irradcast/client/client_tls.h"
 #include "irradcast/client/host_port.h"
 #include "irradcast/common/error.h"
@@ -44,6 +49,11 @@ struct Options {
   int timeout_ms = 10000;
   std::string name = "irradcast-edit";
   std::string log_level = "warn";
+};
+
+// The connection is gone (refused, reset, closed): another server of the list may do.
+struct Lost : irradcast::Error {
+  using irradcast::Error::Error;
 };
 
 // The server answered with an Error frame.
@@ -167,9 +177,9 @@ class Connection {
     std::error_code ec;
     std::string what;
     irradcast::connect_stream(io_, socket_, hp.host, hp.port, timeout, ec, what);
-    if (ec)
-      throw irradcast::Error("cannot connect to " + hp.host + ":" + std::to_string(hp.port) + ": " +
-                             what);
+    if (ec && ec.category() == asio::error::get_ssl_category())
+      throw irradcast::Error("cannot connect to " + hp.text() + ": " + what);
+    if (ec) throw Lost(what);
     timeout_ = timeout;
   }
 
@@ -177,16 +187,19 @@ class Connection {
     const std::string frame = irradcast::wire::encode_frame(e);
     std::error_code ec;
     asio::write(socket_, asio::buffer(frame), ec);
-    if (ec) throw irradcast::Error("lost the connection to the server: " + ec.message());
+    if (ec) throw Lost("lost the connection to the server: " + ec.message());
     last_send_ = Clock::now();
   }
 
-  // The next frame before `deadline` (nullopt on timeout). An Error frame throws Refused.
+  // The next frame before `deadline` (nullopt on timeout). An Error frame throws Refused, or Lost
+  // for one after which the server closes (shutting down, full, idle): another server may do.
   std::optional<irradcast::wire::Envelope> read(Clock::time_point deadline) {
     irradcast::wire::Envelope e;
     for (;;) {
       const irradcast::wire::DecodeStatus st = decoder_.next(e);
       if (st == irradcast::wire::DecodeStatus::Frame) {
+        if (e.has_error() && irradcast::server_error_is_transient(e.error().code()))
+          throw Lost("the server says: " + e.error().message());
         if (e.has_error()) throw Refused(e.error().code(), e.error().message());
         if (e.has_ping()) {
           irradcast::wire::Envelope pong;
@@ -216,9 +229,9 @@ class Connection {
         io_.run();
       }
       if (result && result != asio::error::would_block && result != asio::error::operation_aborted)
-        throw irradcast::Error(result == asio::error::eof
-                                   ? "the server closed the connection"
-                                   : "read: " + irradcast::wire::describe_tls_error(result));
+        throw Lost(result == asio::error::eof
+                       ? "the server closed the connection"
+                       : "read: " + irradcast::wire::describe_tls_error(result));
       decoder_.feed(buffer_.data(), n);
     }
   }
@@ -254,6 +267,8 @@ class Connection {
     socket_.close();
   }
 
+  std::chrono::milliseconds ping_every{10000};  // a third of the server's idle timeout
+
  private:
   asio::io_context io_;
   std::shared_ptr<asio::ssl::context> tls_;  // null: plain TCP
@@ -264,55 +279,128 @@ class Connection {
   Clock::time_point last_send_ = Clock::now();
 };
 
+// A session on one server of the --connect list: Hello, Welcome, and on a lost connection the
+// next server.
+class Session {
+ public:
+  Session(const Options& o, std::vector<irradcast::HostPort> servers)
+      : o_(o), servers_(std::move(servers)) {
+    connect();
+  }
+  Connection& connection() { return *c_; }
+  const irradcast::HostPort& server() const { return servers_[current_]; }
+
+  // The first server that answers, trying each once from the one after the current (the
+  // first: from the start of the list). An Error frame that ends the session (server full,
+  // shutting down) counts as no answer; every failure is in the error.
+  void connect() {
+    using namespace irradcast;
+    std::string failures;
+    for (std::size_t i = 0; i < servers_.size(); ++i) {
+      if (c_ || i > 0) current_ = (current_ + 1) % servers_.size();
+      c_.reset();
+      try {
+        c_ = std::make_unique<Connection>(server(), std::chrono::milliseconds(o_.timeout_ms),
+                                          tools::tls_of(o_.tls));
+        hello();
+        return;
+      } catch (const Lost& e) {
+        failures += "; " + server().text() + ": " + e.what();
+      }
+    }
+    c_.reset();
+    throw Error("no server of --connect answered" + failures);
+  }
+
+ private:
+  void hello() {
+    using namespace irradcast;
+    wire::Envelope hello;
+    hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+    hello.mutable_hello()->set_client_name(o_.name);
+    c_->send(hello);
+    wire::Envelope w = c_->expect("welcome");
+    if (!w.has_welcome())
+      throw Error(std::string("expected welcome, got ") + wire::message_name(w));
+    if (w.welcome().idle_timeout_ms() > 0)
+      c_->ping_every =
+          std::min(c_->ping_every, std::chrono::milliseconds(w.welcome().idle_timeout_ms() / 3));
+    if (servers_.size() > 1) log::info("edit", "connected to " + server().text());
+  }
+
+  const Options& o_;
+  std::vector<irradcast::HostPort> servers_;
+  std::size_t current_ = 0;
+  std::unique_ptr<Connection> c_;
+};
+
+// Sends one edit and returns the revision of its acknowledgement. A connection lost before the
+// edit was written moves to the next server and sends it there.
+std::uint64_t send_edit(Session& session, const irradcast::wire::Envelope& e, std::uint64_t id) {
+  using namespace irradcast;
+  try {
+    session.connection().send(e);
+  } catch (const Lost& lost) {
+    log::warn("edit", session.server().text() + ": " + lost.what() + "; trying the next server");
+    session.connect();
+    session.connection().send(e);
+  }
+  try {
+    for (;;) {
+      wire::Envelope a = session.connection().expect("acknowledgement");
+      if (a.has_scene_edit() && !a.scene_edit().applied() && a.scene_edit().request_id() == id)
+        return a.scene_edit().revision();
+    }
+  } catch (const Lost& lost) {
+    throw Error("edit " + std::to_string(id) + ": " + session.server().text() + ": " + lost.what() +
+                " before the acknowledgement; the edit may or may not be applied, so it is not "
+                "sent again");
+  }
+}
+
 int run(const Options& o, const std::vector<irradcast::EditStep>& steps, const std::string& token) {
   using namespace irradcast;
-  const HostPort hp = tools::start_run(o.log_level, o.connect);
-  Connection c(hp, std::chrono::milliseconds(o.timeout_ms), tools::tls_of(o.tls));
-  wire::Envelope hello;
-  hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
-  hello.mutable_hello()->set_client_name(o.name);
-  c.send(hello);
-  wire::Envelope w = c.expect("welcome");
-  if (!w.has_welcome()) throw Error(std::string("expected welcome, got ") + wire::message_name(w));
-  std::chrono::milliseconds ping_every(10000);
-  if (w.welcome().idle_timeout_ms() > 0)
-    ping_every = std::min(ping_every, std::chrono::milliseconds(w.welcome().idle_timeout_ms() / 3));
-
+  Session session(o, tools::start_run(o.log_level, o.connect));
   for (std::size_t i = 0; i < steps.size(); ++i) {
-    if (steps[i].after_ms > 0.0) c.wait(steps[i].after_ms, ping_every);
+    if (steps[i].after_ms > 0.0) {
+      try {
+        Connection& c = session.connection();
+        c.wait(steps[i].after_ms, c.ping_every);
+      } catch (const Lost& lost) {
+        log::warn("edit",
+                  session.server().text() + ": " + lost.what() + "; trying the next server");
+        session.connect();
+      }
+    }
     wire::Envelope e;
     wire::SceneEdit* m = e.mutable_scene_edit();
     wire::to_proto(steps[i].edit, m);
     m->set_token(token);
     m->set_request_id(i + 1);
     const auto sent = Clock::now();
-    c.send(e);
-    // The acknowledgement: the revision this edit makes.
-    std::uint64_t revision = 0;
-    for (;;) {
-      wire::Envelope a = c.expect("acknowledgement");
-      if (a.has_scene_edit() && !a.scene_edit().applied() && a.scene_edit().request_id() == i + 1) {
-        revision = a.scene_edit().revision();
-        break;
-      }
-    }
+    const std::uint64_t revision = send_edit(session, e, i + 1);
     if (o.no_wait) {
       std::printf("revision %llu queued\n", static_cast<unsigned long long>(revision));
       std::fflush(stdout);
       continue;
     }
     // The broadcast once the engine applied it.
-    for (;;) {
-      wire::Envelope a = c.expect("applied edit " + std::to_string(revision));
-      if (a.has_scene_edit() && a.scene_edit().applied() && a.scene_edit().revision() >= revision)
-        break;
+    try {
+      for (;;) {
+        wire::Envelope a = session.connection().expect("applied edit " + std::to_string(revision));
+        if (a.has_scene_edit() && a.scene_edit().applied() && a.scene_edit().revision() >= revision)
+          break;
+      }
+    } catch (const Lost& lost) {
+      throw Error("revision " + std::to_string(revision) + " was queued, but " +
+                  session.server().text() + ": " + lost.what() + " before it was applied");
     }
     const double ms = std::chrono::duration<double, std::milli>(Clock::now() - sent).count();
     std::printf("revision %llu applied in %.1f ms\n", static_cast<unsigned long long>(revision),
                 ms);
     std::fflush(stdout);
   }
-  c.close();
+  session.connection().close();
   return 0;
 }
 

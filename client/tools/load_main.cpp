@@ -54,10 +54,8 @@ void raise_fd_limit(int users) {
 
 int run(const Options& o) {
   using namespace irradcast;
-  const HostPort hp = tools::start_run(o.log_level, o.connect);
   LoadOptions lo;
-  lo.host = hp.host;
-  lo.port = hp.port;
+  lo.servers = tools::start_run(o.log_level, o.connect);
   lo.tls = irradcast::tools::tls_of(o.tls);
   lo.users = o.users;
   lo.duration_s = o.duration;

@@ -10,7 +10,20 @@
 namespace irradcast::tools {
 
 void add_connect_flags(CLI::App& app, std::string& connect, ClientTls& tls) {
-  app.add_option("--connect", connect, "server address HOST:PORT")->required();
+  app.add_option("--connect", connect,
+                 "server address HOST:PORT, or a failover list HOST:PORT,HOST:PORT,... (at most " +
+                     std::to_string(kMaxServerAddresses) +
+                     ": servers of the same scene, origins or gateways); a refused or lost "
+                     "connection moves on to the next, resuming with the tiles held")
+      ->required()
+      ->check([](const std::string& spec) {
+        try {
+          parse_host_list(spec, "");  // CLI11 names the option
+          return std::string();
+        } catch (const Error& e) {
+          return std::string(e.what());
+        }
+      });
   app.add_flag("--tls", tls.enabled,
                "connect with TLS (a server started with --tls-cert); the server's certificate "
                "must name the --connect host and chain to a trusted CA");
@@ -31,9 +44,9 @@ wire::TileEncoding parse_encoding(const std::string& name) {
   throw Error("--encoding must be rgb9e5 or half, not '" + name + "'");
 }
 
-HostPort start_run(const std::string& log_level, const std::string& connect) {
+std::vector<HostPort> start_run(const std::string& log_level, const std::string& connect) {
   log::set_level(log::parse_level(log_level));
-  return parse_host_port(connect);
+  return parse_host_list(connect);
 }
 
 int parse_and_run(CLI::App& app, int argc, char** argv, const std::function<int()>& run,

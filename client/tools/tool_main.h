@@ -1,12 +1,14 @@
 // What the client tools (irradcast-view, irradcast-load, irradcast-edit) share: the flags every
-// one of them has (--connect, --tls, --tls-ca), the tile encoding flag, the start of a run (log
-// level, server address) and main()'s command-line parsing and error reporting.
+// one of them has (--connect with its failover list, --tls, --tls-ca), the tile encoding flag,
+// the start of a run (log level, server addresses) and main()'s command-line parsing and error
+// reporting.
 #pragma once
 
 #include <CLI/CLI.hpp>
 
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "irradcast.pb.h"
 #include "irradcast/client/client_tls.h"
@@ -14,7 +16,7 @@
 
 namespace irradcast::tools {
 
-// --connect (required), --tls and --tls-ca.
+// --connect HOST:PORT[,HOST:PORT...] (required; checked when parsed), --tls and --tls-ca.
 void add_connect_flags(CLI::App& app, std::string& connect, ClientTls& tls);
 
 // --tls-ca alone means TLS.
@@ -23,8 +25,8 @@ ClientTls tls_of(ClientTls tls);
 // "rgb9e5" or "half" (--encoding); throws irradcast::Error for anything else.
 wire::TileEncoding parse_encoding(const std::string& name);
 
-// The start of a run: sets the log level (--log-level) and parses --connect.
-HostPort start_run(const std::string& log_level, const std::string& connect);
+// The start of a run: sets the log level (--log-level) and parses --connect's list.
+std::vector<HostPort> start_run(const std::string& log_level, const std::string& connect);
 
 // main(): parses the command line (a bad one: CLI11's message and exit code), calls `check`
 // (an irradcast::Error from it is reported as a bad command line), then returns run()'s exit

@@ -113,10 +113,8 @@ std::string default_cache_dir() {
 
 irradcast::ViewClientOptions client_options(const Options& o) {
   using namespace irradcast;
-  const HostPort hp = tools::start_run(o.log_level, o.connect);
   ViewClientOptions vo;
-  vo.host = hp.host;
-  vo.port = hp.port;
+  vo.servers = tools::start_run(o.log_level, o.connect);
   vo.name = o.name;
   vo.cache_dir = o.cache_dir == "auto"   ? default_cache_dir()
                  : o.cache_dir == "none" ? ""
@@ -248,6 +246,7 @@ void report(const Options& o, const irradcast::ViewClientCounters& c, const Fram
                       {"connections", c.connections},
                       {"connections_lost", c.connections_lost},
                       {"connect_attempts", c.connect_attempts},
+                      {"failovers", c.failovers},
                       {"seconds_to_scene", t_scene},
                       {"converged", f.converged},
                       {"seconds_to_converged", f.t_converged},

@@ -5,9 +5,10 @@
 // frames of its view. A user whose connection drops (reset, EOF, a server Error SERVER_SHUTDOWN,
 // a timed-out handshake or download) reconnects with the viewer's back-off policy (backoff.h)
 // until the end of the run and resumes as the viewer does (Hello with its scene hash and tile
-// versions). The report has the numbers a service owner asks about: who connected,
-// how long the scene and the first full image took, tile latency (from the version's time stamp
-// on the server to the user's apply), bandwidth, frame rate and errors by kind.
+// versions); with several servers (--connect A,B,...) the users spread their first connection
+// over them and each retry goes to the next. The report has the numbers a service owner asks about:
+// who connected, how long the scene and the first full image took, tile latency (from the version's
+// time stamp on the server to the user's apply), bandwidth, frame rate and errors by kind.
 //
 // Tile latency compares the server's clock (TileUpdate.server_time_us) with this machine's, so
 // it is exact on one machine and needs synchronised clocks (NTP) across machines. Only versions
@@ -26,12 +27,16 @@
 #include "irradcast/client/backoff.h"
 #include "irradcast/client/camera_path.h"
 #include "irradcast/client/client_tls.h"
+#include "irradcast/client/host_port.h"
 
 namespace irradcast {
 
 struct LoadOptions {
   std::string host = "127.0.0.1";
   std::uint16_t port = 7450;
+  // The failover list (--connect A,B,...); empty: {host, port}. User i tries server i mod n
+  // first and moves to the next after a refused or lost connection.
+  std::vector<HostPort> servers;
   int users = 1;
   double duration_s = 10.0;  // from the start of the run; users then say Bye
   bool render = false;       // compose frames too (else "thin": network + tile decoding)

@@ -4,7 +4,10 @@
 // after a lost connection and resumes: the tiles it holds are only sent again when their version
 // changed. A connection lost in any phase (connect, handshake, scene download, streaming) is
 // retried with capped, jittered exponential back-off (backoff.h) until the deadline; protocol
-// errors (a bad frame from the server, another protocol version) are not retried.
+// errors (a bad frame from the server, another protocol version) are not retried. With several
+// server addresses (--connect A,B,...: origins or gateways of the same scene) a refused or lost
+// connection moves on to the next address, round after round, and resumes there with the tiles
+// held (a server of another tile epoch resends every tile; client_session.h).
 // The protocol itself is the ClientSession's (client_session.h); this class adds the blocking
 // socket, the scene cache on disk and the reconnection policy. Single-threaded: call poll() to
 // make progress.
@@ -22,6 +25,7 @@
 #include "irradcast/client/client_passes.h"
 #include "irradcast/client/client_session.h"
 #include "irradcast/client/client_tls.h"
+#include "irradcast/client/host_port.h"
 #include "irradcast/client/tile_cache.h"
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/image.h"
@@ -34,6 +38,8 @@ namespace irradcast {
 struct ViewClientOptions {
   std::string host = "127.0.0.1";
   std::uint16_t port = 7450;
+  // The failover list (--connect A,B,...), tried in order from the first; empty: {host, port}.
+  std::vector<HostPort> servers;
   std::string name = "irradcast-view";
   std::string cache_dir;  // scene packages by hash; empty = no cache
   wire::TileEncoding encoding = wire::TILE_RGB9E5_ZSTD;
@@ -60,6 +66,7 @@ struct ViewClientCounters {
   std::uint32_t connections = 0;  // sessions set up (Welcome, scene, Subscribe): 1 + reconnects
   std::uint32_t connections_lost = 0;  // connections that dropped after a session was set up
   std::uint32_t connect_attempts = 0;  // connection attempts, failed ones included
+  std::uint32_t failovers = 0;         // moves to the next address of the list after a failure
   bool scene_from_cache = false;
   std::uint64_t errors_received = 0;
   std::uint64_t edits_applied = 0;  // scene edits applied to the viewer's copy of the scene
@@ -109,11 +116,14 @@ class ViewClient {
   // applied SceneEdit the server broadcasts, in order; docs/EDITS.md).
   std::uint64_t scene_revision() const { return core_.revision(); }
   std::uint64_t session() const { return core_.session(); }
+  // The address of the current connection (or of the next attempt).
+  const HostPort& server() const { return servers_[current_]; }
 
  private:
   struct Net;
-  // Attempts connections (open_connection + handshake) until one sets up a session, sleeping a
-  // back-off delay before each attempt but the first (and before the first too when
+  // Attempts connections (open_connection + handshake) until one sets up a session, moving to
+  // the next address after each failure (and first of all when `after_loss`). Sleeps a back-off
+  // delay before each round over the list but the first (and before the first too when
   // `after_loss`); throws irradcast::Error at the deadline or on a protocol error.
   void establish(bool after_loss);
   // One TCP connection attempt, bounded by `deadline`; throws ConnectionLost.
@@ -133,13 +143,15 @@ class ViewClient {
   void connection_lost(const std::exception& lost);
 
   ViewClientOptions options_;
+  std::vector<HostPort> servers_;            // at least one
+  std::size_t current_ = 0;                  // index into servers_
   std::shared_ptr<asio::ssl::context> tls_;  // null: plain TCP
   Backoff backoff_;
   std::unique_ptr<Net> net_;
   ClientSession core_;
   // Connection counts; the protocol's counts are the core's.
   std::uint64_t bytes_received_ = 0;
-  std::uint32_t connections_ = 0, connections_lost_ = 0, connect_attempts_ = 0;
+  std::uint32_t connections_ = 0, connections_lost_ = 0, connect_attempts_ = 0, failovers_ = 0;
   std::chrono::steady_clock::time_point last_ping_{};
 };
 
