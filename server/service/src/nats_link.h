@@ -1,0 +1,54 @@
+// What the origin's publisher and the gateway share of the NATS C client (libnats): a
+// connection that retries in the background until the server is there and reconnects forever,
+// with its JetStream context and a generation that counts (re)connections; and small helpers.
+#pragma once
+
+#include <nats/nats.h>
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include <google/protobuf/message_lite.h>
+
+namespace irradcast::nats_link {
+
+class Connection {
+ public:
+  // Starts connecting to `url` (nats://HOST:PORT); returns at once when the server is not there
+  // yet (the client keeps trying). `changed` runs on a libnats thread after every connect,
+  // disconnect and reconnect. Throws irradcast::Error on a bad URL or options.
+  Connection(const std::string& url, const std::string& name, std::function<void()> changed);
+  ~Connection();
+  Connection(const Connection&) = delete;
+  Connection& operator=(const Connection&) = delete;
+
+  natsConnection* nc() const { return nc_; }
+  jsCtx* js() const { return js_; }
+  bool connected() const { return connected_; }
+  // Counts the times the connection was established (0: never yet).
+  std::uint64_t generation() const { return generation_; }
+  const std::string& url() const { return url_; }
+
+ private:
+  static void on_connected(natsConnection* nc, void* self);
+  static void on_disconnected(natsConnection* nc, void* self);
+  void up();
+  std::string url_;
+  std::function<void()> changed_;
+  natsOptions* opts_ = nullptr;
+  natsConnection* nc_ = nullptr;
+  jsCtx* js_ = nullptr;
+  std::atomic<bool> connected_{false};
+  std::atomic<std::uint64_t> generation_{0};
+};
+
+// "NATS_TIMEOUT: ..." for a log line or an Error.
+std::string describe(natsStatus s);
+// A message's bytes, or "" for none.
+std::string data_of(natsMsg* msg);
+// Serialises and publishes a reply (msg's reply subject); nothing when it has none.
+void reply(natsConnection* nc, natsMsg* msg, const google::protobuf::MessageLite& m);
+
+}  // namespace irradcast::nats_link
