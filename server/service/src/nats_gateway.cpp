@@ -23,8 +23,8 @@ namespace irradcast {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-constexpr std::uint32_t kMaxChunks = 1u << 14;        // 8 GiB of package at 512 KiB
-constexpr std::size_t kMaxEarlyTiles = 1u << 20;      // tiles before the first state
+constexpr std::uint32_t kMaxChunks = 1u << 14;    // 8 GiB of package at 512 KiB
+constexpr std::size_t kMaxEarlyTiles = 1u << 20;  // tiles before the first state
 constexpr std::uint32_t kMaxLightmaps = 1u << 20;
 constexpr std::size_t kMaxCameras = 4096;
 constexpr auto kCameraKeepalive = std::chrono::seconds(2);
@@ -91,9 +91,9 @@ struct NatsGateway::Impl {
   std::optional<wire::NatsSceneState> pending_state;  // waiting for its chunks
   std::map<std::uint32_t, wire::NatsPackageChunk> chunks;
   std::map<std::uint32_t, wire::NatsTile> early_tiles;  // before the first state
-  std::vector<std::uint64_t> tile_origin;  // the origin of each tile's version held
-  std::uint64_t reset_origin = 0;          // a new lineage: its tiles replace what is held
-  std::uint64_t last_edit = 0;             // the newest edit revision forwarded
+  std::vector<std::uint64_t> tile_origin;               // the origin of each tile's version held
+  std::uint64_t reset_origin = 0;  // a new lineage: its tiles replace what is held
+  std::uint64_t last_edit = 0;     // the newest edit revision forwarded
 
   std::unique_ptr<nats_link::Connection> conn;
   natsSubscription* sub = nullptr;  // worker thread
@@ -225,9 +225,8 @@ void NatsGateway::Impl::apply_state(const wire::NatsSceneState& s,
       store = std::make_unique<TileStore>(sizes, to);
       tile_origin.assign(store->tile_count(), 0);
       st.ready = true;
-      log::info("gateway", "scene '" + options.scene_id + "' revision " +
-                               std::to_string(revision) + ": " +
-                               std::to_string(store->tile_count()) + " tiles");
+      log::info("gateway", "scene '" + options.scene_id + "' revision " + std::to_string(revision) +
+                               ": " + std::to_string(store->tile_count()) + " tiles");
     }
   }
   cv.notify_all();
@@ -452,13 +451,15 @@ std::uint64_t NatsGateway::submit_edit(const SceneEdit& edit) {
     std::lock_guard lock(im.mutex);
     ++im.st.edit_requests;
   }
-  const natsStatus s = natsConnection_Request(
-      &reply, im.conn->nc(), im.subjects.submit.c_str(), bytes.data(),
-      static_cast<int>(bytes.size()), static_cast<std::int64_t>(im.options.request_timeout.count()));
+  const natsStatus s =
+      natsConnection_Request(&reply, im.conn->nc(), im.subjects.submit.c_str(), bytes.data(),
+                             static_cast<int>(bytes.size()),
+                             static_cast<std::int64_t>(im.options.request_timeout.count()));
   if (s == NATS_NO_RESPONDERS || s == NATS_TIMEOUT)
     throw Error("no origin answered for scene '" + im.options.scene_id +
                 "'; the edit was not applied");
-  if (s != NATS_OK) throw Error("the edit could not be sent to the origin: " + nats_link::describe(s));
+  if (s != NATS_OK)
+    throw Error("the edit could not be sent to the origin: " + nats_link::describe(s));
   wire::NatsReply r;
   const bool parsed = r.ParseFromString(nats_link::data_of(reply));
   natsMsg_Destroy(reply);

@@ -14,8 +14,8 @@ namespace irradcast {
 NatsSubjects nats_subjects(const std::string& scene_id) {
   NatsSubjects s;
   for (char c : scene_id) {
-    const bool plain = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') ||
-                       (c >= '0' && c <= '9') || c == '-' || c == '_';
+    const bool plain = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+                       c == '-' || c == '_';
     s.token += plain ? c : '_';
   }
   if (s.token.empty() || s.token != scene_id)

@@ -340,8 +340,7 @@ void NatsOrigin::Impl::expire_cameras() {
 
 // A gateway's cameras: they replace the ones it sent before (viewer ids from the gateway's id
 // and the camera's position in the list).
-void NatsOrigin::Impl::on_cameras(natsConnection* nc, natsSubscription*, natsMsg* msg,
-                                  void* self) {
+void NatsOrigin::Impl::on_cameras(natsConnection* nc, natsSubscription*, natsMsg* msg, void* self) {
   Impl& im = *static_cast<Impl*>(self);
   wire::NatsCameras m;
   wire::NatsReply r;
@@ -400,9 +399,8 @@ NatsOrigin::NatsOrigin(EngineHost& host, NatsOriginOptions options)
     : host_(host), impl_(std::make_unique<Impl>(host, std::move(options))) {
   Impl& im = *impl_;
   im.dirty.assign(host.tiles().tile_count(), 0);  // the first round publishes every tile
-  im.conn = std::make_unique<nats_link::Connection>(im.options.url, "irradcast-origin " +
-                                                                        host.scene_id(),
-                                                    [&im] { im.cv.notify_all(); });
+  im.conn = std::make_unique<nats_link::Connection>(
+      im.options.url, "irradcast-origin " + host.scene_id(), [&im] { im.cv.notify_all(); });
   natsStatus s = natsConnection_Subscribe(&im.camera_sub, im.conn->nc(),
                                           im.subjects.cameras.c_str(), Impl::on_cameras, &im);
   if (s == NATS_OK)

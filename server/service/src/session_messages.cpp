@@ -112,8 +112,8 @@ EngineHostStats engine_stats_from(const wire::Stats& s) {
   es.last_update_ms = s.engine_update_ms();
   es.idle = s.engine_idle();
   for (const wire::PassTime& pt : s.pass_times())
-    es.passes.push_back({pt.pass(), pt.bounce(), pt.ms() * 1e-3, pt.rays(), pt.seconds_total(),
-                         pt.rays_total()});
+    es.passes.push_back(
+        {pt.pass(), pt.bounce(), pt.ms() * 1e-3, pt.rays(), pt.seconds_total(), pt.rays_total()});
   es.update_rate = s.update_rate();
   es.tiles_published = s.tiles_published();
   es.seconds_total = s.engine_seconds_total();

@@ -7,8 +7,8 @@
 #include <optional>
 #include <string>
 
-#include "irradcast/service/tile_source.h"
 #include "irradcast/service/net_server.h"
+#include "irradcast/service/tile_source.h"
 #include "irradcast/service/tile_store.h"
 #include "irradcast/wire/frame.h"
 

@@ -21,9 +21,9 @@
 #include <vector>
 
 #include "irradcast/common/log.h"
-#include "irradcast/service/tile_source.h"
 #include "irradcast/service/net_server.h"
 #include "irradcast/service/send_queue.h"
+#include "irradcast/service/tile_source.h"
 #include "irradcast/wire/frame.h"
 #include "peer_table.h"
 #include "session_messages.h"

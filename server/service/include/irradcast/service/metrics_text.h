@@ -8,9 +8,9 @@
 #include <string>
 #include <string_view>
 
-#include "irradcast/service/tile_source.h"
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/net_server.h"
+#include "irradcast/service/tile_source.h"
 
 namespace irradcast {
 

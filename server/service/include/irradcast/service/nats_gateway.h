@@ -20,7 +20,7 @@
 namespace irradcast {
 
 struct NatsGatewayOptions {
-  std::string url;                 // nats://HOST:PORT
+  std::string url;                   // nats://HOST:PORT
   std::string scene_id = "cornell";  // the origin's --scene
   // Sent with every edit (the origin checks it); the Server's control token, which the
   // sessions check first.

@@ -1,9 +1,9 @@
 // The network server: accepts TCP connections and runs one session per client (the protocol of
 // docs/PROTOCOL.md) on a small pool of Asio I/O threads. It serves the scene package and the
-// tiles of a TileSource (an EngineHost, or a NATS gateway); the engine runs on its own thread and only tells the server which
-// tiles got new versions. A session's memory is bounded: at most one queue entry per tile and a
-// capped number of control frames, so a slow or stuck client never makes the server buffer
-// without bound or stall the others.
+// tiles of a TileSource (an EngineHost, or a NATS gateway); the engine runs on its own thread and
+// only tells the server which tiles got new versions. A session's memory is bounded: at most one
+// queue entry per tile and a capped number of control frames, so a slow or stuck client never makes
+// the server buffer without bound or stall the others.
 #pragma once
 
 #include <array>

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "irradcast/common/world.h"
 #include "irradcast/common/scene_edit.h"
+#include "irradcast/common/world.h"
 #include "irradcast/service/tile_store.h"
 #include "irradcast/wire/scene_package.h"
 
