@@ -202,7 +202,8 @@ void NatsGateway::Impl::apply_state(const wire::NatsSceneState& s,
   std::vector<std::uint32_t> installed;
   {
     std::unique_lock lock(mutex);
-    if (store && sizes_of(s) != sizes) {
+    if (store &&
+        (sizes_of(s) != sizes || static_cast<int>(s.tile_size()) != store->options().tile_size)) {
       lock.unlock();
       return bad("the origin's lightmap layout changed; restart the gateway to serve it");
     }

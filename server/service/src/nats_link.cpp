@@ -57,9 +57,11 @@ void reply(natsConnection* nc, natsMsg* msg, const google::protobuf::MessageLite
 
 Connection::Connection(const std::string& url, const std::string& name,
                        std::function<void()> changed)
-    : url_(url), changed_(std::move(changed)) {
-  if (url.rfind("nats://", 0) != 0 && url.rfind("tls://", 0) != 0)
+    : shared_(new Shared{url, std::move(changed)}) {
+  if (url.rfind("nats://", 0) != 0 && url.rfind("tls://", 0) != 0) {
+    delete shared_;
     throw Error("--nats: '" + url + "' is not a nats://HOST:PORT URL");
+  }
   natsStatus s = natsOptions_Create(&opts_);
   if (s == NATS_OK) s = natsOptions_SetURL(opts_, url.c_str());
   if (s == NATS_OK) s = natsOptions_SetName(opts_, name.c_str());
@@ -67,53 +69,58 @@ Connection::Connection(const std::string& url, const std::string& name,
   if (s == NATS_OK) s = natsOptions_SetReconnectWait(opts_, 250);
   if (s == NATS_OK) s = natsOptions_SetTimeout(opts_, 2000);
   if (s == NATS_OK) s = natsOptions_SetPingInterval(opts_, 5000);
-  if (s == NATS_OK) s = natsOptions_SetRetryOnFailedConnect(opts_, true, on_connected, this);
-  if (s == NATS_OK) s = natsOptions_SetReconnectedCB(opts_, on_connected, this);
-  if (s == NATS_OK) s = natsOptions_SetDisconnectedCB(opts_, on_disconnected, this);
-  if (s != NATS_OK) {
-    natsOptions_Destroy(opts_);
-    throw Error("NATS options for " + url + ": " + describe(s));
-  }
-  s = natsConnection_Connect(&nc_, opts_);
-  if (s == NATS_OK) {
-    up();
-  } else if (s != NATS_NOT_YET_CONNECTED) {
-    natsOptions_Destroy(opts_);
-    throw Error("cannot connect to NATS at " + url + ": " + describe(s));
-  } else {
+  if (s == NATS_OK) s = natsOptions_SetRetryOnFailedConnect(opts_, true, on_connected, shared_);
+  if (s == NATS_OK) s = natsOptions_SetReconnectedCB(opts_, on_connected, shared_);
+  if (s == NATS_OK) s = natsOptions_SetDisconnectedCB(opts_, on_disconnected, shared_);
+  if (s == NATS_OK) s = natsOptions_SetClosedCB(opts_, on_closed, shared_);
+  if (s == NATS_OK) s = natsConnection_Connect(&nc_, opts_);
+  if (s == NATS_NOT_YET_CONNECTED)
     log::warn("nats", "NATS at " + url + " is not there yet; retrying in the background");
-  }
-  s = natsConnection_JetStream(&js_, nc_, nullptr);
+  else if (s == NATS_OK)
+    shared_->up();
+  if (s == NATS_OK || s == NATS_NOT_YET_CONNECTED) s = natsConnection_JetStream(&js_, nc_, nullptr);
   if (s != NATS_OK) {
-    natsConnection_Destroy(nc_);
+    const std::string why = describe(s);
+    if (nc_) {  // its closed callback deletes shared_
+      shared_->closing = true;
+      natsConnection_Close(nc_);
+      natsConnection_Destroy(nc_);
+    } else {
+      delete shared_;
+    }
     natsOptions_Destroy(opts_);
-    throw Error("NATS JetStream context: " + describe(s));
+    throw Error("cannot connect to NATS at " + url + ": " + why);
   }
 }
 
 Connection::~Connection() {
+  shared_->closing = true;
   jsCtx_Destroy(js_);
-  natsConnection_Close(nc_);
+  natsConnection_Close(nc_);  // the closed callback deletes shared_
   natsConnection_Destroy(nc_);
   natsOptions_Destroy(opts_);
 }
 
-void Connection::up() {
-  if (connected_.exchange(true)) return;
-  ++generation_;
-  log::info("nats", "connected to " + url_);
-  if (changed_) changed_();
+void Connection::Shared::up() {
+  if (closing || connected.exchange(true)) return;
+  ++generation;
+  log::info("nats", "connected to " + url);
+  if (changed) changed();
 }
 
-void Connection::on_connected(natsConnection*, void* self) {
-  static_cast<Connection*>(self)->up();
+void Connection::on_connected(natsConnection*, void* shared) {
+  static_cast<Shared*>(shared)->up();
 }
 
-void Connection::on_disconnected(natsConnection*, void* self) {
-  auto* c = static_cast<Connection*>(self);
-  if (!c->connected_.exchange(false)) return;
-  log::warn("nats", "lost the connection to " + c->url_ + "; reconnecting");
-  if (c->changed_) c->changed_();
+void Connection::on_disconnected(natsConnection*, void* shared) {
+  auto* c = static_cast<Shared*>(shared);
+  if (c->closing || !c->connected.exchange(false)) return;
+  log::warn("nats", "lost the connection to " + c->url + "; reconnecting");
+  if (c->changed) c->changed();
+}
+
+void Connection::on_closed(natsConnection*, void* shared) {
+  delete static_cast<Shared*>(shared);
 }
 
 }  // namespace nats_link

@@ -26,22 +26,29 @@ class Connection {
 
   natsConnection* nc() const { return nc_; }
   jsCtx* js() const { return js_; }
-  bool connected() const { return connected_; }
+  bool connected() const { return shared_->connected; }
   // Counts the times the connection was established (0: never yet).
-  std::uint64_t generation() const { return generation_; }
-  const std::string& url() const { return url_; }
+  std::uint64_t generation() const { return shared_->generation; }
+  const std::string& url() const { return shared_->url; }
 
  private:
-  static void on_connected(natsConnection* nc, void* self);
-  static void on_disconnected(natsConnection* nc, void* self);
-  void up();
-  std::string url_;
-  std::function<void()> changed_;
+  // What libnats's callbacks see. They run on its own thread, also after the connection is
+  // closed, so this lives until the closed callback (the last one) deletes it.
+  struct Shared {
+    std::string url;
+    std::function<void()> changed;
+    std::atomic<bool> connected{false};
+    std::atomic<bool> closing{false};  // the owner is going: tell it nothing more
+    std::atomic<std::uint64_t> generation{0};
+    void up();
+  };
+  static void on_connected(natsConnection* nc, void* shared);
+  static void on_disconnected(natsConnection* nc, void* shared);
+  static void on_closed(natsConnection* nc, void* shared);
+  Shared* shared_;
   natsOptions* opts_ = nullptr;
   natsConnection* nc_ = nullptr;
   jsCtx* js_ = nullptr;
-  std::atomic<bool> connected_{false};
-  std::atomic<std::uint64_t> generation_{0};
 };
 
 // "NATS_TIMEOUT: ..." for a log line or an Error.
