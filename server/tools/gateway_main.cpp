@@ -117,19 +117,6 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGINT);
-  sigaddset(&signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  std::signal(SIGPIPE, SIG_IGN);
-  try {
-    return run(o, signals);
-  } catch (const irradcast::Error& e) {
-    std::fprintf(stderr, "irradcast-gateway: error: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "irradcast-gateway: internal error: %s\n", e.what());
-    return 2;
-  }
+  return irradcast::tools::run_service("irradcast-gateway",
+                                       [&o](const sigset_t& signals) { return run(o, signals); });
 }

@@ -1,15 +1,19 @@
 // The network options irradcast-server and irradcast-gateway share (the protocol port, TLS,
 // limits, the control token, the metrics endpoint, logging): their CLI, the ServerOptions they
-// make, and the metrics endpoint with a body function.
+// make, the metrics endpoint with a body function, and main()'s signal and error handling.
 #pragma once
 
 #include <CLI/CLI.hpp>
 
+#include <csignal>
+#include <cstdio>
 #include <fstream>
 #include <functional>
 #include <memory>
 #include <string>
 #include <utility>
+
+#include <pthread.h>
 
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
@@ -143,5 +147,26 @@ struct NetworkOptions {
     return metrics;
   }
 };
+
+// The rest of a service program's main() after its options are parsed: blocks SIGINT and
+// SIGTERM in every thread (threads inherit the mask; `run` waits for them), ignores SIGPIPE, and
+// turns errors into "TOOL: error: ..." and exit status 1 (2 for internal errors).
+inline int run_service(const char* tool, const std::function<int(const sigset_t&)>& run) {
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  std::signal(SIGPIPE, SIG_IGN);
+  try {
+    return run(signals);
+  } catch (const Error& e) {
+    std::fprintf(stderr, "%s: error: %s\n", tool, e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: internal error: %s\n", tool, e.what());
+    return 2;
+  }
+}
 
 }  // namespace irradcast::tools

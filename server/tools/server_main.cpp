@@ -57,7 +57,7 @@ irradcast::Scene load_lit_scene(const Options& o) {
   return scene;
 }
 
-int run(const Options& o, sigset_t signals) {
+int run(const Options& o, const sigset_t& signals) {
   using namespace irradcast;
   log::set_level(log::parse_level(o.net.log_level));
   Progress::set_enabled(false);
@@ -213,20 +213,6 @@ int main(int argc, char** argv) {
     return app.exit(e);
   }
   if (list_devices) return print_devices();
-  // Block the stop signals in every thread (threads inherit the mask); main waits for them.
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGINT);
-  sigaddset(&signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  std::signal(SIGPIPE, SIG_IGN);
-  try {
-    return run(o, signals);
-  } catch (const irradcast::Error& e) {
-    std::fprintf(stderr, "irradcast-server: error: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "irradcast-server: internal error: %s\n", e.what());
-    return 2;
-  }
+  return irradcast::tools::run_service("irradcast-server",
+                                       [&o](const sigset_t& signals) { return run(o, signals); });
 }

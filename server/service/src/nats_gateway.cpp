@@ -69,9 +69,7 @@ struct NatsGateway::Impl {
     return (std::uint64_t{rd()} << 32 | rd()) | 1;
   }();
 
-  std::mutex listener_mutex;
-  PublishListener tiles_listener;
-  EditListener edit_listener;
+  nats_link::Listeners listeners;  // the Server's
 
   mutable std::mutex mutex;  // guards the state below
   mutable std::condition_variable cv;
@@ -118,10 +116,6 @@ struct NatsGateway::Impl {
       ++st.bad_messages;
     }
     log::warn("gateway", "ignored a message from NATS: " + what);
-  }
-  void notify_tiles(const std::vector<std::uint32_t>& tiles) {
-    std::lock_guard lock(listener_mutex);
-    if (tiles_listener && !tiles.empty()) tiles_listener(tiles);
   }
 };
 
@@ -234,7 +228,7 @@ void NatsGateway::Impl::apply_state(const wire::NatsSceneState& s,
   for (auto& [index, t] : early_tiles)
     if (install(t)) installed.push_back(index);
   early_tiles.clear();
-  notify_tiles(installed);
+  listeners.tiles(installed);
 }
 
 void NatsGateway::Impl::on_tile(wire::NatsTile t) {
@@ -248,7 +242,7 @@ void NatsGateway::Impl::on_tile(wire::NatsTile t) {
       return;
     }
   }
-  if (install(t)) notify_tiles({t.index()});
+  if (install(t)) listeners.tiles({t.index()});
 }
 
 bool NatsGateway::Impl::install(const wire::NatsTile& t) {
@@ -282,8 +276,7 @@ void NatsGateway::Impl::on_edit(const std::string& data) {
     std::lock_guard lock(mutex);
     if (e.edit().scene_hash() == (package ? package->hash : "")) a.package = package;
   }
-  std::lock_guard lock(listener_mutex);
-  if (edit_listener) edit_listener(a);
+  listeners.edit(a);
 }
 
 void NatsGateway::Impl::on_stats(const std::string& data) {
@@ -398,13 +391,11 @@ bool NatsGateway::wait_ready(std::chrono::milliseconds limit) const {
 }
 
 void NatsGateway::set_listener(PublishListener listener) {
-  std::lock_guard lock(impl_->listener_mutex);
-  impl_->tiles_listener = std::move(listener);
+  impl_->listeners.set(std::move(listener));
 }
 
 void NatsGateway::set_edit_listener(EditListener listener) {
-  std::lock_guard lock(impl_->listener_mutex);
-  impl_->edit_listener = std::move(listener);
+  impl_->listeners.set(std::move(listener));
 }
 
 const std::string& NatsGateway::scene_id() const {

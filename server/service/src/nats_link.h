@@ -12,6 +12,11 @@
 
 #include <google/protobuf/message_lite.h>
 
+#include <mutex>
+#include <vector>
+
+#include "irradcast/service/tile_source.h"
+
 namespace irradcast::nats_link {
 
 class Connection {
@@ -49,6 +54,33 @@ class Connection {
   natsOptions* opts_ = nullptr;
   natsConnection* nc_ = nullptr;
   jsCtx* js_ = nullptr;
+};
+
+// The Server's listeners on a TileSource that NATS feeds (set from any thread, called from the
+// thread that publishes or receives).
+class Listeners {
+ public:
+  void set(TileSource::PublishListener l) {
+    std::lock_guard lock(mutex_);
+    tiles_ = std::move(l);
+  }
+  void set(TileSource::EditListener l) {
+    std::lock_guard lock(mutex_);
+    edits_ = std::move(l);
+  }
+  void tiles(const std::vector<std::uint32_t>& changed) {
+    std::lock_guard lock(mutex_);
+    if (tiles_ && !changed.empty()) tiles_(changed);
+  }
+  void edit(const AppliedEdit& applied) {
+    std::lock_guard lock(mutex_);
+    if (edits_) edits_(applied);
+  }
+
+ private:
+  std::mutex mutex_;
+  TileSource::PublishListener tiles_;
+  TileSource::EditListener edits_;
 };
 
 // "NATS_TIMEOUT: ..." for a log line or an Error.

@@ -45,9 +45,7 @@ struct NatsOrigin::Impl {
   NatsSubjects subjects;
   const std::uint64_t origin = random_id();
 
-  std::mutex listener_mutex;
-  PublishListener tiles_listener;  // the Server's
-  EditListener edit_listener;
+  nats_link::Listeners listeners;  // the Server's
 
   mutable std::mutex mutex;  // guards what follows, to `conn`
   std::condition_variable cv;
@@ -112,8 +110,7 @@ void NatsOrigin::Impl::on_tiles(const std::vector<std::uint32_t>& tiles) {
     idle = false;
   }
   cv.notify_all();
-  std::lock_guard lock(listener_mutex);
-  if (tiles_listener) tiles_listener(tiles);
+  listeners.tiles(tiles);
 }
 
 void NatsOrigin::Impl::on_edit(const AppliedEdit& applied) {
@@ -127,8 +124,7 @@ void NatsOrigin::Impl::on_edit(const AppliedEdit& applied) {
     idle = false;
   }
   cv.notify_all();
-  std::lock_guard lock(listener_mutex);
-  if (edit_listener) edit_listener(applied);
+  listeners.edit(applied);
 }
 
 void NatsOrigin::Impl::run() {
@@ -433,13 +429,11 @@ NatsOrigin::~NatsOrigin() {
 }
 
 void NatsOrigin::set_listener(PublishListener listener) {
-  std::lock_guard lock(impl_->listener_mutex);
-  impl_->tiles_listener = std::move(listener);
+  impl_->listeners.set(std::move(listener));
 }
 
 void NatsOrigin::set_edit_listener(EditListener listener) {
-  std::lock_guard lock(impl_->listener_mutex);
-  impl_->edit_listener = std::move(listener);
+  impl_->listeners.set(std::move(listener));
 }
 
 NatsOriginStats NatsOrigin::nats_stats() const {
