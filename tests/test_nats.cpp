@@ -10,9 +10,11 @@
 #include <nats/nats.h>
 
 #include <chrono>
+#include <sstream>
 #include <string>
 #include <vector>
 
+#include "cli.h"
 #include "irradcast/client/view_client.h"
 #include "irradcast/common/camera.h"
 #include "irradcast/service/nats_subjects.h"
@@ -398,4 +400,71 @@ TEST(Nats, MalformedMessagesAndRequestsAreRefused) {
   EXPECT_TRUE(converge(v, origin.host.tiles()));
   jsCtx_Destroy(js);
   natsConnection_Destroy(nc);
+}
+
+// The programs: irradcast-server --nats and irradcast-gateway, as an operator runs them.
+TEST(NatsPrograms, TheGatewayProgramServesWhatTheOriginProgramComputes) {
+  IRRADCAST_NEED_NATS();
+  test::NatsProcess nats;
+  const std::uint16_t origin_port = test::free_loopback_port();
+  const std::uint16_t gateway_port = test::free_loopback_port();
+  const auto tmp = std::filesystem::temp_directory_path();
+  const std::string pid = std::to_string(::getpid());
+  const std::string common = "--bind 127.0.0.1 --io-threads 1 --status-every 0 --log-level warn";
+  auto args = [](const std::string& exe, const std::string& line) {
+    std::vector<std::string> v = {exe};
+    std::istringstream ss(line);
+    for (std::string w; ss >> w;) v.push_back(w);
+    return v;
+  };
+  test::Process origin(
+      args(IRRADCAST_SERVER_EXE,
+           "--scene cornell --texels-per-scene 48 --tile-size 16 --max-updates 3 "
+           "--threads 1 --nats " +
+               nats.url() + " --port " + std::to_string(origin_port) + " " + common),
+      tmp / ("irradcast_nats_origin_" + pid + ".log"));
+  test::Process gateway(
+      args(IRRADCAST_GATEWAY_EXE, "--nats " + nats.url() + " --scene cornell --port " +
+                                      std::to_string(gateway_port) + " " + common),
+      tmp / ("irradcast_nats_gateway_" + pid + ".log"));
+  ViewClientOptions vo;
+  vo.connect_timeout = 30000ms;
+  vo.port = origin_port;
+  ViewClient direct(vo);
+  vo.port = gateway_port;
+  ViewClient via(vo);
+  direct.connect();
+  via.connect();
+  // Until the origin's engine is final and both viewers hold the same versions of every tile.
+  bool same = false;
+  const auto deadline = std::chrono::steady_clock::now() + 30s;
+  while (!same && std::chrono::steady_clock::now() < deadline) {
+    direct.poll(50ms);
+    via.poll(50ms);
+    auto s = direct.request_stats(2s);
+    same = s && s->engine_idle() && direct.all_tiles_received();
+    for (std::uint32_t m = 0; same && m < direct.lightmaps().size(); ++m)
+      for (std::uint32_t ty = 0;
+           same && ty * 16 < static_cast<std::uint32_t>(direct.lightmaps()[m].height); ++ty)
+        for (std::uint32_t tx = 0;
+             same && tx * 16 < static_cast<std::uint32_t>(direct.lightmaps()[m].width); ++tx)
+          same = direct.tile_version(m, tx, ty) == via.tile_version(m, tx, ty);
+  }
+  ASSERT_TRUE(same) << origin.output() << gateway.output();
+  EXPECT_EQ(via.scene_hash(), direct.scene_hash());
+  expect_same_image(view_of(via), view_of(direct), "viewer of irradcast-gateway");
+  direct.close();
+  via.close();
+  gateway.signal(SIGTERM);
+  EXPECT_EQ(gateway.wait_for(10s), 0) << gateway.output();
+  origin.signal(SIGTERM);
+  EXPECT_EQ(origin.wait_for(10s), 0) << origin.output();
+  // Bad arguments: one clear line, exit status 1.
+  const test::CliResult bad =
+      test::run_cli(IRRADCAST_GATEWAY_EXE, "--nats http://127.0.0.1:1 --port 0");
+  EXPECT_EQ(bad.status, 1);
+  EXPECT_NE(bad.output.find("irradcast-gateway: error: --nats: 'http://127.0.0.1:1' is not a "
+                            "nats://HOST:PORT URL"),
+            std::string::npos)
+      << bad.output;
 }
