@@ -146,6 +146,12 @@ TEST(Nats, ViewersOfTwoGatewaysSeeExactlyWhatAViewerOfTheOriginSees) {
   const ImageRGB reference = view_of(direct);
   expect_same_image(view_of(via_a), reference, "gateway a");
   expect_same_image(view_of(via_b), reference, "gateway b");
+  // A viewer's camera goes to the origin through the gateway.
+  via_a.send_camera(default_camera(via_a.scene(), via_a.world()));
+  EXPECT_TRUE(test::eventually([&] {
+    via_a.poll(10ms);
+    return origin.origin.nats_stats().camera_requests >= 1;
+  }));
   // The gateways' Stats carry the origin's engine stats.
   auto stats = via_a.request_stats(5s);
   ASSERT_TRUE(stats);
