@@ -23,8 +23,9 @@ namespace irradcast {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-constexpr std::uint32_t kMaxChunks = 1u << 14;    // 8 GiB of package at 512 KiB
-constexpr std::size_t kMaxEarlyTiles = 1u << 20;  // tiles before the first state
+constexpr std::uint32_t kMaxChunks = 1u << 14;      // 8 GiB of package at 512 KiB
+constexpr std::size_t kMaxEarlyTiles = 1u << 20;    // tiles before the first state
+constexpr std::size_t kMaxEarlyBytes = 256u << 20;  // their payloads
 constexpr std::uint32_t kMaxLightmaps = 1u << 20;
 constexpr std::size_t kMaxCameras = 4096;
 constexpr auto kCameraKeepalive = std::chrono::seconds(2);
@@ -89,9 +90,10 @@ struct NatsGateway::Impl {
   std::optional<wire::NatsSceneState> pending_state;  // waiting for its chunks
   std::map<std::uint32_t, wire::NatsPackageChunk> chunks;
   std::map<std::uint32_t, wire::NatsTile> early_tiles;  // before the first state
-  std::vector<std::uint64_t> tile_origin;               // the origin of each tile's version held
-  std::uint64_t reset_origin = 0;  // a new lineage: its tiles replace what is held
-  std::uint64_t last_edit = 0;     // the newest edit revision forwarded
+  std::size_t early_bytes = 0;
+  std::vector<std::uint64_t> tile_origin;  // the origin of each tile's version held
+  std::uint64_t reset_origin = 0;          // a new lineage: its tiles replace what is held
+  std::uint64_t last_edit = 0;             // the newest edit revision forwarded
 
   std::unique_ptr<nats_link::Connection> conn;
   natsSubscription* sub = nullptr;  // worker thread
@@ -228,6 +230,7 @@ void NatsGateway::Impl::apply_state(const wire::NatsSceneState& s,
   for (auto& [index, t] : early_tiles)
     if (install(t)) installed.push_back(index);
   early_tiles.clear();
+  early_bytes = 0;
   listeners.tiles(installed);
 }
 
@@ -237,8 +240,15 @@ void NatsGateway::Impl::on_tile(wire::NatsTile t) {
     ++st.tiles_received;
     st.lag_seconds = static_cast<double>(now_us() - std::min(now_us(), t.time_us())) * 1e-6;
     if (!store) {
-      if (early_tiles.size() < kMaxEarlyTiles || early_tiles.count(t.index()))
-        early_tiles[t.index()] = std::move(t);
+      // Kept until the layout is known, bounded in count and bytes (the rest come again with the
+      // next catch-up or version).
+      auto it = early_tiles.find(t.index());
+      const std::size_t held = it == early_tiles.end() ? 0 : it->second.payload().size();
+      if (early_bytes - held + t.payload().size() > kMaxEarlyBytes ||
+          (it == early_tiles.end() && early_tiles.size() >= kMaxEarlyTiles))
+        return;
+      early_bytes = early_bytes - held + t.payload().size();
+      early_tiles[t.index()] = std::move(t);
       return;
     }
   }
