@@ -22,7 +22,9 @@
 #include "irradcast/service/engine_host.h"
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/metrics_text.h"
+#include "irradcast/service/nats_origin.h"
 #include "irradcast/service/net_server.h"
+#include "network_options.h"
 #include "scene_options.h"
 
 namespace {
@@ -32,53 +34,17 @@ struct Options {
   std::string scene_root;
   std::string sky_dir;
   float detail = 1.0f;
-  std::string bind = "0.0.0.0";
-  int port = 7450;
-  int io_threads = 2;
   int threads = 0;
   int tile_size = 32;
   float tile_threshold = 0.01f;
   float tile_refresh = 2.0f;
   int engine_nice = 10;
   std::uint32_t max_updates = 0;
-  int idle_timeout_s = 30;
-  int status_every_s = 5;
-  int metrics_port = -1;     // -1: no metrics endpoint
-  std::string metrics_bind;  // empty: --bind
-  std::string log_level = "info";
-  std::string control_token;
-  std::string control_token_file;
-  std::string tls_cert, tls_key;
-  std::uint32_t max_clients = irradcast::ServerOptions().max_clients;
-  std::uint32_t max_clients_per_peer = irradcast::ServerOptions().max_clients_per_peer;
+  std::string nats;  // nats://HOST:PORT: also publish to NATS (docs/DISTRIBUTION.md)
+  irradcast::tools::NetworkOptions net;
   irradcast::tools::EngineOptions engine;
   irradcast::tools::SceneOptions lighting;
 };
-
-// The control token for scene edits (docs/EDITS.md) and where it came from, for the log (the
-// token itself is never logged). Empty: the server takes no edits.
-std::pair<std::string, std::string> control_token(const Options& o) {
-  using irradcast::Error;
-  if (!o.control_token.empty() && !o.control_token_file.empty())
-    throw Error("give --control-token or --control-token-file, not both");
-  if (!o.control_token_file.empty()) {
-    std::ifstream f(o.control_token_file);
-    if (!f) throw Error("--control-token-file: cannot read '" + o.control_token_file + "'");
-    std::string line;
-    std::getline(f, line);
-    const char* space = " \t\r\n";
-    const std::size_t first = line.find_first_not_of(space);
-    line = first == std::string::npos
-               ? ""
-               : line.substr(first, line.find_last_not_of(space) + 1 - first);
-    if (line.empty())
-      throw Error("--control-token-file: the first line of '" + o.control_token_file +
-                  "' is empty (it must hold the token)");
-    return {line, "file " + o.control_token_file};
-  }
-  if (!o.control_token.empty()) return {o.control_token, "--control-token"};
-  return {"", ""};
-}
 
 // The scene with the --sky and --sun of the options; logs what lights it.
 irradcast::Scene load_lit_scene(const Options& o) {
@@ -91,11 +57,11 @@ irradcast::Scene load_lit_scene(const Options& o) {
   return scene;
 }
 
-int run(const Options& o, sigset_t signals) {
+int run(const Options& o, const sigset_t& signals) {
   using namespace irradcast;
-  log::set_level(log::parse_level(o.log_level));
+  log::set_level(log::parse_level(o.net.log_level));
   Progress::set_enabled(false);
-  const auto [token, token_source] = control_token(o);
+  const auto token = o.net.token();
   std::unique_ptr<tbb::global_control> threads;
   if (o.threads > 0)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -110,47 +76,22 @@ int run(const Options& o, sigset_t signals) {
   ho.engine_nice = o.engine_nice;
   ho.max_updates = o.max_updates;
   ho.sky_dir = o.sky_dir;
-  if (!token.empty() && token.size() < kMinTokenLength)
-    throw Error("the control token from " + token_source + " has " + std::to_string(token.size()) +
-                " characters; it needs at least " + std::to_string(kMinTokenLength) +
-                " (e.g. head -c 18 /dev/urandom | base64)");
   EngineHost host(load_lit_scene(o), o.scene, ho);
 
-  ServerOptions so;
-  so.bind = o.bind;
-  so.port = static_cast<std::uint16_t>(o.port);
-  so.io_threads = o.io_threads;
-  so.idle_timeout = std::chrono::seconds(o.idle_timeout_s);
-  so.control_token = token;
-  so.tls_cert = o.tls_cert;
-  so.tls_key = o.tls_key;
-  so.max_clients = o.max_clients;
-  so.max_clients_per_peer = o.max_clients_per_peer;
-  const std::uint64_t files = raise_open_file_limit();
-  if (files < so.max_clients + 64u)
-    log::warn("server", "this process may open " + std::to_string(files) +
-                            " files, fewer than --max-clients " + std::to_string(so.max_clients) +
-                            " needs (raise the hard limit: ulimit -Hn)");
-  log::info("server", token.empty()
-                          ? std::string("scene edits: disabled")
-                          : "scene edits: enabled (control token from " + token_source + ")");
-  Server server(host, so);
+  const ServerOptions so = o.net.server_options(token, "server");
+  // With --nats the server serves the NatsOrigin, which publishes what the host makes.
+  std::unique_ptr<NatsOrigin> origin;
+  if (!o.nats.empty())
+    origin = std::make_unique<NatsOrigin>(host, NatsOriginOptions{o.nats, token.first});
+  TileSource& source = origin ? static_cast<TileSource&>(*origin) : host;
+  Server server(source, so);
   server.start();
-  std::unique_ptr<MetricsEndpoint> metrics;
-  if (o.metrics_port >= 0) {
-    MetricsEndpointOptions mo;
-    mo.bind = o.metrics_bind.empty() ? o.bind : o.metrics_bind;
-    mo.port = static_cast<std::uint16_t>(o.metrics_port);
-    mo.tls_cert = o.tls_cert;
-    mo.tls_key = o.tls_key;
-    // The body runs on the endpoint's thread, after start(): `metrics` is set by then.
-    metrics = std::make_unique<MetricsEndpoint>(
-        [&server, &host, &metrics] {
-          return format_metrics(collect_metrics(server, host, metrics.get()));
-        },
-        mo);
-    metrics->start();  // logs "metrics on http://ADDR:PORT/metrics"
-  }
+  std::unique_ptr<MetricsEndpoint> metrics =
+      o.net.start_metrics([&server, &source, &origin](const MetricsEndpoint* endpoint) {
+        std::string text = format_metrics(collect_metrics(server, source, endpoint));
+        if (origin) text += format_nats_origin_metrics(origin->nats_stats());
+        return text;
+      });
   host.start();
 
   // The status line, on its own thread, until a signal arrives.
@@ -159,8 +100,8 @@ int run(const Options& o, sigset_t signals) {
     auto next = std::chrono::steady_clock::now();
     while (!done) {
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
-      if (o.status_every_s <= 0 || std::chrono::steady_clock::now() < next) continue;
-      next += std::chrono::seconds(o.status_every_s);
+      if (o.net.status_every_s <= 0 || std::chrono::steady_clock::now() < next) continue;
+      next += std::chrono::seconds(o.net.status_every_s);
       const EngineHostStats es = host.stats();
       const ServerStats ss = server.stats();
       char line[384];
@@ -185,6 +126,8 @@ int run(const Options& o, sigset_t signals) {
   if (metrics) metrics->stop();
   server.stop();
   host.stop();
+  if (origin) origin->flush(std::chrono::seconds(2));
+  origin.reset();
   const ServerStats ss = server.stats();
   log::info("server", "stopped: " + std::to_string(ss.connections) + " connections, " +
                           std::to_string(ss.bytes_sent) + " bytes sent");
@@ -237,9 +180,12 @@ int main(int argc, char** argv) {
                  "folder that sky edits may name EXR maps in (default: none, file sky edits are "
                  "refused; docs/EDITS.md)")
       ->check(CLI::ExistingDirectory);
-  app.add_option("--bind", o.bind, "address to listen on");
-  app.add_option("--port", o.port, "TCP port (0 = any free port)")->check(CLI::Range(0, 65535));
-  app.add_option("--io-threads", o.io_threads, "network threads")->check(CLI::Range(1, 64));
+  o.net.add_to(app);
+  app.add_option("--nats", o.nats,
+                 "also publish the scene, its tiles, edits and stats to this NATS server "
+                 "(nats://HOST:PORT, JetStream enabled) for irradcast-gateway, and take their "
+                 "viewers' cameras and edits (docs/DISTRIBUTION.md)")
+      ->default_str("none");
   app.add_option("--threads", o.threads, "engine worker threads (0 = all cores)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--tile-size", o.tile_size, "tile edge in texels")->check(CLI::Range(4, 1024));
@@ -256,40 +202,6 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1.0f, 1000.0f));
   app.add_option("--max-updates", o.max_updates,
                  "stop refining after this many engine updates (0 = never)");
-  app.add_option("--idle-timeout", o.idle_timeout_s,
-                 "seconds without a frame before a client is dropped")
-      ->check(CLI::Range(1, 86400));
-  app.add_option("--status-every", o.status_every_s, "seconds between status lines (0 = none)")
-      ->check(CLI::NonNegativeNumber);
-  app.add_option("--metrics-port", o.metrics_port,
-                 "serve Prometheus metrics at http://ADDR:PORT/metrics (0 = any free port; off "
-                 "when not given)")
-      ->check(CLI::Range(0, 65535))
-      ->default_str("off");
-  app.add_option("--metrics-bind", o.metrics_bind,
-                 "address for the metrics endpoint (default: the --bind address)");
-  app.add_option("--control-token", o.control_token,
-                 "accept live scene edits (irradcast-edit) from clients that give this token "
-                 "(visible in the process list: prefer --control-token-file); without a token "
-                 "the server takes no edits")
-      ->default_str("none");
-  app.add_option("--control-token-file", o.control_token_file,
-                 "read the control token for scene edits from the first line of this file")
-      ->default_str("none");
-  app.add_option("--max-clients", o.max_clients,
-                 "the most sessions at once, all addresses together; past it a new connection "
-                 "gets the error 'the server is full' and is closed")
-      ->check(CLI::Range(1u, 1000000u));
-  app.add_option("--max-clients-per-peer", o.max_clients_per_peer,
-                 "the most sessions from one address (an IPv6 /64) at once; past it a new "
-                 "connection is refused (0 = no limit; irradcast-load users on one machine count "
-                 "as one address)");
-  app.add_option("--tls-cert", o.tls_cert,
-                 "serve TLS on the protocol port and the metrics endpoint with this PEM "
-                 "certificate chain (with --tls-key; docs/OPERATIONS.md)")
-      ->default_str("none");
-  app.add_option("--tls-key", o.tls_key, "the PEM private key of --tls-cert")->default_str("none");
-  app.add_option("--log-level", o.log_level, "debug | info | warn | error | off");
   bool list_devices = false;
   app.add_flag("--list-devices", list_devices,
                "list the compute devices (Vulkan) and exit; the engine runs on Embree (CPU)");
@@ -301,20 +213,6 @@ int main(int argc, char** argv) {
     return app.exit(e);
   }
   if (list_devices) return print_devices();
-  // Block the stop signals in every thread (threads inherit the mask); main waits for them.
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGINT);
-  sigaddset(&signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  std::signal(SIGPIPE, SIG_IGN);
-  try {
-    return run(o, signals);
-  } catch (const irradcast::Error& e) {
-    std::fprintf(stderr, "irradcast-server: error: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "irradcast-server: internal error: %s\n", e.what());
-    return 2;
-  }
+  return irradcast::tools::run_service("irradcast-server",
+                                       [&o](const sigset_t& signals) { return run(o, signals); });
 }

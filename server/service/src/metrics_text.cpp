@@ -237,7 +237,14 @@ std::string format_metric_value(double value) {
   return std::string(buf, end);
 }
 
-MetricsSnapshot collect_metrics(const Server& server, const EngineHost& host,
+void append_metric(std::string& out, std::string_view name, std::string_view type,
+                   std::string_view help, double value) {
+  out.append("# HELP ").append(name).append(" ").append(help).append("\n# TYPE ");
+  out.append(name).append(" ").append(type).append("\n").append(name).append(" ");
+  out.append(format_metric_value(value)).append("\n");
+}
+
+MetricsSnapshot collect_metrics(const Server& server, const TileSource& host,
                                 const MetricsEndpoint* endpoint) {
   MetricsSnapshot m;
   if (endpoint) m.endpoint = endpoint->stats();

@@ -36,7 +36,7 @@ using Clock = std::chrono::steady_clock;
 // would make a cycle through the io_context that owns the handler). The engine listener holds a
 // weak_ptr.
 struct Server::Impl {
-  Impl(EngineHost& h, ServerOptions o)
+  Impl(TileSource& h, ServerOptions o)
       : host(h),
         options(std::move(o)),
         peers(options),
@@ -48,7 +48,7 @@ struct Server::Impl {
                                     options.max_hello_frame + 32 * host.tiles().tile_count())},
             nullptr, [this](const std::shared_ptr<Session>& s) { remove(s); }} {}
 
-  EngineHost& host;
+  TileSource& host;
   ServerOptions options;
   ServerCounters counters;
   // Peers by address key; sessions count themselves in and out (admit, release).
@@ -220,7 +220,7 @@ void Server::Impl::on_edit(const AppliedEdit& applied) {
   for (const auto& s : sessions) s->edit_applied(frame);
 }
 
-Server::Server(EngineHost& host, ServerOptions options)
+Server::Server(TileSource& host, ServerOptions options)
     : impl_(std::make_shared<Impl>(host, std::move(options))) {
   Impl& im = *impl_;
   const ServerOptions& o = im.options;

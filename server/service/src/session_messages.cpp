@@ -1,9 +1,40 @@
-// The messages a session builds from the server's state.
+// The messages a session builds from the server's state, and the control token's comparison.
 #include "session_messages.h"
 
+#include <cmath>
 #include <utility>
 
+#include <glm/geometric.hpp>
+
 namespace irradcast {
+
+bool same_secret(const std::string& given, const std::string& secret) {
+  unsigned char diff = given.size() == secret.size() ? 0 : 1;
+  for (std::size_t i = 0; i < secret.size(); ++i)
+    diff |= static_cast<unsigned char>((i < given.size() ? given[i] : '\0') ^ secret[i]);
+  return diff == 0;
+}
+
+std::optional<CameraPose> camera_pose_of(const wire::CameraUpdate& c, std::string& problem) {
+  auto vec = [](const wire::Vec3& v) { return glm::vec3(v.x(), v.y(), v.z()); };
+  CameraPose pose;
+  pose.eye = vec(c.eye());
+  pose.forward = vec(c.forward());
+  pose.up = vec(c.up());
+  pose.yfov = c.yfov();
+  const auto finite = [](glm::vec3 v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+  };
+  if (!finite(pose.eye) || !finite(pose.forward) || !finite(pose.up) || !std::isfinite(pose.yfov)) {
+    problem = "camera update: a number is not finite (NaN or infinity)";
+    return std::nullopt;
+  }
+  if (!(glm::length(pose.forward) > 0.0f)) {
+    problem = "camera update: the forward direction is zero";
+    return std::nullopt;
+  }
+  return pose;
+}
 
 CloseReason reason_of(wire::ErrorCode code) {
   static constexpr std::pair<wire::ErrorCode, CloseReason> kReasons[] = {
@@ -20,7 +51,7 @@ CloseReason reason_of(wire::ErrorCode code) {
 
 // The Welcome that answers a Hello: the session, the scene package, the lightmaps and tiles,
 // the server's limits.
-wire::Envelope welcome_message(const EngineHost& host, const ServerOptions& options,
+wire::Envelope welcome_message(const TileSource& host, const ServerOptions& options,
                                std::uint64_t session, const wire::ScenePackage& package) {
   const TileStore& tiles = host.tiles();
   wire::Envelope w;
@@ -71,6 +102,29 @@ void add_engine_stats(const EngineHostStats& es, wire::Stats* s) {
   s->set_scene_revision(es.revision);
   s->set_last_edit_ms(es.last_edit_ms);
   s->set_stale_texels(es.stale_texels);
+}
+
+EngineHostStats engine_stats_from(const wire::Stats& s) {
+  EngineHostStats es;
+  es.updates = s.updates();
+  es.rays_per_s = s.rays_per_s();
+  es.convergence = s.convergence();
+  es.last_update_ms = s.engine_update_ms();
+  es.idle = s.engine_idle();
+  for (const wire::PassTime& pt : s.pass_times())
+    es.passes.push_back(
+        {pt.pass(), pt.bounce(), pt.ms() * 1e-3, pt.rays(), pt.seconds_total(), pt.rays_total()});
+  es.update_rate = s.update_rate();
+  es.tiles_published = s.tiles_published();
+  es.seconds_total = s.engine_seconds_total();
+  es.rays_total = s.rays_total();
+  es.tiles = s.tiles();
+  es.texels = s.texels();
+  es.revision = s.scene_revision();
+  es.last_edit_ms = s.last_edit_ms();
+  es.stale_texels = s.stale_texels();
+  es.bytes_per_texel = s.bytes_per_texel();
+  return es;
 }
 
 // The server's part of a Stats reply.

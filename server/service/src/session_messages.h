@@ -1,26 +1,36 @@
 // The messages a session builds from the server's state (session_protocol.h decides when): the
-// Welcome, the parts of a Stats reply, a TileUpdate; and the close reason an Error code means.
+// Welcome, the parts of a Stats reply, a TileUpdate; the close reason an Error code means; the
+// control token's comparison.
 #pragma once
 
 #include <cstdint>
+#include <optional>
+#include <string>
 
-#include "irradcast/service/engine_host.h"
 #include "irradcast/service/net_server.h"
+#include "irradcast/service/tile_source.h"
 #include "irradcast/service/tile_store.h"
 #include "irradcast/wire/frame.h"
 
 namespace irradcast {
 
+// Compares a client's token with the server's in time independent of where they differ.
+bool same_secret(const std::string& given, const std::string& secret);
 // The reason a session ends after sending an Error frame with this code.
 CloseReason reason_of(wire::ErrorCode code);
 
 // The Welcome that answers a Hello: the session, the scene package, the lightmaps and tiles, the
 // server's limits.
-wire::Envelope welcome_message(const EngineHost& host, const ServerOptions& options,
+wire::Envelope welcome_message(const TileSource& host, const ServerOptions& options,
                                std::uint64_t session, const wire::ScenePackage& package);
 // The engine's and the server's parts of a Stats reply.
 void add_engine_stats(const EngineHostStats& es, wire::Stats* s);
 void add_server_stats(const ServerStats& ss, wire::Stats* s);
+// The inverse of add_engine_stats (a gateway reads the origin's stats from NATS).
+EngineHostStats engine_stats_from(const wire::Stats& s);
+// A CameraUpdate's pose, or nullopt with the reason in `problem` (a number that is not finite, a
+// zero forward direction).
+std::optional<CameraPose> camera_pose_of(const wire::CameraUpdate& c, std::string& problem);
 // The TileUpdate that carries a snapshot of `tile`.
 wire::Envelope tile_update_message(const TileStore::Tile& tile, const TileStore::Snapshot& snap,
                                    wire::TileEncoding encoding);

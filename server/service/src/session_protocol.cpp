@@ -10,18 +10,6 @@
 
 namespace irradcast {
 
-namespace {
-
-// Compares a client's token with the server's in time independent of where they differ.
-bool same_secret(const std::string& given, const std::string& secret) {
-  unsigned char diff = given.size() == secret.size() ? 0 : 1;
-  for (std::size_t i = 0; i < secret.size(); ++i)
-    diff |= static_cast<unsigned char>((i < given.size() ? given[i] : '\0') ^ secret[i]);
-  return diff == 0;
-}
-
-}  // namespace
-
 SessionProtocol::SessionProtocol(SessionContext& context, std::uint64_t id, std::string peer_key,
                                  std::string peer)
     : ctx_(context),
@@ -166,7 +154,7 @@ void SessionProtocol::on_hello(const wire::Hello& h) {
                                         std::to_string(wire::kProtocolVersion));
     return;
   }
-  const EngineHost& host = ctx_.host;
+  const TileSource& host = ctx_.host;
   const TileStore& tiles = host.tiles();
   // Resume: tiles the client already holds are only sent again when their version changes.
   // Versions only mean something for the same scene package.
@@ -235,21 +223,10 @@ void SessionProtocol::on_subscribe(const wire::Subscribe& s) {
 
 // The viewer's camera: the engine refines what the viewers see first after an edit.
 void SessionProtocol::on_camera(const wire::CameraUpdate& c) {
-  auto vec = [](const wire::Vec3& v) { return glm::vec3(v.x(), v.y(), v.z()); };
-  CameraPose pose;
-  pose.eye = vec(c.eye());
-  pose.forward = vec(c.forward());
-  pose.up = vec(c.up());
-  pose.yfov = c.yfov();
-  const auto finite = [](glm::vec3 v) {
-    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-  };
-  if (!finite(pose.eye) || !finite(pose.forward) || !finite(pose.up) || !std::isfinite(pose.yfov)) {
-    error(wire::BAD_REQUEST, "camera update: a number is not finite (NaN or infinity)");
-    return;
-  }
-  if (!(glm::length(pose.forward) > 0.0f)) {
-    error(wire::BAD_REQUEST, "camera update: the forward direction is zero");
+  std::string problem;
+  const std::optional<CameraPose> pose = camera_pose_of(c, problem);
+  if (!pose) {
+    error(wire::BAD_REQUEST, problem);
     return;
   }
   ctx_.host.set_camera(id_, pose);

@@ -21,9 +21,9 @@
 #include <vector>
 
 #include "irradcast/common/log.h"
-#include "irradcast/service/engine_host.h"
 #include "irradcast/service/net_server.h"
 #include "irradcast/service/send_queue.h"
+#include "irradcast/service/tile_source.h"
 #include "irradcast/wire/frame.h"
 #include "peer_table.h"
 #include "session_messages.h"
@@ -43,7 +43,7 @@ struct ServerCounters {
 
 // What a session's protocol uses of the server around it; outlives every session.
 struct SessionContext {
-  EngineHost& host;
+  TileSource& host;
   const ServerOptions& options;
   ServerCounters& counters;
   PeerTable& peers;

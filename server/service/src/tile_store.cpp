@@ -152,6 +152,36 @@ std::vector<std::uint32_t> TileStore::publish(const std::vector<Lightmap>& maps,
   return out;
 }
 
+bool TileStore::install(std::uint32_t index, std::uint64_t version, std::uint64_t time_us,
+                        std::shared_ptr<const std::string> rgb9e5, bool force) {
+  if (index >= tiles_.size())
+    throw Error("tile store: there is no tile " + std::to_string(index) + " (the store has " +
+                std::to_string(tiles_.size()) + ")");
+  if (version == 0 || !rgb9e5) throw Error("tile store: version 0 or no payload installed");
+  if (!force && version <= this->version(index)) return false;
+  const Tile& t = tiles_[index];
+  Lightmap decoded(t.rect.w, t.rect.h);
+  wire::decode_tile(*rgb9e5, wire::TILE_RGB9E5_ZSTD, {0, 0, t.rect.w, t.rect.h}, decoded);
+  std::unique_lock lock(mutex_);
+  Lightmap& dst = published_[t.lightmap];
+  for (int y = 0; y < t.rect.h; ++y)
+    for (int x = 0; x < t.rect.w; ++x)
+      dst.texels[static_cast<std::size_t>(t.rect.y0 + y) * dst.width + t.rect.x0 + x] =
+          decoded.texels[static_cast<std::size_t>(y) * t.rect.w + x];
+  State& s = state_[index];
+  if (s.rgb9e5) payload_bytes_ -= s.rgb9e5->size();
+  payload_bytes_ += rgb9e5->size();
+  s.version = version;
+  s.time_us = time_us;
+  s.rgb9e5 = std::move(rgb9e5);
+  {
+    std::lock_guard half_lock(half_mutex_);
+    s.half.reset();
+  }
+  if (publishes_ == 0) publishes_ = 1;  // bytes_per_texel counts from here
+  return true;
+}
+
 std::uint64_t TileStore::version(std::uint32_t index) const {
   std::shared_lock lock(mutex_);
   return state_.at(index).version;

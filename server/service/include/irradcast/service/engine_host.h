@@ -25,6 +25,7 @@
 #include "irradcast/engine/backend_select.h"
 #include "irradcast/engine/engine_params.h"
 #include "irradcast/engine/prepared_scene.h"
+#include "irradcast/service/tile_source.h"
 #include "irradcast/service/tile_store.h"
 #include "irradcast/wire/scene_package.h"
 
@@ -32,16 +33,6 @@ namespace irradcast {
 
 class LapTimer;
 struct UpdateStats;
-
-// An edit the engine thread has applied (EngineHost::set_edit_listener).
-struct AppliedEdit {
-  SceneEdit edit;
-  std::uint64_t revision = 0;  // the scene's revision after it (the first edit makes 1)
-  std::shared_ptr<const wire::ScenePackage> package;  // the scene package at that revision
-  std::uint64_t tile_epoch = 0;                       // EngineHost::tile_epoch() after it
-  std::uint64_t applied_us = 0;                       // system clock when the engine had applied it
-  double apply_ms = 0.0;  // time to apply (scene, ray scene, G-buffers, engine)
-};
 
 struct EngineHostOptions {
   EngineParams engine;
@@ -57,54 +48,17 @@ struct EngineHostOptions {
   std::string sky_dir;
 };
 
-// One engine pass (direct, or a bounce's probe gather or scatter): the last update's time and
-// rays, and the totals over every update.
-struct EnginePassStats {
-  std::string pass;          // "direct", "probes" or "scatter"
-  std::uint32_t bounce = 0;  // 0 for direct, k for the k-th indirect bounce
-  double seconds = 0.0;      // last update
-  std::uint64_t rays = 0;    // last update
-  double seconds_total = 0.0;
-  std::uint64_t rays_total = 0;
-};
-
-struct EngineHostStats {
-  std::uint64_t updates = 0;
-  double last_update_ms = 0.0;
-  double rays_per_s = 0.0;   // of the last update
-  double convergence = 1.0;  // mean relative standard error of the texels
-  bool idle = false;         // max_updates reached: the lightmaps will not change
-  std::uint64_t tiles_published = 0;
-  // Passes in the order they run: direct, then per bounce probes (not in unbiased mode, which
-  // has no probes) and scatter. Empty before the first update.
-  std::vector<EnginePassStats> passes;
-  double seconds_total = 0.0;  // time in updates (Engine::update), summed
-  std::uint64_t rays_total = 0;
-  // Updates per second over the last kUpdateRateWindow: the updates that finished in that
-  // window divided by the window (or by the time since the first update began, when that is
-  // shorter). Sliding, so it falls to 0 within the window once the engine stops refining.
-  double update_rate = 0.0;
-  double bytes_per_texel = 0.0;  // TileStore::bytes_per_texel() after the last publish
-  std::uint64_t texels = 0;      // texels the engine computes
-  std::uint64_t tiles = 0;       // tiles in the tile store
-  std::uint64_t revision = 0;    // scene revision (edits applied so far)
-  double last_edit_ms = 0.0;     // time the last edit took to apply
-  // Texels still waiting for their first estimate since the last edit (0: caught up).
-  std::uint64_t stale_texels = 0;
-};
-
-class EngineHost {
+class EngineHost final : public TileSource {
  public:
   // Builds everything (the slow part of start-up). Throws irradcast::Error on a bad scene or
   // bad parameters.
   EngineHost(Scene scene, std::string scene_id, EngineHostOptions options);
-  ~EngineHost();
+  ~EngineHost() override;
   EngineHost(const EngineHost&) = delete;
   EngineHost& operator=(const EngineHost&) = delete;
 
   // Called on the engine thread after each publish with the tiles that got a new version.
-  using PublishListener = std::function<void(const std::vector<std::uint32_t>&)>;
-  void set_listener(PublishListener listener);
+  void set_listener(PublishListener listener) override;
 
   // Scene edits (docs/EDITS.md). Validates `edit` against the scene and queues it; the engine
   // thread applies queued edits before its next update (waking up if it was idle) and then
@@ -113,28 +67,27 @@ class EngineHost {
   // A sky op that names a file gets its map here, read from options.sky_dir (validate_sky), and
   // carries it to the engine and, with the broadcast, to the viewers; a map in `edit` itself is
   // never used. Any thread.
-  std::uint64_t submit_edit(const SceneEdit& edit);
+  std::uint64_t submit_edit(const SceneEdit& edit) override;
   // Called on the engine thread once per applied edit, before the tiles that show it are
   // published: the server sends the edit to every viewer from here.
-  using EditListener = std::function<void(const AppliedEdit&)>;
-  void set_edit_listener(EditListener listener);
+  void set_edit_listener(EditListener listener) override;
   // The revision of the scene as applied (0: as loaded).
-  std::uint64_t revision() const;
+  std::uint64_t revision() const override;
 
   // The cameras of connected viewers (from their CameraUpdates): the engine refines what they
   // see first after an edit. `pose` empty removes the viewer. Any thread.
-  void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose);
+  void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) override;
 
   void start();  // starts the engine thread
   void stop();   // stops it after the update in flight; idempotent
   // Runs one update and publishes it on the calling thread (tests; not while started).
   void step();
 
-  const std::string& scene_id() const { return scene_id_; }
+  const std::string& scene_id() const override { return scene_id_; }
   // Which backend runs the passes and why (make_backend's reason line).
   const std::string& backend() const { return backend_; }
   // The backend and its device ("embree", "vulkan on NVIDIA ... (discrete GPU, ...)").
-  const std::string& backend_name() const { return backend_name_; }
+  std::string backend_name() const override { return backend_name_; }
   // The scene, world and atlas: the engine thread changes the scene and world when it applies
   // an edit, so other threads must not read them while the engine runs (tests read them
   // between step() calls).
@@ -144,16 +97,16 @@ class EngineHost {
   // The indirect method's state in one line ("" for radiance cells); engine thread or stopped.
   std::string method_summary() const;
   // The scene package at the current revision (a new one after every edit). Any thread.
-  std::shared_ptr<const wire::ScenePackage> package() const;
+  std::shared_ptr<const wire::ScenePackage> package() const override;
   // Identifies the lineage of tile versions (Welcome.tile_epoch): a hash of everything that
   // determines them (scene package, engine, atlas and tile options, and every edit since). The
   // engine is deterministic, so a host built from the same inputs publishes the same versions.
   // Any thread.
-  std::uint64_t tile_epoch() const;
+  std::uint64_t tile_epoch() const override;
   TileStore& tiles() { return *tiles_; }
-  const TileStore& tiles() const { return *tiles_; }
+  const TileStore& tiles() const override { return *tiles_; }
   // A copy of the stats; update_rate is computed at the time of the call.
-  EngineHostStats stats() const;
+  EngineHostStats stats() const override;
   static constexpr std::chrono::seconds kUpdateRateWindow{10};
   // Blocks until at least `updates` updates are published or the engine is idle (tests).
   void wait_for_updates(std::uint64_t updates) const;

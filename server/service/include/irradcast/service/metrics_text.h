@@ -8,9 +8,9 @@
 #include <string>
 #include <string_view>
 
-#include "irradcast/service/engine_host.h"
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/net_server.h"
+#include "irradcast/service/tile_source.h"
 
 namespace irradcast {
 
@@ -25,12 +25,17 @@ struct MetricsSnapshot {
 // Reads the stats of a running (or stopped) server and engine host, and of the endpoint when one
 // is given. Thread-safe; takes the server's session lock and the engine host's stats lock, each
 // briefly (the endpoint caches the text, so this runs at most a few times a second).
-MetricsSnapshot collect_metrics(const Server& server, const EngineHost& host,
+MetricsSnapshot collect_metrics(const Server& server, const TileSource& host,
                                 const MetricsEndpoint* endpoint = nullptr);
 
 // The exposition text: one family per metric, # HELP and # TYPE before its samples, one sample
 // per line (`name{label="value",...} value`), "\n" line ends.
 std::string format_metrics(const MetricsSnapshot& metrics);
+
+// Appends one unlabelled metric (# HELP, # TYPE and its sample) to `out`: for the families of
+// the NATS origin and gateway (nats_origin.h, nats_gateway.h).
+void append_metric(std::string& out, std::string_view name, std::string_view type,
+                   std::string_view help, double value);
 
 // A label value with \, " and newline escaped (\\, \", \n), as the format requires.
 std::string escape_label_value(std::string_view value);

@@ -1,9 +1,9 @@
 // The network server: accepts TCP connections and runs one session per client (the protocol of
 // docs/PROTOCOL.md) on a small pool of Asio I/O threads. It serves the scene package and the
-// tiles of an EngineHost; the engine runs on its own thread and only tells the server which
-// tiles got new versions. A session's memory is bounded: at most one queue entry per tile and a
-// capped number of control frames, so a slow or stuck client never makes the server buffer
-// without bound or stall the others.
+// tiles of a TileSource (an EngineHost, or a NATS gateway); the engine runs on its own thread and
+// only tells the server which tiles got new versions. A session's memory is bounded: at most one
+// queue entry per tile and a capped number of control frames, so a slow or stuck client never makes
+// the server buffer without bound or stall the others.
 #pragma once
 
 #include <array>
@@ -13,7 +13,7 @@
 #include <memory>
 #include <string>
 
-#include "irradcast/service/engine_host.h"
+#include "irradcast/service/tile_source.h"
 
 namespace irradcast {
 
@@ -122,7 +122,7 @@ struct ServerStats {
 
 class Server {
  public:
-  Server(EngineHost& host, ServerOptions options);
+  Server(TileSource& host, ServerOptions options);
   ~Server();
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;

@@ -57,6 +57,14 @@ class TileStore {
   std::vector<std::uint32_t> publish(const std::vector<Lightmap>& maps, std::uint64_t time_us,
                                      const Noise* noise = nullptr);
 
+  // A gateway's store (nats_gateway.h): installs a version that another tile store published,
+  // from its RGB9E5 payload, when it is newer than the version held (or always, with `force`:
+  // the origin started a new lineage). The payload is decoded (the half-float encoding is made
+  // from the decoded texels). Throws irradcast::Error on a bad index or a payload that does not
+  // decode to the tile (nothing changes). Returns whether it was installed. One thread.
+  bool install(std::uint32_t index, std::uint64_t version, std::uint64_t time_us,
+               std::shared_ptr<const std::string> rgb9e5, bool force = false);
+
   std::size_t tile_count() const { return tiles_.size(); }
   const Tile& tile(std::uint32_t index) const { return tiles_[index]; }
   std::size_t lightmap_count() const { return sizes_.size(); }

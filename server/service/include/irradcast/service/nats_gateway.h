@@ -1,0 +1,86 @@
+// A gateway's TileSource (irradcast-gateway, docs/DISTRIBUTION.md): no engine; the tile store,
+// scene package, revision, tile epoch and engine stats come from the scene's JetStream stream
+// that an origin (NatsOrigin) fills. A Server serves it exactly as it serves an EngineHost.
+// The stream keeps the latest message of every subject, so a gateway that starts late, or
+// reconnects, reads it from the start (an ordered consumer) and has the current state without
+// asking the origin; tile versions are the origin's, so viewers resume across gateways and the
+// origin. Viewers' cameras go to the origin (all of this gateway's, every 250 ms while they
+// change and every 2 s regardless) and edits (with the control token) through NATS requests.
+// When NATS or the origin goes away the gateway keeps serving what it has; on reconnection it
+// reads the stream again and installs what is newer.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "irradcast/service/tile_source.h"
+
+namespace irradcast {
+
+struct NatsGatewayOptions {
+  std::string url;                   // nats://HOST:PORT
+  std::string scene_id = "cornell";  // the origin's --scene
+  // Sent with every edit (the origin checks it); the Server's control token, which the
+  // sessions check first.
+  std::string control_token;
+  std::chrono::milliseconds request_timeout{3000};  // an edit's answer from the origin
+  std::chrono::milliseconds camera_every{250};
+};
+
+struct NatsGatewayStats {
+  bool connected = false;  // to NATS
+  bool ready = false;      // has a scene package and tile layout: can serve
+  std::uint64_t messages = 0;
+  std::uint64_t tiles_received = 0;
+  std::uint64_t tiles_installed = 0;  // newer than the version held
+  std::uint64_t edits_received = 0;
+  std::uint64_t packages_received = 0;  // complete, hash-checked packages
+  std::uint64_t bad_messages = 0;
+  std::uint64_t subscriptions = 0;  // reads of the stream from its start (1 + catch-ups)
+  std::uint64_t camera_requests = 0;
+  std::uint64_t edit_requests = 0;
+  // Seconds from the origin computing a tile version to its arrival here (the newest one).
+  double lag_seconds = 0.0;
+  std::uint64_t revision = 0;
+};
+
+class NatsGateway final : public TileSource {
+ public:
+  // Connects (in the background when NATS is not there yet) and starts reading the stream.
+  // Throws irradcast::Error on a bad URL.
+  explicit NatsGateway(NatsGatewayOptions options);
+  ~NatsGateway() override;
+  NatsGateway(const NatsGateway&) = delete;
+  NatsGateway& operator=(const NatsGateway&) = delete;
+
+  // Blocks until the first scene package and tile layout have arrived (a Server can be made
+  // then), or the limit passes; returns whether they did.
+  bool wait_ready(std::chrono::milliseconds limit) const;
+
+  void set_listener(PublishListener listener) override;
+  void set_edit_listener(EditListener listener) override;
+  const std::string& scene_id() const override;
+  std::string backend_name() const override;
+  std::shared_ptr<const wire::ScenePackage> package() const override;
+  std::uint64_t tile_epoch() const override;
+  std::uint64_t revision() const override;
+  const TileStore& tiles() const override;  // only once ready
+  std::uint64_t submit_edit(const SceneEdit& edit) override;
+  void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) override;
+  EngineHostStats stats() const override;
+
+  NatsGatewayStats nats_stats() const;
+
+  struct Impl;
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+// The gateway's NATS metrics (irradcast_gateway_*) in the Prometheus text format, appended to
+// format_metrics()'s text by irradcast-gateway.
+std::string format_nats_gateway_metrics(const NatsGatewayStats& s);
+
+}  // namespace irradcast

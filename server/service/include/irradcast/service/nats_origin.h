@@ -1,0 +1,88 @@
+// The origin's side of distribution through NATS (docs/DISTRIBUTION.md): wraps an EngineHost as
+// the TileSource a Server serves, and publishes what the engine makes to the scene's JetStream
+// stream (nats_subjects.h): the scene package (in chunks) and its state, every tile version's
+// RGB9E5 payload (the one the tile store encoded), every applied edit, and the engine's stats
+// once a second. It answers the gateways' requests: their viewers' cameras (for visible-first
+// refinement after edits) and scene edits (with the control token, checked here as a session
+// checks it). Publishing runs on its own thread and never blocks the engine: the engine's
+// listeners only mark tiles dirty (a tile marked again before it went out is published once, at
+// its latest version: counted as coalesced) and queue edits (bounded, oldest dropped). On every
+// (re)connection the whole current state is published again, so a NATS server that lost its
+// storage is refilled.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "irradcast/service/engine_host.h"
+#include "irradcast/service/tile_source.h"
+
+namespace irradcast {
+
+struct NatsOriginOptions {
+  std::string url;            // nats://HOST:PORT
+  std::string control_token;  // edits from gateways need it (empty: they are refused)
+  std::chrono::milliseconds stats_every{1000};
+  // A gateway's cameras are forgotten after this long without a camera request from it.
+  std::chrono::milliseconds camera_expiry{10000};
+  std::size_t max_queued_edits = 1024;  // applied edits waiting to be published
+};
+
+struct NatsOriginStats {
+  bool connected = false;
+  std::uint64_t tiles_published = 0;
+  std::uint64_t tiles_coalesced = 0;  // versions replaced before they were published
+  std::uint64_t edits_published = 0;
+  std::uint64_t edits_dropped = 0;  // queue full (a gateway reloads the package)
+  std::uint64_t packages_published = 0;
+  std::uint64_t republished = 0;  // whole-state publishes after a (re)connection
+  std::uint64_t publish_errors = 0;
+  std::uint64_t camera_requests = 0;
+  std::uint64_t edit_requests = 0;
+  std::uint64_t edits_refused = 0;  // wrong token or invalid edit
+  std::uint64_t bad_requests = 0;   // requests that do not parse
+};
+
+class NatsOrigin final : public TileSource {
+ public:
+  // Connects (in the background when NATS is not there yet) and starts publishing; hooks the
+  // host's listeners (a Server then serves this object, not the host). Throws irradcast::Error
+  // on a bad URL.
+  NatsOrigin(EngineHost& host, NatsOriginOptions options);
+  ~NatsOrigin() override;
+  NatsOrigin(const NatsOrigin&) = delete;
+  NatsOrigin& operator=(const NatsOrigin&) = delete;
+
+  void set_listener(PublishListener listener) override;
+  void set_edit_listener(EditListener listener) override;
+  const std::string& scene_id() const override { return host_.scene_id(); }
+  std::string backend_name() const override { return host_.backend_name(); }
+  std::shared_ptr<const wire::ScenePackage> package() const override { return host_.package(); }
+  std::uint64_t tile_epoch() const override { return host_.tile_epoch(); }
+  std::uint64_t revision() const override { return host_.revision(); }
+  const TileStore& tiles() const override { return host_.tiles(); }
+  std::uint64_t submit_edit(const SceneEdit& edit) override { return host_.submit_edit(edit); }
+  void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) override {
+    host_.set_camera(viewer, std::move(pose));
+  }
+  EngineHostStats stats() const override { return host_.stats(); }
+
+  NatsOriginStats nats_stats() const;
+  // Blocks until everything marked so far is published and acknowledged by JetStream, or the
+  // limit passes; returns whether it got there (tests, shutdown).
+  bool flush(std::chrono::milliseconds limit);
+
+  struct Impl;
+
+ private:
+  EngineHost& host_;
+  std::unique_ptr<Impl> impl_;
+};
+
+// The origin's NATS metrics (irradcast_nats_*) in the Prometheus text format, appended to
+// format_metrics()'s text by irradcast-server --nats.
+std::string format_nats_origin_metrics(const NatsOriginStats& s);
+
+}  // namespace irradcast

@@ -1,0 +1,524 @@
+// NatsGateway: the stream's messages into a tile store, package and stats; the requests to the
+// origin. See nats_gateway.h.
+#include "irradcast/service/nats_gateway.h"
+
+#include <condition_variable>
+#include <map>
+#include <mutex>
+#include <random>
+#include <thread>
+
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/metrics_text.h"
+#include "irradcast/service/nats_subjects.h"
+#include "irradcast/service/thread_priority.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast_nats.pb.h"
+#include "nats_link.h"
+#include "session_messages.h"
+
+namespace irradcast {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr std::uint32_t kMaxChunks = 1u << 14;      // 8 GiB of package at 512 KiB
+constexpr std::size_t kMaxEarlyTiles = 1u << 20;    // tiles before the first state
+constexpr std::size_t kMaxEarlyBytes = 256u << 20;  // their payloads
+constexpr std::uint32_t kMaxLightmaps = 1u << 20;
+constexpr std::size_t kMaxCameras = 4096;
+constexpr auto kCameraKeepalive = std::chrono::seconds(2);
+
+std::uint64_t now_us() {
+  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
+                                        std::chrono::system_clock::now().time_since_epoch())
+                                        .count());
+}
+
+// A state message's problem, or "" when it can be used.
+std::string check_state(const wire::NatsSceneState& s) {
+  if (s.scene_hash().size() != 32) return "the scene hash is not 32 bytes";
+  if (s.package_chunks() == 0 || s.package_chunks() > kMaxChunks)
+    return "package chunk count " + std::to_string(s.package_chunks()) + " is out of range";
+  if (s.tile_size() < 1 || s.tile_size() > 4096) return "tile size is out of range";
+  if (s.lightmaps_size() == 0 || static_cast<std::uint32_t>(s.lightmaps_size()) > kMaxLightmaps)
+    return "lightmap count is out of range";
+  for (const wire::LightmapInfo& l : s.lightmaps())
+    if (l.width() < 1 || l.height() < 1 || l.width() > 65536 || l.height() > 65536)
+      return "a lightmap size is out of range";
+  return "";
+}
+
+std::vector<std::pair<int, int>> sizes_of(const wire::NatsSceneState& s) {
+  std::vector<std::pair<int, int>> sizes;
+  for (const wire::LightmapInfo& l : s.lightmaps())
+    sizes.emplace_back(static_cast<int>(l.width()), static_cast<int>(l.height()));
+  return sizes;
+}
+
+}  // namespace
+
+struct NatsGateway::Impl {
+  explicit Impl(NatsGatewayOptions o)
+      : options(std::move(o)), subjects(nats_subjects(options.scene_id)) {}
+
+  NatsGatewayOptions options;
+  NatsSubjects subjects;
+  const std::uint64_t gateway = [] {
+    std::random_device rd;
+    return (std::uint64_t{rd()} << 32 | rd()) | 1;
+  }();
+
+  nats_link::Listeners listeners;  // the Server's
+
+  mutable std::mutex mutex;  // guards the state below
+  mutable std::condition_variable cv;
+  bool stopping = false;
+  std::unique_ptr<TileStore> store;  // made once, from the first state
+  std::vector<std::pair<int, int>> sizes;
+  std::shared_ptr<const wire::ScenePackage> package;
+  std::uint64_t revision = 0, epoch = 0, origin = 0;
+  std::string backend;
+  EngineHostStats engine;
+  NatsGatewayStats st;
+  std::map<std::uint64_t, CameraPose> cameras;
+  bool cameras_changed = false;
+
+  // The stream's messages, one at a time (the subscription's thread).
+  std::mutex handle_mutex;
+  std::optional<wire::NatsSceneState> pending_state;  // waiting for its chunks
+  std::map<std::uint32_t, wire::NatsPackageChunk> chunks;
+  std::map<std::uint32_t, wire::NatsTile> early_tiles;  // before the first state
+  std::size_t early_bytes = 0;
+  std::vector<std::uint64_t> tile_origin;  // the origin of each tile's version held
+  std::uint64_t reset_origin = 0;          // a new lineage: its tiles replace what is held
+  std::uint64_t last_edit = 0;             // the newest edit revision forwarded
+
+  std::unique_ptr<nats_link::Connection> conn;
+  natsSubscription* sub = nullptr;  // worker thread
+  std::thread worker;
+
+  void run();
+  void subscribe();
+  void send_cameras();
+  static void on_message(natsConnection*, natsSubscription*, natsMsg* msg, void* self);
+  void handle(const std::string& kind, const std::string& data);
+  void on_state(const std::string& data);
+  void on_chunk(const std::string& data);
+  void try_complete();
+  void apply_state(const wire::NatsSceneState& s, std::shared_ptr<const wire::ScenePackage> p);
+  void on_tile(wire::NatsTile t);
+  bool install(const wire::NatsTile& t);
+  void on_edit(const std::string& data);
+  void on_stats(const std::string& data);
+  void bad(const std::string& what) {
+    {
+      std::lock_guard lock(mutex);
+      ++st.bad_messages;
+    }
+    log::warn("gateway", "ignored a message from NATS: " + what);
+  }
+};
+
+void NatsGateway::Impl::on_message(natsConnection*, natsSubscription*, natsMsg* msg, void* self) {
+  Impl& im = *static_cast<Impl*>(self);
+  const std::string subject = natsMsg_GetSubject(msg) ? natsMsg_GetSubject(msg) : "";
+  const std::string data = nats_link::data_of(msg);
+  natsMsg_Destroy(msg);
+  const std::string prefix = im.subjects.filter.substr(0, im.subjects.filter.size() - 1);
+  if (subject.rfind(prefix, 0) != 0) return;
+  std::lock_guard lock(im.handle_mutex);
+  {
+    std::lock_guard l(im.mutex);
+    ++im.st.messages;
+  }
+  try {
+    im.handle(subject.substr(prefix.size()), data);
+  } catch (const std::exception& e) {
+    im.bad(subject + ": " + e.what());
+  }
+}
+
+void NatsGateway::Impl::handle(const std::string& kind, const std::string& data) {
+  if (kind == "state") return on_state(data);
+  if (kind == "edit") return on_edit(data);
+  if (kind == "stats") return on_stats(data);
+  if (kind.rfind("package.", 0) == 0) return on_chunk(data);
+  if (kind.rfind("tile.", 0) == 0) {
+    wire::NatsTile t;
+    if (!t.ParseFromString(data)) return bad("a tile does not parse");
+    return on_tile(std::move(t));
+  }
+  bad("unknown subject ." + kind);
+}
+
+void NatsGateway::Impl::on_state(const std::string& data) {
+  wire::NatsSceneState s;
+  if (!s.ParseFromString(data)) return bad("the scene state does not parse");
+  if (const std::string problem = check_state(s); !problem.empty())
+    return bad("scene state: " + problem);
+  pending_state = std::move(s);
+  try_complete();
+}
+
+void NatsGateway::Impl::on_chunk(const std::string& data) {
+  wire::NatsPackageChunk c;
+  if (!c.ParseFromString(data) || c.index() >= kMaxChunks) return bad("a package chunk");
+  chunks[c.index()] = std::move(c);
+  try_complete();
+}
+
+// The pending state once every chunk of its package is there, with the right hash.
+void NatsGateway::Impl::try_complete() {
+  if (!pending_state) return;
+  const wire::NatsSceneState& s = *pending_state;
+  std::string bytes;
+  for (std::uint32_t i = 0; i < s.package_chunks(); ++i) {
+    auto it = chunks.find(i);
+    if (it == chunks.end() || it->second.scene_hash() != s.scene_hash()) return;  // not yet
+    bytes += it->second.data();
+    if (bytes.size() > s.package_bytes()) break;
+  }
+  wire::NatsSceneState state = std::move(*pending_state);
+  pending_state.reset();
+  if (bytes.size() != state.package_bytes() || wire::sha256(bytes) != state.scene_hash())
+    return bad("the scene package's chunks do not make the announced package");
+  auto p = std::make_shared<wire::ScenePackage>();
+  p->bytes = std::move(bytes);
+  p->hash = state.scene_hash();
+  apply_state(state, std::move(p));
+}
+
+void NatsGateway::Impl::apply_state(const wire::NatsSceneState& s,
+                                    std::shared_ptr<const wire::ScenePackage> p) {
+  if (s.scene_id() != options.scene_id)
+    log::warn("gateway", "the stream's scene is '" + log::quote(s.scene_id(), 64) + "', not '" +
+                             options.scene_id + "'");
+  std::vector<std::uint32_t> installed;
+  {
+    std::unique_lock lock(mutex);
+    if (store &&
+        (sizes_of(s) != sizes || static_cast<int>(s.tile_size()) != store->options().tile_size)) {
+      lock.unlock();
+      return bad("the origin's lightmap layout changed; restart the gateway to serve it");
+    }
+    if (origin != 0 && s.origin() != origin && s.tile_epoch() != epoch) {
+      reset_origin = s.origin();  // another lineage: its versions replace ours
+      last_edit = s.revision();
+      log::warn("gateway", "a new origin with another tile epoch: its tiles replace ours");
+    }
+    origin = s.origin();
+    package = std::move(p);
+    revision = s.revision();
+    epoch = s.tile_epoch();
+    backend = s.backend();
+    ++st.packages_received;
+    st.revision = revision;
+    if (!store) {
+      TileStoreOptions to;
+      to.tile_size = static_cast<int>(s.tile_size());
+      sizes = sizes_of(s);
+      store = std::make_unique<TileStore>(sizes, to);
+      tile_origin.assign(store->tile_count(), 0);
+      st.ready = true;
+      log::info("gateway", "scene '" + options.scene_id + "' revision " + std::to_string(revision) +
+                               ": " + std::to_string(store->tile_count()) + " tiles");
+    }
+  }
+  cv.notify_all();
+  for (auto& [index, t] : early_tiles)
+    if (install(t)) installed.push_back(index);
+  early_tiles.clear();
+  early_bytes = 0;
+  listeners.tiles(installed);
+}
+
+void NatsGateway::Impl::on_tile(wire::NatsTile t) {
+  {
+    std::lock_guard lock(mutex);
+    ++st.tiles_received;
+    st.lag_seconds = static_cast<double>(now_us() - std::min(now_us(), t.time_us())) * 1e-6;
+    if (!store) {
+      // Kept until the layout is known, bounded in count and bytes (the rest come again with the
+      // next catch-up or version).
+      auto it = early_tiles.find(t.index());
+      const std::size_t held = it == early_tiles.end() ? 0 : it->second.payload().size();
+      if (early_bytes - held + t.payload().size() > kMaxEarlyBytes ||
+          (it == early_tiles.end() && early_tiles.size() >= kMaxEarlyTiles))
+        return;
+      early_bytes = early_bytes - held + t.payload().size();
+      early_tiles[t.index()] = std::move(t);
+      return;
+    }
+  }
+  if (install(t)) listeners.tiles({t.index()});
+}
+
+bool NatsGateway::Impl::install(const wire::NatsTile& t) {
+  if (t.index() >= tile_origin.size())
+    throw Error("tile " + std::to_string(t.index()) + " is not in the layout");
+  const bool force = t.origin() == reset_origin && tile_origin[t.index()] != t.origin();
+  if (!store->install(t.index(), t.version(), t.time_us(),
+                      std::make_shared<const std::string>(t.payload()), force))
+    return false;
+  tile_origin[t.index()] = t.origin();
+  std::lock_guard lock(mutex);
+  ++st.tiles_installed;
+  return true;
+}
+
+void NatsGateway::Impl::on_edit(const std::string& data) {
+  wire::NatsEdit e;
+  if (!e.ParseFromString(data) || !e.edit().applied()) return bad("an edit does not parse");
+  {
+    std::lock_guard lock(mutex);
+    ++st.edits_received;
+  }
+  if (e.edit().revision() <= last_edit) return;  // forwarded before (a catch-up's replay)
+  last_edit = e.edit().revision();
+  AppliedEdit a;
+  a.edit = wire::from_proto(e.edit());
+  a.revision = e.edit().revision();
+  a.tile_epoch = e.tile_epoch();
+  a.applied_us = e.edit().applied_us();
+  {
+    std::lock_guard lock(mutex);
+    if (e.edit().scene_hash() == (package ? package->hash : "")) a.package = package;
+  }
+  listeners.edit(a);
+}
+
+void NatsGateway::Impl::on_stats(const std::string& data) {
+  wire::Stats s;
+  if (!s.ParseFromString(data)) return bad("the stats do not parse");
+  std::lock_guard lock(mutex);
+  engine = engine_stats_from(s);
+}
+
+void NatsGateway::Impl::run() {
+  set_thread_name("irradcast-nats");
+  std::uint64_t subscribed = 0;  // the connection generation the subscription belongs to
+  Clock::time_point retry{}, cameras_sent{};
+  std::unique_lock lock(mutex);
+  while (!stopping) {
+    cv.wait_for(lock, std::chrono::milliseconds(50));
+    if (stopping || !conn->connected()) continue;
+    const Clock::time_point now = Clock::now();
+    const bool send = (cameras_changed && now - cameras_sent >= options.camera_every) ||
+                      (!cameras.empty() && now - cameras_sent >= kCameraKeepalive);
+    lock.unlock();
+    // Catch up after every (re)connection: read the stream again from its start.
+    if (subscribed != conn->generation() && now >= retry) {
+      const std::uint64_t generation = conn->generation();
+      subscribe();
+      if (sub) subscribed = generation;
+      retry = now + std::chrono::milliseconds(500);
+    }
+    if (send) {
+      send_cameras();
+      cameras_sent = now;
+    }
+    lock.lock();
+  }
+}
+
+void NatsGateway::Impl::subscribe() {
+  if (sub) natsSubscription_Destroy(sub);
+  sub = nullptr;
+  jsSubOptions so;
+  jsSubOptions_Init(&so);
+  so.Stream = subjects.stream.c_str();
+  so.Ordered = true;
+  so.Config.DeliverPolicy = js_DeliverAll;
+  jsErrCode jerr = static_cast<jsErrCode>(0);
+  const natsStatus s = js_Subscribe(&sub, conn->js(), subjects.filter.c_str(), on_message, this,
+                                    nullptr, &so, &jerr);
+  if (s != NATS_OK) {
+    sub = nullptr;
+    log::debug("gateway", "no stream " + subjects.stream + " yet: " + nats_link::describe(s));
+    return;
+  }
+  std::lock_guard lock(mutex);
+  ++st.subscriptions;
+  log::info("gateway", "reading stream " + subjects.stream + " from its start");
+}
+
+// All of this gateway's viewers' cameras, in one request (the origin replaces the set it had).
+void NatsGateway::Impl::send_cameras() {
+  wire::NatsCameras m;
+  m.set_gateway(gateway);
+  {
+    std::lock_guard lock(mutex);
+    for (const auto& [viewer, pose] : cameras) {
+      if (static_cast<std::size_t>(m.cameras_size()) >= kMaxCameras) break;
+      wire::CameraUpdate* c = m.add_cameras();
+      auto vec = [](wire::Vec3* v, glm::vec3 x) {
+        v->set_x(x.x);
+        v->set_y(x.y);
+        v->set_z(x.z);
+      };
+      vec(c->mutable_eye(), pose.eye);
+      vec(c->mutable_forward(), pose.forward);
+      vec(c->mutable_up(), pose.up);
+      c->set_yfov(pose.yfov);
+    }
+    cameras_changed = false;
+    ++st.camera_requests;
+  }
+  const std::string bytes = m.SerializeAsString();
+  natsMsg* reply = nullptr;
+  natsConnection_Request(&reply, conn->nc(), subjects.cameras.c_str(), bytes.data(),
+                         static_cast<int>(bytes.size()), 1000);
+  natsMsg_Destroy(reply);  // the origin's answer says nothing we need
+}
+
+NatsGateway::NatsGateway(NatsGatewayOptions options)
+    : impl_(std::make_unique<Impl>(std::move(options))) {
+  Impl& im = *impl_;
+  im.conn = std::make_unique<nats_link::Connection>(
+      im.options.url, "irradcast-gateway " + im.options.scene_id, [&im] { im.cv.notify_all(); });
+  im.worker = std::thread([&im] { im.run(); });
+  log::info("gateway", "reading scene '" + im.options.scene_id + "' from " + im.options.url +
+                           " (stream " + im.subjects.stream + ")");
+}
+
+NatsGateway::~NatsGateway() {
+  Impl& im = *impl_;
+  {
+    std::lock_guard lock(im.mutex);
+    im.stopping = true;
+  }
+  im.cv.notify_all();
+  im.worker.join();
+  if (im.sub) natsSubscription_Destroy(im.sub);
+  im.conn.reset();
+}
+
+bool NatsGateway::wait_ready(std::chrono::milliseconds limit) const {
+  std::unique_lock lock(impl_->mutex);
+  return impl_->cv.wait_for(lock, limit, [&] { return impl_->store != nullptr; });
+}
+
+void NatsGateway::set_listener(PublishListener listener) {
+  impl_->listeners.set(std::move(listener));
+}
+
+void NatsGateway::set_edit_listener(EditListener listener) {
+  impl_->listeners.set(std::move(listener));
+}
+
+const std::string& NatsGateway::scene_id() const {
+  return impl_->options.scene_id;
+}
+
+std::string NatsGateway::backend_name() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->backend;
+}
+
+std::shared_ptr<const wire::ScenePackage> NatsGateway::package() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->package;
+}
+
+std::uint64_t NatsGateway::tile_epoch() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->epoch;
+}
+
+std::uint64_t NatsGateway::revision() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->revision;
+}
+
+const TileStore& NatsGateway::tiles() const {
+  std::lock_guard lock(impl_->mutex);
+  if (!impl_->store) throw Error("the gateway has no scene from the origin yet");
+  return *impl_->store;
+}
+
+// Forwards an edit (which the session accepted with the control token) to the origin and waits
+// for its answer: the revision, or why it refused.
+std::uint64_t NatsGateway::submit_edit(const SceneEdit& edit) {
+  Impl& im = *impl_;
+  if (!im.conn->connected())
+    throw Error("the gateway has lost NATS; the edit was not sent to the origin");
+  wire::SceneEdit m;
+  wire::to_proto(edit, &m);
+  m.set_token(im.options.control_token);
+  const std::string bytes = m.SerializeAsString();
+  natsMsg* reply = nullptr;
+  {
+    std::lock_guard lock(im.mutex);
+    ++im.st.edit_requests;
+  }
+  const natsStatus s =
+      natsConnection_Request(&reply, im.conn->nc(), im.subjects.submit.c_str(), bytes.data(),
+                             static_cast<int>(bytes.size()),
+                             static_cast<std::int64_t>(im.options.request_timeout.count()));
+  if (s == NATS_NO_RESPONDERS || s == NATS_TIMEOUT)
+    throw Error("no origin answered for scene '" + im.options.scene_id +
+                "'; the edit was not applied");
+  if (s != NATS_OK)
+    throw Error("the edit could not be sent to the origin: " + nats_link::describe(s));
+  wire::NatsReply r;
+  const bool parsed = r.ParseFromString(nats_link::data_of(reply));
+  natsMsg_Destroy(reply);
+  if (!parsed) throw Error("the origin's answer to the edit does not parse");
+  if (!r.error().empty()) throw Error(r.error());
+  return r.revision();
+}
+
+void NatsGateway::set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) {
+  std::lock_guard lock(impl_->mutex);
+  if (pose)
+    impl_->cameras[viewer] = *pose;
+  else
+    impl_->cameras.erase(viewer);
+  impl_->cameras_changed = true;
+}
+
+EngineHostStats NatsGateway::stats() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->engine;
+}
+
+NatsGatewayStats NatsGateway::nats_stats() const {
+  std::lock_guard lock(impl_->mutex);
+  NatsGatewayStats s = impl_->st;
+  s.connected = impl_->conn->connected();
+  return s;
+}
+
+std::string format_nats_gateway_metrics(const NatsGatewayStats& s) {
+  std::string out;
+  auto d = [](std::uint64_t v) { return static_cast<double>(v); };
+  append_metric(out, "irradcast_gateway_nats_connected", "gauge",
+                "1 while the gateway is connected to NATS.", s.connected ? 1.0 : 0.0);
+  append_metric(out, "irradcast_gateway_ready", "gauge",
+                "1 once the gateway has a scene package and tile layout from the origin.",
+                s.ready ? 1.0 : 0.0);
+  append_metric(out, "irradcast_gateway_tiles_received_total", "counter",
+                "Tile versions received from NATS.", d(s.tiles_received));
+  append_metric(out, "irradcast_gateway_tiles_installed_total", "counter",
+                "Tile versions newer than the one held, installed.", d(s.tiles_installed));
+  append_metric(out, "irradcast_gateway_edits_received_total", "counter",
+                "Applied edits received from NATS.", d(s.edits_received));
+  append_metric(out, "irradcast_gateway_packages_received_total", "counter",
+                "Scene packages received and hash-checked.", d(s.packages_received));
+  append_metric(out, "irradcast_gateway_bad_messages_total", "counter",
+                "Messages from NATS ignored as malformed.", d(s.bad_messages));
+  append_metric(out, "irradcast_gateway_stream_reads_total", "counter",
+                "Reads of the scene's stream from its start (the first and each catch-up).",
+                d(s.subscriptions));
+  append_metric(out, "irradcast_gateway_lag_seconds", "gauge",
+                "Seconds from the origin computing the newest tile version received to its "
+                "arrival.",
+                s.lag_seconds);
+  append_metric(out, "irradcast_gateway_scene_revision", "gauge",
+                "The scene revision of the origin's package held.", d(s.revision));
+  return out;
+}
+
+}  // namespace irradcast

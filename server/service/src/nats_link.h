@@ -1,0 +1,93 @@
+// What the origin's publisher and the gateway share of the NATS C client (libnats): a
+// connection that retries in the background until the server is there and reconnects forever,
+// with its JetStream context and a generation that counts (re)connections; and small helpers.
+#pragma once
+
+#include <nats/nats.h>
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include <google/protobuf/message_lite.h>
+
+#include <mutex>
+#include <vector>
+
+#include "irradcast/service/tile_source.h"
+
+namespace irradcast::nats_link {
+
+class Connection {
+ public:
+  // Starts connecting to `url` (nats://HOST:PORT); returns at once when the server is not there
+  // yet (the client keeps trying). `changed` runs on a libnats thread after every connect,
+  // disconnect and reconnect. Throws irradcast::Error on a bad URL or options.
+  Connection(const std::string& url, const std::string& name, std::function<void()> changed);
+  ~Connection();
+  Connection(const Connection&) = delete;
+  Connection& operator=(const Connection&) = delete;
+
+  natsConnection* nc() const { return nc_; }
+  jsCtx* js() const { return js_; }
+  bool connected() const { return shared_->connected; }
+  // Counts the times the connection was established (0: never yet).
+  std::uint64_t generation() const { return shared_->generation; }
+  const std::string& url() const { return shared_->url; }
+
+ private:
+  // What libnats's callbacks see. They run on its own thread, also after the connection is
+  // closed, so this lives until the closed callback (the last one) deletes it.
+  struct Shared {
+    std::string url;
+    std::function<void()> changed;
+    std::atomic<bool> connected{false};
+    std::atomic<bool> closing{false};  // the owner is going: tell it nothing more
+    std::atomic<std::uint64_t> generation{0};
+    void up();
+  };
+  static void on_connected(natsConnection* nc, void* shared);
+  static void on_disconnected(natsConnection* nc, void* shared);
+  static void on_closed(natsConnection* nc, void* shared);
+  Shared* shared_;
+  natsOptions* opts_ = nullptr;
+  natsConnection* nc_ = nullptr;
+  jsCtx* js_ = nullptr;
+};
+
+// The Server's listeners on a TileSource that NATS feeds (set from any thread, called from the
+// thread that publishes or receives).
+class Listeners {
+ public:
+  void set(TileSource::PublishListener l) {
+    std::lock_guard lock(mutex_);
+    tiles_ = std::move(l);
+  }
+  void set(TileSource::EditListener l) {
+    std::lock_guard lock(mutex_);
+    edits_ = std::move(l);
+  }
+  void tiles(const std::vector<std::uint32_t>& changed) {
+    std::lock_guard lock(mutex_);
+    if (tiles_ && !changed.empty()) tiles_(changed);
+  }
+  void edit(const AppliedEdit& applied) {
+    std::lock_guard lock(mutex_);
+    if (edits_) edits_(applied);
+  }
+
+ private:
+  std::mutex mutex_;
+  TileSource::PublishListener tiles_;
+  TileSource::EditListener edits_;
+};
+
+// "NATS_TIMEOUT: ..." for a log line or an Error.
+std::string describe(natsStatus s);
+// A message's bytes, or "" for none.
+std::string data_of(natsMsg* msg);
+// Serialises and publishes a reply (msg's reply subject); nothing when it has none.
+void reply(natsConnection* nc, natsMsg* msg, const google::protobuf::MessageLite& m);
+
+}  // namespace irradcast::nats_link

@@ -1,0 +1,480 @@
+// NatsOrigin: the origin's publisher thread (stream, package, tiles, edits, stats) and its
+// request handlers (cameras, edits). See nats_origin.h.
+#include "irradcast/service/nats_origin.h"
+
+#include <algorithm>
+#include <condition_variable>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <random>
+#include <thread>
+
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/metrics_text.h"
+#include "irradcast/service/nats_subjects.h"
+#include "irradcast/service/thread_priority.h"
+#include "irradcast/wire/edit_message.h"
+#include "irradcast_nats.pb.h"
+#include "nats_link.h"
+#include "session_messages.h"
+
+namespace irradcast {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr std::size_t kMaxCamerasPerGateway = 4096;
+constexpr std::uint64_t kGatewayViewer = std::uint64_t{1} << 63;  // above every session id
+
+std::uint64_t random_id() {
+  std::random_device rd;
+  return (std::uint64_t{rd()} << 32 | rd()) | 1;
+}
+
+}  // namespace
+
+struct NatsOrigin::Impl {
+  Impl(EngineHost& h, NatsOriginOptions o)
+      : host(h), options(std::move(o)), subjects(nats_subjects(h.scene_id())) {}
+
+  EngineHost& host;
+  NatsOriginOptions options;
+  NatsSubjects subjects;
+  const std::uint64_t origin = random_id();
+
+  nats_link::Listeners listeners;  // the Server's
+
+  mutable std::mutex mutex;  // guards what follows, to `conn`
+  std::condition_variable cv;
+  bool stopping = false;
+  bool idle = false;  // the last round published everything marked before it
+  std::vector<std::uint8_t> dirty;
+  std::vector<std::uint32_t> dirty_list;
+  std::deque<AppliedEdit> edits;
+  NatsOriginStats st;
+
+  std::mutex camera_mutex;
+  struct Gateway {
+    std::size_t cameras = 0;
+    Clock::time_point seen;
+  };
+  std::map<std::uint64_t, Gateway> gateways;
+
+  std::unique_ptr<nats_link::Connection> conn;
+  natsSubscription* camera_sub = nullptr;
+  natsSubscription* edit_sub = nullptr;
+  std::thread worker;
+
+  // Worker thread only.
+  std::uint64_t published_generation = 0;
+  const wire::ScenePackage* last_package = nullptr;
+  std::optional<AppliedEdit> last_edit;  // the newest edit published
+  Clock::time_point next_stats{};
+
+  void on_tiles(const std::vector<std::uint32_t>& tiles);
+  void on_edit(const AppliedEdit& applied);
+  void run();
+  bool round(bool full, const std::vector<std::uint32_t>& tiles, std::deque<AppliedEdit>& eds);
+  bool ensure_stream();
+  bool publish(const std::string& subject, const google::protobuf::MessageLite& m);
+  bool publish_package(const wire::ScenePackage& package, std::uint64_t revision,
+                       std::uint64_t epoch);
+  bool publish_tile(std::uint32_t index);
+  bool publish_everything(std::deque<AppliedEdit>& eds);
+  bool publish_edits(std::deque<AppliedEdit>& eds);
+  bool publish_edit(const AppliedEdit& a, bool names_package);
+  bool publish_stats();
+  void expire_cameras();
+  void count(std::uint64_t NatsOriginStats::*field, std::uint64_t n = 1) {
+    std::lock_guard lock(mutex);
+    st.*field += n;
+  }
+  static void on_cameras(natsConnection* nc, natsSubscription*, natsMsg* msg, void* self);
+  static void on_submit(natsConnection* nc, natsSubscription*, natsMsg* msg, void* self);
+};
+
+void NatsOrigin::Impl::on_tiles(const std::vector<std::uint32_t>& tiles) {
+  {
+    std::lock_guard lock(mutex);
+    for (std::uint32_t t : tiles) {
+      if (dirty[t]) {
+        ++st.tiles_coalesced;
+        continue;
+      }
+      dirty[t] = 1;
+      dirty_list.push_back(t);
+    }
+    idle = false;
+  }
+  cv.notify_all();
+  listeners.tiles(tiles);
+}
+
+void NatsOrigin::Impl::on_edit(const AppliedEdit& applied) {
+  {
+    std::lock_guard lock(mutex);
+    if (edits.size() >= options.max_queued_edits) {
+      edits.pop_front();
+      ++st.edits_dropped;
+    }
+    edits.push_back(applied);
+    idle = false;
+  }
+  cv.notify_all();
+  listeners.edit(applied);
+}
+
+void NatsOrigin::Impl::run() {
+  set_thread_name("irradcast-nats");
+  std::unique_lock lock(mutex);
+  while (!stopping) {
+    cv.wait_for(lock, std::chrono::milliseconds(100));
+    if (stopping) break;
+    if (!conn->connected()) continue;
+    const std::uint64_t generation = conn->generation();
+    const bool full = generation != published_generation;
+    std::vector<std::uint32_t> tiles;
+    tiles.swap(dirty_list);
+    for (std::uint32_t t : tiles) dirty[t] = 0;
+    std::deque<AppliedEdit> eds;
+    eds.swap(edits);
+    lock.unlock();
+    const bool ok = round(full, tiles, eds);
+    lock.lock();
+    if (ok && full) published_generation = generation;
+    if (!ok) {
+      ++st.publish_errors;
+      published_generation = 0;  // publish everything again next round
+    }
+    idle = ok && dirty_list.empty() && edits.empty();
+    cv.notify_all();
+  }
+}
+
+// One round of the worker: everything after a (re)connection, then the queued edits (with the
+// package they made) and tiles, the stats when due; waits for JetStream's acknowledgements.
+bool NatsOrigin::Impl::round(bool full, const std::vector<std::uint32_t>& tiles,
+                             std::deque<AppliedEdit>& eds) {
+  bool ok = true;
+  if (full) ok = publish_everything(eds);
+  if (ok) ok = publish_edits(eds);
+  for (std::size_t i = 0; ok && i < tiles.size(); ++i) ok = publish_tile(tiles[i]);
+  if (ok && Clock::now() >= next_stats) {
+    ok = publish_stats();
+    next_stats = Clock::now() + options.stats_every;
+  }
+  expire_cameras();
+  jsPubOptions po;
+  jsPubOptions_Init(&po);
+  po.MaxWait = 5000;
+  const natsStatus s = js_PublishAsyncComplete(conn->js(), &po);
+  if (s != NATS_OK) {
+    log::warn("nats", "publish to JetStream: " + nats_link::describe(s));
+    return false;
+  }
+  return ok;
+}
+
+// After a (re)connection: the stream, the current package, the newest edit (a gateway that
+// missed edits forwards it, and its viewers see the revision gap and load the package), every
+// tile. Queued edits the package already holds are dropped.
+bool NatsOrigin::Impl::publish_everything(std::deque<AppliedEdit>& eds) {
+  if (!ensure_stream()) return false;
+  const auto package = host.package();
+  const std::uint64_t revision = host.revision();
+  if (!publish_package(*package, revision, host.tile_epoch())) return false;
+  last_package = package.get();
+  while (!eds.empty() && eds.front().revision <= revision) {
+    last_edit = std::move(eds.front());
+    eds.pop_front();
+  }
+  if (last_edit && !publish_edit(*last_edit, last_edit->revision == revision)) return false;
+  for (std::uint32_t t = 0; t < host.tiles().tile_count(); ++t)
+    if (!publish_tile(t)) return false;
+  count(&NatsOriginStats::republished);
+  next_stats = {};
+  return true;
+}
+
+bool NatsOrigin::Impl::ensure_stream() {
+  jsStreamConfig cfg;
+  jsStreamConfig_Init(&cfg);
+  cfg.Name = subjects.stream.c_str();
+  const char* subject_list[] = {subjects.filter.c_str()};
+  cfg.Subjects = subject_list;
+  cfg.SubjectsLen = 1;
+  cfg.MaxMsgsPerSubject = 1;
+  cfg.Storage = js_FileStorage;
+  jsStreamInfo* si = nullptr;
+  jsErrCode jerr = static_cast<jsErrCode>(0);
+  natsStatus s = js_AddStream(&si, conn->js(), &cfg, nullptr, &jerr);
+  if (s != NATS_OK && jerr == JSStreamNameExistErr)
+    s = js_UpdateStream(&si, conn->js(), &cfg, nullptr, &jerr);
+  jsStreamInfo_Destroy(si);
+  if (s != NATS_OK) {
+    log::warn("nats", "stream " + subjects.stream + ": " + nats_link::describe(s));
+    return false;
+  }
+  return true;
+}
+
+bool NatsOrigin::Impl::publish(const std::string& subject, const google::protobuf::MessageLite& m) {
+  const std::string bytes = m.SerializeAsString();
+  const natsStatus s = js_PublishAsync(conn->js(), subject.c_str(), bytes.data(),
+                                       static_cast<int>(bytes.size()), nullptr);
+  if (s != NATS_OK) {
+    log::warn("nats", "publish " + subject + ": " + nats_link::describe(s));
+    return false;
+  }
+  return true;
+}
+
+bool NatsOrigin::Impl::publish_package(const wire::ScenePackage& package, std::uint64_t revision,
+                                       std::uint64_t epoch) {
+  const std::int64_t max_payload = natsConnection_GetMaxPayload(conn->nc());
+  const std::size_t chunk_bytes =
+      static_cast<std::size_t>(std::clamp<std::int64_t>(max_payload - 4096, 4096, 512 << 10));
+  const std::vector<std::string> chunks = wire::chunk(package.bytes, chunk_bytes);
+  for (std::size_t i = 0; i < chunks.size(); ++i) {
+    wire::NatsPackageChunk c;
+    c.set_scene_hash(package.hash);
+    c.set_index(static_cast<std::uint32_t>(i));
+    c.set_data(chunks[i]);
+    if (!publish(subjects.package_chunk(static_cast<std::uint32_t>(i)), c)) return false;
+  }
+  const TileStore& tiles = host.tiles();
+  wire::NatsSceneState state;
+  state.set_scene_id(host.scene_id());
+  state.set_origin(origin);
+  state.set_revision(revision);
+  state.set_tile_epoch(epoch);
+  state.set_scene_hash(package.hash);
+  state.set_package_bytes(package.bytes.size());
+  state.set_package_chunks(static_cast<std::uint32_t>(chunks.size()));
+  state.set_tile_size(static_cast<std::uint32_t>(tiles.options().tile_size));
+  for (std::uint32_t m = 0; m < tiles.lightmap_count(); ++m) {
+    wire::LightmapInfo* li = state.add_lightmaps();
+    li->set_width(static_cast<std::uint32_t>(tiles.lightmap_size(m).first));
+    li->set_height(static_cast<std::uint32_t>(tiles.lightmap_size(m).second));
+  }
+  state.set_backend(host.backend_name());
+  if (!publish(subjects.state, state)) return false;
+  count(&NatsOriginStats::packages_published);
+  return true;
+}
+
+bool NatsOrigin::Impl::publish_tile(std::uint32_t index) {
+  const TileStore::Snapshot snap = host.tiles().snapshot(index, wire::TILE_RGB9E5_ZSTD);
+  if (snap.version == 0) return true;
+  wire::NatsTile t;
+  t.set_origin(origin);
+  t.set_index(index);
+  t.set_version(snap.version);
+  t.set_time_us(snap.time_us);
+  t.set_payload(*snap.payload);
+  if (!publish(subjects.tile(index), t)) return false;
+  count(&NatsOriginStats::tiles_published);
+  return true;
+}
+
+// The edits in order, each after the package it made (edits applied together share the package
+// made after the last of them, which names it, as Server's broadcast does).
+bool NatsOrigin::Impl::publish_edits(std::deque<AppliedEdit>& eds) {
+  for (std::size_t i = 0; i < eds.size(); ++i) {
+    const AppliedEdit& a = eds[i];
+    std::size_t last = i;
+    while (last + 1 < eds.size() && eds[last + 1].package == a.package) ++last;
+    if (a.package && a.package.get() != last_package) {
+      if (!publish_package(*a.package, eds[last].revision, eds[last].tile_epoch)) return false;
+      last_package = a.package.get();
+    }
+    if (!publish_edit(a, a.package && i == last)) return false;
+    last_edit = a;
+  }
+  return true;
+}
+
+bool NatsOrigin::Impl::publish_edit(const AppliedEdit& a, bool names_package) {
+  wire::NatsEdit e;
+  e.set_origin(origin);
+  e.set_tile_epoch(a.tile_epoch);
+  wire::SceneEdit* m = e.mutable_edit();
+  wire::to_proto(a.edit, m);
+  m->set_revision(a.revision);
+  if (names_package && a.package) m->set_scene_hash(a.package->hash);
+  m->set_applied(true);
+  m->set_applied_us(a.applied_us);
+  if (!publish(subjects.edit, e)) return false;
+  count(&NatsOriginStats::edits_published);
+  return true;
+}
+
+bool NatsOrigin::Impl::publish_stats() {
+  wire::Stats s;
+  add_engine_stats(host.stats(), &s);
+  s.set_bytes_per_texel(host.tiles().bytes_per_texel());
+  s.set_backend(host.backend_name());
+  return publish(subjects.stats, s);
+}
+
+void NatsOrigin::Impl::expire_cameras() {
+  std::lock_guard lock(camera_mutex);
+  const Clock::time_point now = Clock::now();
+  for (auto it = gateways.begin(); it != gateways.end();) {
+    if (now - it->second.seen < options.camera_expiry) {
+      ++it;
+      continue;
+    }
+    for (std::size_t i = 0; i < it->second.cameras; ++i)
+      host.set_camera(kGatewayViewer | ((it->first << 12) + i), std::nullopt);
+    it = gateways.erase(it);
+  }
+}
+
+// A gateway's cameras: they replace the ones it sent before (viewer ids from the gateway's id
+// and the camera's position in the list).
+void NatsOrigin::Impl::on_cameras(natsConnection* nc, natsSubscription*, natsMsg* msg, void* self) {
+  Impl& im = *static_cast<Impl*>(self);
+  wire::NatsCameras m;
+  wire::NatsReply r;
+  if (!m.ParseFromString(nats_link::data_of(msg)) || m.gateway() == 0) {
+    im.count(&NatsOriginStats::bad_requests);
+    r.set_error("cameras: the request does not parse");
+    r.set_code(wire::BAD_REQUEST);
+  } else {
+    im.count(&NatsOriginStats::camera_requests);
+    std::lock_guard lock(im.camera_mutex);
+    Gateway& g = im.gateways[m.gateway()];
+    const std::uint64_t base = kGatewayViewer | (m.gateway() << 12);
+    std::size_t n = 0;
+    for (int i = 0; i < m.cameras_size() && n < kMaxCamerasPerGateway; ++i) {
+      std::string problem;
+      if (auto pose = camera_pose_of(m.cameras(i), problem)) im.host.set_camera(base + n++, pose);
+    }
+    for (std::size_t i = n; i < g.cameras; ++i) im.host.set_camera(base + i, std::nullopt);
+    g.cameras = n;
+    g.seen = Clock::now();
+  }
+  nats_link::reply(nc, msg, r);
+  natsMsg_Destroy(msg);
+}
+
+// A scene edit from a gateway: the control token, then the host's validation, as a session.
+void NatsOrigin::Impl::on_submit(natsConnection* nc, natsSubscription*, natsMsg* msg, void* self) {
+  Impl& im = *static_cast<Impl*>(self);
+  wire::SceneEdit m;
+  wire::NatsReply r;
+  if (!m.ParseFromString(nats_link::data_of(msg))) {
+    im.count(&NatsOriginStats::bad_requests);
+    r.set_error("scene edit: the request does not parse");
+    r.set_code(wire::BAD_REQUEST);
+  } else if (im.options.control_token.empty() ||
+             !same_secret(m.token(), im.options.control_token)) {
+    im.count(&NatsOriginStats::edits_refused);
+    r.set_error(im.options.control_token.empty() ? "the origin takes no edits"
+                                                 : "scene edits need the control token");
+    r.set_code(wire::PERMISSION_DENIED);
+  } else {
+    im.count(&NatsOriginStats::edit_requests);
+    try {
+      r.set_revision(im.host.submit_edit(wire::from_proto(m)));
+    } catch (const Error& e) {
+      im.count(&NatsOriginStats::edits_refused);
+      r.set_error(e.what());
+      r.set_code(wire::BAD_REQUEST);
+    }
+  }
+  nats_link::reply(nc, msg, r);
+  natsMsg_Destroy(msg);
+}
+
+NatsOrigin::NatsOrigin(EngineHost& host, NatsOriginOptions options)
+    : host_(host), impl_(std::make_unique<Impl>(host, std::move(options))) {
+  Impl& im = *impl_;
+  im.dirty.assign(host.tiles().tile_count(), 0);  // the first round publishes every tile
+  im.conn = std::make_unique<nats_link::Connection>(
+      im.options.url, "irradcast-origin " + host.scene_id(), [&im] { im.cv.notify_all(); });
+  natsStatus s = natsConnection_Subscribe(&im.camera_sub, im.conn->nc(),
+                                          im.subjects.cameras.c_str(), Impl::on_cameras, &im);
+  if (s == NATS_OK)
+    s = natsConnection_Subscribe(&im.edit_sub, im.conn->nc(), im.subjects.submit.c_str(),
+                                 Impl::on_submit, &im);
+  if (s != NATS_OK) {
+    natsSubscription_Destroy(im.camera_sub);
+    throw Error("NATS subscriptions of the origin: " + nats_link::describe(s));
+  }
+  host.set_listener([&im](const std::vector<std::uint32_t>& tiles) { im.on_tiles(tiles); });
+  host.set_edit_listener([&im](const AppliedEdit& applied) { im.on_edit(applied); });
+  im.worker = std::thread([&im] { im.run(); });
+  log::info("nats", "publishing scene '" + host.scene_id() + "' to " + im.options.url +
+                        " (stream " + im.subjects.stream + ")");
+}
+
+NatsOrigin::~NatsOrigin() {
+  Impl& im = *impl_;
+  host_.set_listener(nullptr);
+  host_.set_edit_listener(nullptr);
+  {
+    std::lock_guard lock(im.mutex);
+    im.stopping = true;
+  }
+  im.cv.notify_all();
+  im.worker.join();
+  natsSubscription_Destroy(im.camera_sub);
+  natsSubscription_Destroy(im.edit_sub);
+  im.conn.reset();
+}
+
+void NatsOrigin::set_listener(PublishListener listener) {
+  impl_->listeners.set(std::move(listener));
+}
+
+void NatsOrigin::set_edit_listener(EditListener listener) {
+  impl_->listeners.set(std::move(listener));
+}
+
+NatsOriginStats NatsOrigin::nats_stats() const {
+  std::lock_guard lock(impl_->mutex);
+  NatsOriginStats s = impl_->st;
+  s.connected = impl_->conn->connected();
+  return s;
+}
+
+bool NatsOrigin::flush(std::chrono::milliseconds limit) {
+  std::unique_lock lock(impl_->mutex);
+  impl_->idle = false;
+  impl_->cv.notify_all();
+  return impl_->cv.wait_for(lock, limit, [&] { return impl_->idle; });
+}
+
+std::string format_nats_origin_metrics(const NatsOriginStats& s) {
+  std::string out;
+  auto d = [](std::uint64_t v) { return static_cast<double>(v); };
+  append_metric(out, "irradcast_nats_connected", "gauge",
+                "1 while the origin is connected to NATS.", s.connected ? 1.0 : 0.0);
+  append_metric(out, "irradcast_nats_tiles_published_total", "counter",
+                "Tile versions published to the scene's stream.", d(s.tiles_published));
+  append_metric(out, "irradcast_nats_tiles_coalesced_total", "counter",
+                "Tile versions replaced by a newer one before they were published.",
+                d(s.tiles_coalesced));
+  append_metric(out, "irradcast_nats_edits_published_total", "counter", "Applied edits published.",
+                d(s.edits_published));
+  append_metric(out, "irradcast_nats_edits_dropped_total", "counter",
+                "Applied edits dropped from a full publish queue.", d(s.edits_dropped));
+  append_metric(out, "irradcast_nats_republished_total", "counter",
+                "Whole-state publishes after a (re)connection to NATS.", d(s.republished));
+  append_metric(out, "irradcast_nats_publish_errors_total", "counter",
+                "Publish rounds that failed.", d(s.publish_errors));
+  append_metric(out, "irradcast_nats_edit_requests_total", "counter",
+                "Scene edits accepted from gateways.", d(s.edit_requests));
+  append_metric(out, "irradcast_nats_edits_refused_total", "counter",
+                "Scene edits from gateways refused (token or validation).", d(s.edits_refused));
+  append_metric(out, "irradcast_nats_camera_requests_total", "counter",
+                "Camera requests from gateways.", d(s.camera_requests));
+  return out;
+}
+
+}  // namespace irradcast

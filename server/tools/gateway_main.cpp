@@ -1,0 +1,122 @@
+// irradcast-gateway: serves viewers a scene that an origin (irradcast-server --nats) computes,
+// with no engine of its own: its tile store, scene package and stats come from NATS
+// (NatsGateway), and the same Server as irradcast-server serves them (protocol, resume, limits,
+// TLS, metrics). Viewers' cameras and edits go to the origin through NATS. Keeps serving what it
+// has while NATS or the origin is away. Stops cleanly on SIGINT / SIGTERM. docs/DISTRIBUTION.md.
+#include <CLI/CLI.hpp>
+
+#include <csignal>
+#include <cstdio>
+#include <ctime>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include <pthread.h>
+
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
+#include "irradcast/service/metrics_endpoint.h"
+#include "irradcast/service/metrics_text.h"
+#include "irradcast/service/nats_gateway.h"
+#include "irradcast/service/net_server.h"
+#include "network_options.h"
+
+namespace {
+
+struct Options {
+  std::string nats;
+  std::string scene = "cornell";
+  irradcast::tools::NetworkOptions net;
+};
+
+// Waits for a stop signal for up to `limit`; returns it, or 0.
+int take_signal(const sigset_t& signals, std::chrono::milliseconds limit) {
+  timespec ts{static_cast<time_t>(limit.count() / 1000),
+              static_cast<long>(limit.count() % 1000) * 1000000L};
+  const int sig = sigtimedwait(&signals, nullptr, &ts);
+  return sig > 0 ? sig : 0;
+}
+
+void status_line(const irradcast::Server& server, const irradcast::NatsGateway& gateway) {
+  const irradcast::ServerStats ss = server.stats();
+  const irradcast::NatsGatewayStats gs = gateway.nats_stats();
+  char line[384];
+  std::snprintf(line, sizeof line,
+                "NATS %s, revision %llu, %llu tiles received (%llu new), lag %.3f s, %u clients, "
+                "%.2f MB sent, %llu tiles sent, %llu queued (max %llu)",
+                gs.connected ? "connected" : "away", static_cast<unsigned long long>(gs.revision),
+                static_cast<unsigned long long>(gs.tiles_received),
+                static_cast<unsigned long long>(gs.tiles_installed), gs.lag_seconds, ss.clients,
+                ss.bytes_sent * 1e-6, static_cast<unsigned long long>(ss.tiles_sent),
+                static_cast<unsigned long long>(ss.queue_depth),
+                static_cast<unsigned long long>(ss.queue_depth_max));
+  irradcast::log::info("status", line);
+}
+
+int run(const Options& o, const sigset_t& signals) {
+  using namespace irradcast;
+  log::set_level(log::parse_level(o.net.log_level));
+  Progress::set_enabled(false);
+  const auto token = o.net.token();
+  const ServerOptions so = o.net.server_options(token, "gateway");
+  NatsGatewayOptions go;
+  go.url = o.nats;
+  go.scene_id = o.scene;
+  go.control_token = token.first;
+  NatsGateway gateway(go);
+  // The tile layout and scene package come from the origin: wait for them.
+  for (int waited = 0; !gateway.wait_ready(std::chrono::milliseconds(0)); waited += 200) {
+    if (take_signal(signals, std::chrono::milliseconds(200))) return 0;
+    if (waited > 0 && waited % 5000 == 0)
+      log::info("gateway", "waiting for scene '" + o.scene + "' from the origin (NATS " +
+                               (gateway.nats_stats().connected ? "connected" : "not connected") +
+                               ")");
+  }
+  Server server(gateway, so);
+  server.start();
+  std::unique_ptr<MetricsEndpoint> metrics =
+      o.net.start_metrics([&server, &gateway](const MetricsEndpoint* endpoint) {
+        return format_metrics(collect_metrics(server, gateway, endpoint)) +
+               format_nats_gateway_metrics(gateway.nats_stats());
+      });
+  int sig = 0;
+  auto next = std::chrono::steady_clock::now() + std::chrono::seconds(o.net.status_every_s);
+  while ((sig = take_signal(signals, std::chrono::milliseconds(100))) == 0) {
+    if (o.net.status_every_s <= 0 || std::chrono::steady_clock::now() < next) continue;
+    next += std::chrono::seconds(o.net.status_every_s);
+    status_line(server, gateway);
+  }
+  log::info("gateway",
+            std::string("received ") + (sig == SIGINT ? "SIGINT" : "SIGTERM") + ", shutting down");
+  if (metrics) metrics->stop();
+  server.stop();
+  const ServerStats ss = server.stats();
+  log::info("gateway", "stopped: " + std::to_string(ss.connections) + " connections, " +
+                           std::to_string(ss.bytes_sent) + " bytes sent");
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  CLI::App app{
+      "irradcast-gateway: serves viewers the lightmap tiles of a scene that irradcast-server "
+      "--nats computes, read from NATS JetStream; no engine. Same protocol, limits and options "
+      "as irradcast-server; cameras and (with the control token) edits go to the origin.",
+      "irradcast-gateway"};
+  app.option_defaults()->always_capture_default();
+  app.add_option("--nats", o.nats, "the NATS server the origin publishes to (nats://HOST:PORT)")
+      ->required();
+  app.add_option("--scene", o.scene, "the scene id the origin serves (its --scene)");
+  o.net.add_to(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  return irradcast::tools::run_service("irradcast-gateway",
+                                       [&o](const sigset_t& signals) { return run(o, signals); });
+}

@@ -1,0 +1,172 @@
+// The network options irradcast-server and irradcast-gateway share (the protocol port, TLS,
+// limits, the control token, the metrics endpoint, logging): their CLI, the ServerOptions they
+// make, the metrics endpoint with a body function, and main()'s signal and error handling.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <memory>
+#include <string>
+#include <utility>
+
+#include <pthread.h>
+
+#include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
+#include "irradcast/service/metrics_endpoint.h"
+#include "irradcast/service/net_server.h"
+
+namespace irradcast::tools {
+
+struct NetworkOptions {
+  std::string bind = "0.0.0.0";
+  int port = 7450;
+  int io_threads = 2;
+  int idle_timeout_s = 30;
+  int status_every_s = 5;
+  int metrics_port = -1;     // -1: no metrics endpoint
+  std::string metrics_bind;  // empty: --bind
+  std::string log_level = "info";
+  std::string control_token;
+  std::string control_token_file;
+  std::string tls_cert, tls_key;
+  std::uint32_t max_clients = ServerOptions().max_clients;
+  std::uint32_t max_clients_per_peer = ServerOptions().max_clients_per_peer;
+
+  void add_to(CLI::App& app) {
+    app.add_option("--bind", bind, "address to listen on");
+    app.add_option("--port", port, "TCP port (0 = any free port)")->check(CLI::Range(0, 65535));
+    app.add_option("--io-threads", io_threads, "network threads")->check(CLI::Range(1, 64));
+    app.add_option("--idle-timeout", idle_timeout_s,
+                   "seconds without a frame before a client is dropped")
+        ->check(CLI::Range(1, 86400));
+    app.add_option("--status-every", status_every_s, "seconds between status lines (0 = none)")
+        ->check(CLI::NonNegativeNumber);
+    app.add_option("--metrics-port", metrics_port,
+                   "serve Prometheus metrics at http://ADDR:PORT/metrics (0 = any free port; off "
+                   "when not given)")
+        ->check(CLI::Range(0, 65535))
+        ->default_str("off");
+    app.add_option("--metrics-bind", metrics_bind,
+                   "address for the metrics endpoint (default: the --bind address)");
+    app.add_option("--control-token", control_token,
+                   "accept live scene edits (irradcast-edit) from clients that give this token "
+                   "(visible in the process list: prefer --control-token-file); without a token "
+                   "the server takes no edits")
+        ->default_str("none");
+    app.add_option("--control-token-file", control_token_file,
+                   "read the control token for scene edits from the first line of this file")
+        ->default_str("none");
+    app.add_option("--max-clients", max_clients,
+                   "the most sessions at once, all addresses together; past it a new connection "
+                   "gets the error 'the server is full' and is closed")
+        ->check(CLI::Range(1u, 1000000u));
+    app.add_option("--max-clients-per-peer", max_clients_per_peer,
+                   "the most sessions from one address (an IPv6 /64) at once; past it a new "
+                   "connection is refused (0 = no limit; irradcast-load users on one machine "
+                   "count as one address)");
+    app.add_option("--tls-cert", tls_cert,
+                   "serve TLS on the protocol port and the metrics endpoint with this PEM "
+                   "certificate chain (with --tls-key; docs/OPERATIONS.md)")
+        ->default_str("none");
+    app.add_option("--tls-key", tls_key, "the PEM private key of --tls-cert")->default_str("none");
+    app.add_option("--log-level", log_level, "debug | info | warn | error | off");
+  }
+
+  // The control token for scene edits (docs/EDITS.md) and where it came from, for the log (the
+  // token itself is never logged). Empty: no edits.
+  std::pair<std::string, std::string> token() const {
+    if (!control_token.empty() && !control_token_file.empty())
+      throw Error("give --control-token or --control-token-file, not both");
+    if (!control_token_file.empty()) {
+      std::ifstream f(control_token_file);
+      if (!f) throw Error("--control-token-file: cannot read '" + control_token_file + "'");
+      std::string line;
+      std::getline(f, line);
+      const char* space = " \t\r\n";
+      const std::size_t first = line.find_first_not_of(space);
+      line = first == std::string::npos
+                 ? ""
+                 : line.substr(first, line.find_last_not_of(space) + 1 - first);
+      if (line.empty())
+        throw Error("--control-token-file: the first line of '" + control_token_file +
+                    "' is empty (it must hold the token)");
+      return {line, "file " + control_token_file};
+    }
+    if (!control_token.empty()) return {control_token, "--control-token"};
+    return {"", ""};
+  }
+
+  // The server's options with `token`; checks its length and the open-file limit (logs).
+  ServerOptions server_options(const std::pair<std::string, std::string>& token,
+                               const char* tag) const {
+    if (!token.first.empty() && token.first.size() < kMinTokenLength)
+      throw Error("the control token from " + token.second + " has " +
+                  std::to_string(token.first.size()) + " characters; it needs at least " +
+                  std::to_string(kMinTokenLength) + " (e.g. head -c 18 /dev/urandom | base64)");
+    ServerOptions so;
+    so.bind = bind;
+    so.port = static_cast<std::uint16_t>(port);
+    so.io_threads = io_threads;
+    so.idle_timeout = std::chrono::seconds(idle_timeout_s);
+    so.control_token = token.first;
+    so.tls_cert = tls_cert;
+    so.tls_key = tls_key;
+    so.max_clients = max_clients;
+    so.max_clients_per_peer = max_clients_per_peer;
+    const std::uint64_t files = raise_open_file_limit();
+    if (files < so.max_clients + 64u)
+      log::warn(tag, "this process may open " + std::to_string(files) +
+                         " files, fewer than --max-clients " + std::to_string(so.max_clients) +
+                         " needs (raise the hard limit: ulimit -Hn)");
+    log::info(tag, token.first.empty()
+                       ? std::string("scene edits: disabled")
+                       : "scene edits: enabled (control token from " + token.second + ")");
+    return so;
+  }
+
+  // The metrics endpoint (started; logs its URL) when --metrics-port was given, else null.
+  // `body` gets the endpoint (for its own stats) and runs on the endpoint's thread.
+  std::unique_ptr<MetricsEndpoint> start_metrics(
+      std::function<std::string(const MetricsEndpoint*)> body) const {
+    if (metrics_port < 0) return nullptr;
+    MetricsEndpointOptions mo;
+    mo.bind = metrics_bind.empty() ? bind : metrics_bind;
+    mo.port = static_cast<std::uint16_t>(metrics_port);
+    mo.tls_cert = tls_cert;
+    mo.tls_key = tls_key;
+    auto self = std::make_shared<const MetricsEndpoint*>(nullptr);
+    auto metrics = std::make_unique<MetricsEndpoint>(
+        [body = std::move(body), self] { return body(*self); }, mo);
+    *self = metrics.get();
+    metrics->start();  // logs "metrics on http://ADDR:PORT/metrics"
+    return metrics;
+  }
+};
+
+// The rest of a service program's main() after its options are parsed: blocks SIGINT and
+// SIGTERM in every thread (threads inherit the mask; `run` waits for them), ignores SIGPIPE, and
+// turns errors into "TOOL: error: ..." and exit status 1 (2 for internal errors).
+inline int run_service(const char* tool, const std::function<int(const sigset_t&)>& run) {
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  std::signal(SIGPIPE, SIG_IGN);
+  try {
+    return run(signals);
+  } catch (const Error& e) {
+    std::fprintf(stderr, "%s: error: %s\n", tool, e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: internal error: %s\n", tool, e.what());
+    return 2;
+  }
+}
+
+}  // namespace irradcast::tools

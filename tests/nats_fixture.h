@@ -1,0 +1,136 @@
+// What the NATS tests share: a nats-server with JetStream started on a random loopback port with
+// its storage in a temporary folder (stopped, and restarted on the same port and storage, by the
+// test), an in-process origin (EngineHost + NatsOrigin + Server) and gateways (NatsGateway +
+// Server). Without nats-server the tests skip, or fail under IRRADCAST_TESTDATA_REQUIRED=1.
+#pragma once
+
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "irradcast/common/builtin.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/service/nats_gateway.h"
+#include "irradcast/service/nats_origin.h"
+#include "irradcast/service/net_server.h"
+#include "process.h"
+#include "service_fixture.h"
+#include "testdata.h"
+
+namespace irradcast::test {
+
+inline std::string nats_server_exe() {
+  for (const char* p :
+       {"/usr/sbin/nats-server", "/usr/bin/nats-server", "/usr/local/bin/nats-server"})
+    if (::access(p, X_OK) == 0) return p;
+  return "";
+}
+
+#define IRRADCAST_NEED_NATS()                                                                    \
+  do {                                                                                           \
+    if (::irradcast::test::nats_server_exe().empty()) {                                          \
+      if (::irradcast::test::testdata_required())                                                \
+        FAIL() << "no nats-server (apt-get install nats-server; IRRADCAST_TESTDATA_REQUIRED=1)"; \
+      GTEST_SKIP() << "no nats-server (apt-get install nats-server)";                            \
+    }                                                                                            \
+  } while (0)
+
+inline std::uint16_t free_loopback_port() {
+  asio::io_context io;
+  asio::ip::tcp::acceptor a(io, asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), 0));
+  return a.local_endpoint().port();
+}
+
+// nats-server -js on 127.0.0.1, storage in its own temporary folder.
+class NatsProcess {
+ public:
+  NatsProcess()
+      : port_(free_loopback_port()),
+        dir_(std::filesystem::temp_directory_path() /
+             ("irradcast_nats_" + std::to_string(::getpid()) + "_" + std::to_string(port_))) {
+    std::filesystem::create_directories(dir_);
+    start();
+  }
+  ~NatsProcess() {
+    process_.reset();
+    std::error_code ec;
+    std::filesystem::remove_all(dir_, ec);
+  }
+  std::string url() const { return "nats://127.0.0.1:" + std::to_string(port_); }
+  void start() {
+    process_ = std::make_unique<Process>(
+        std::vector<std::string>{nats_server_exe(), "-js", "-sd", dir_.string(), "-p",
+                                 std::to_string(port_), "-a", "127.0.0.1"},
+        dir_.string() + ".log");
+    EXPECT_TRUE(eventually([&] { return listening(); }, std::chrono::seconds(10)))
+        << process_->output();
+  }
+  void stop() {
+    process_->signal(SIGTERM);
+    EXPECT_TRUE(process_->wait_for(std::chrono::seconds(10)));
+    process_.reset();
+  }
+
+ private:
+  bool listening() const {
+    asio::io_context io;
+    asio::ip::tcp::socket s(io);
+    std::error_code ec;
+    s.connect({asio::ip::make_address("127.0.0.1"), port_}, ec);
+    return !ec;
+  }
+  std::uint16_t port_;
+  std::filesystem::path dir_;
+  std::unique_ptr<Process> process_;
+};
+
+// irradcast-server --nats in the process: cornell, small, final after `updates` updates.
+struct NatsOriginNode {
+  NatsOriginNode(const std::string& url, std::uint32_t updates, const std::string& token = "")
+      : host(make_cornell_box(), "cornell", small_host(updates)),
+        origin(host, NatsOriginOptions{url, token}),
+        server(origin, [&] {
+          ServerOptions o = loopback();
+          o.control_token = token;
+          o.io_threads = 1;
+          return o;
+        }()) {
+    server.start();
+    host.start();
+  }
+  ~NatsOriginNode() {
+    server.stop();
+    host.stop();
+  }
+  // The engine is final and everything it made is in JetStream.
+  bool settle() {
+    host.wait_for_updates(~std::uint64_t{0});
+    return origin.flush(std::chrono::seconds(10));
+  }
+  EngineHost host;
+  NatsOrigin origin;
+  Server server;
+};
+
+// irradcast-gateway in the process.
+struct NatsGatewayNode {
+  explicit NatsGatewayNode(const std::string& url, const std::string& token = "")
+      : gateway(NatsGatewayOptions{url, "cornell", token}) {
+    EXPECT_TRUE(gateway.wait_ready(std::chrono::seconds(10))) << "no scene from NATS";
+    ServerOptions o = loopback();
+    o.control_token = token;
+    o.io_threads = 1;
+    server = std::make_unique<Server>(gateway, o);
+    server->start();
+  }
+  ~NatsGatewayNode() { server->stop(); }
+  NatsGateway gateway;
+  std::unique_ptr<Server> server;
+};
+
+}  // namespace irradcast::test
