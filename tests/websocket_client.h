@@ -77,26 +77,10 @@ struct WsConnection {
   // Reads until the server closes the connection (or the limit); the first Error message.
   std::optional<wire::Error> error_then_close(
       std::chrono::milliseconds limit = std::chrono::milliseconds(5000)) {
-    std::optional<wire::Error> error;
-    const auto deadline = Clock::now() + limit;
-    while (!raw.eof && Clock::now() < deadline) {
-      auto e = read(std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()));
-      if (e && e->has_error() && !error) error = e->error();
-    }
-    return error;
+    return first_error_before_close(*this, raw.eof, limit);
   }
-
   // Hello, then waits for the Welcome; false without one.
-  bool join(const std::string& name = "ws") {
-    send(hello_frame(name));
-    while (auto e = read()) {
-      if (e->has_welcome()) {
-        welcome = e->welcome();
-        return true;
-      }
-    }
-    return false;
-  }
+  bool join(const std::string& name = "ws") { return join_session(*this, name, welcome); }
 
   RawConnection raw;
   wire::WsClientConnection ws;
