@@ -105,6 +105,12 @@ bool Session::pump_websocket() {
   return false;
 }
 
+// Reading waits while the protocol says so, and while the WebSocket layer's own replies (pongs)
+// pile up behind a write in flight: a client that pings and does not read is pushed back by TCP.
+bool Session::read_paused() const {
+  return protocol_.paused() || (ws_ && ws_->output_size() > kMaxWebSocketOutput);
+}
+
 void Session::start() {
   asio::post(strand_, [self = shared_from_this()] {
     self->arm_idle_timer();
@@ -231,7 +237,7 @@ void Session::drain() {
     act();
     return;
   }
-  if (!protocol_.paused()) read();
+  if (!read_paused()) read();
 }
 
 void Session::act() {
@@ -337,9 +343,9 @@ void Session::write(SessionWrite w, bool raw) {
           counters.tile_bytes_sent += n;
         }
         if (kind == SessionWrite::Kind::Scene) counters.scene_bytes_sent += n;
-        const bool was_paused = self->protocol_.paused();
+        const bool was_paused = self->read_paused();
         self->pump();
-        if (was_paused && !self->protocol_.paused()) self->drain();  // replies written: read on
+        if (was_paused && !self->read_paused()) self->drain();  // replies written: read on
       }));
 }
 

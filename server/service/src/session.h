@@ -70,6 +70,8 @@ class Session : public std::enable_shared_from_this<Session> {
   void on_penalty_over(bool banned);
   void pump();
   // The web port: what the WebSocket layer needs before protocol frames (websocket.cpp).
+  static constexpr std::size_t kMaxWebSocketOutput = 64 << 10;
+  bool read_paused() const;
   void make_websocket();
   void on_websocket_input();
   bool pump_websocket();

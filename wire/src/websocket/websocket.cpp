@@ -210,6 +210,9 @@ WsCloseCode WsServerConnection::close_code() const {
 bool WsServerConnection::has_output() const {
   return !impl_->out.empty();
 }
+std::size_t WsServerConnection::output_size() const {
+  return impl_->out.size();
+}
 std::string WsServerConnection::take_output() {
   return std::exchange(impl_->out, std::string());
 }

@@ -75,6 +75,7 @@ class WsServerConnection {
 
   // Bytes the library wants written (handshake or HTTP reply, pongs, its close frames); taken.
   bool has_output() const;
+  std::size_t output_size() const;
   std::string take_output();
 
   // One unmasked binary frame carrying `payload` (the server's messages are never fragmented).
