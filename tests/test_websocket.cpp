@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <thread>
 
 #include "irradcast/client/client_session.h"
 #include "irradcast/common/builtin.h"
@@ -310,4 +311,29 @@ TEST(WebSocket, TheWebPortUsesTheServersTls) {
   const std::string plain = get(server.http_port(), "/");
   EXPECT_EQ(plain.find("200 OK"), std::string::npos);
   server.stop();
+}
+
+// RFC 6455 lets any hop split a message into fragments: they are joined into one frame (within
+// the same cap), so a proxy that re-fragments does not break the protocol. Then the server stops.
+TEST(WebSocket, AFragmentedMessageIsOneFrameAndShutdownIsAnnounced) {
+  EngineHost host(make_cornell_box(), "cornell", test::quick_host(1));
+  Server server(host, web_loopback());
+  server.start();
+  WsConnection ws(server.http_port());
+  ASSERT_TRUE(ws.opened());
+  const std::string hello = test::hello_frame("fragments").SerializeAsString();
+  ASSERT_GT(hello.size(), 4u);
+  ws.write_raw(masked_frame(0x02, hello.substr(0, 3)) +  // binary, not final
+               masked_frame(0x89, "ping") +              // a control frame in between
+               masked_frame(0x80, hello.substr(3)));     // continuation, final
+  std::optional<wire::Envelope> e = ws.read();
+  ASSERT_TRUE(e);
+  ASSERT_TRUE(e->has_welcome()) << wire::message_name(*e);
+  // Shutdown reaches a WebSocket client as on TCP.
+  std::thread stopper([&] { server.stop(); });
+  const auto error = ws.error_then_close();
+  stopper.join();
+  ASSERT_TRUE(error);
+  EXPECT_EQ(error->code(), wire::SERVER_SHUTDOWN);
+  EXPECT_EQ(ws.ws.remote_close_code(), 1000);
 }
