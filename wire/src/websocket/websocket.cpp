@@ -171,9 +171,16 @@ WsServerConnection::WsServerConnection(Handlers handlers, std::size_t max_messag
   im.con->start();
 }
 
+// A connection waiting for bytes holds its own read handler, which holds the connection: ending
+// the read (a transport error) breaks that cycle, else every connection would leak. Its handlers
+// run now, while the Impl they refer to is still whole.
+template <class Con>
+void release(const Con& con) {
+  con->fatal_error();
+}
+
 WsServerConnection::~WsServerConnection() {
-  // The connection's handlers refer to the Impl; drop them before it goes.
-  impl_->con->set_shutdown_handler(nullptr);
+  release(impl_->con);
 }
 
 void WsServerConnection::receive(const char* data, std::size_t n) {
@@ -274,7 +281,7 @@ WsClientConnection::WsClientConnection(const std::string& host, const std::strin
 }
 
 WsClientConnection::~WsClientConnection() {
-  impl_->con->set_shutdown_handler(nullptr);
+  release(impl_->con);
 }
 
 void WsClientConnection::receive(const char* data, std::size_t n) {
