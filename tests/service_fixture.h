@@ -113,6 +113,33 @@ std::pair<std::error_code, std::size_t> read_some_before(
   return {result, n};
 }
 
+// What the raw connections (here and websocket_client.h) share; Connection has send(Envelope)
+// and read(limit). Reads until `eof` (the server closed) or the limit: the first Error frame.
+template <class Connection>
+std::optional<wire::Error> first_error_before_close(Connection& c, const bool& eof,
+                                                    std::chrono::milliseconds limit) {
+  using Clock = std::chrono::steady_clock;
+  std::optional<wire::Error> error;
+  const auto deadline = Clock::now() + limit;
+  while (!eof && Clock::now() < deadline) {
+    auto e = c.read(std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()));
+    if (e && e->has_error() && !error) error = e->error();
+  }
+  return error;
+}
+// Hello, then waits for the Welcome (skipping other frames); false without one.
+template <class Connection>
+bool join_session(Connection& c, const std::string& name, wire::Welcome& welcome) {
+  c.send(hello_frame(name));
+  while (auto e = c.read()) {
+    if (e->has_welcome()) {
+      welcome = e->welcome();
+      return true;
+    }
+  }
+  return false;
+}
+
 // A raw protocol connection to 127.0.0.1:port, plain or TLS (the server's name is 127.0.0.1).
 // Writes ignore errors (a test may write to a server that closed); reads wait at most a limit.
 struct RawConnection {
@@ -153,26 +180,10 @@ struct RawConnection {
   // Reads until the server closes the connection (or the limit); the first Error frame.
   std::optional<wire::Error> error_then_close(
       std::chrono::milliseconds limit = std::chrono::milliseconds(5000)) {
-    std::optional<wire::Error> error;
-    const auto deadline = Clock::now() + limit;
-    while (!eof && Clock::now() < deadline) {
-      auto e = read(std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()));
-      if (e && e->has_error() && !error) error = e->error();
-    }
-    return error;
+    return first_error_before_close(*this, eof, limit);
   }
-
   // Hello, then waits for the Welcome (skipping other frames); false without one.
-  bool join(const std::string& name = "raw") {
-    send(hello_frame(name));
-    while (auto e = read()) {
-      if (e->has_welcome()) {
-        welcome = e->welcome();
-        return true;
-      }
-    }
-    return false;
-  }
+  bool join(const std::string& name = "raw") { return join_session(*this, name, welcome); }
 
   asio::io_context io;
   wire::Stream stream;

@@ -441,6 +441,8 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   s.token_failures = 8;
   s.edits_dropped = 9;
   s.log_lines_suppressed = 10;
+  s.websocket_sessions = 23;
+  s.http_requests = 29;
   s.partial_bytes = 11;
   s.queue_depth = 40;
   s.queue_depth_max = 25;
@@ -508,6 +510,8 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   u("irradcast_token_failures_total", 8);
   u("irradcast_edits_dropped_total", 9);
   u("irradcast_log_lines_suppressed_total", 10);
+  u("irradcast_websocket_sessions_total", 23);
+  u("irradcast_http_requests_total", 29);
   u("irradcast_partial_frame_bytes", 11);
   for (std::size_t r = 0; r < kCloseReasons; ++r)
     u("irradcast_sessions_closed_total", 100 + r,
@@ -555,7 +559,7 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   u("irradcast_metrics_collections_total", 19);
   // Nothing else: every sample above was checked.
   EXPECT_EQ(checked.size(), x.samples.size()) << text;
-  EXPECT_EQ(x.samples.size(), 44 + kCloseReasons + 4 * e.passes.size());
+  EXPECT_EQ(x.samples.size(), 46 + kCloseReasons + 4 * e.passes.size());
 }
 
 TEST(Metrics, FormatterHandlesAnEmptySnapshotAndSpecialValues) {

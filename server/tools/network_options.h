@@ -29,6 +29,7 @@ struct NetworkOptions {
   int idle_timeout_s = 30;
   int status_every_s = 5;
   int metrics_port = -1;     // -1: no metrics endpoint
+  int http_port = -1;        // -1: no web port (browser viewer and WebSocket)
   std::string metrics_bind;  // empty: --bind
   std::string log_level = "info";
   std::string control_token;
@@ -46,6 +47,12 @@ struct NetworkOptions {
         ->check(CLI::Range(1, 86400));
     app.add_option("--status-every", status_every_s, "seconds between status lines (0 = none)")
         ->check(CLI::NonNegativeNumber);
+    app.add_option("--http-port", http_port,
+                   "serve the browser viewer at http://ADDR:PORT/ and the protocol over a "
+                   "WebSocket at /ws (https and wss with --tls-cert; 0 = any free port; off when "
+                   "not given)")
+        ->check(CLI::Range(0, 65535))
+        ->default_str("off");
     app.add_option("--metrics-port", metrics_port,
                    "serve Prometheus metrics at http://ADDR:PORT/metrics (0 = any free port; off "
                    "when not given)")
@@ -111,6 +118,7 @@ struct NetworkOptions {
     ServerOptions so;
     so.bind = bind;
     so.port = static_cast<std::uint16_t>(port);
+    if (http_port >= 0) so.http_port = static_cast<std::uint16_t>(http_port);
     so.io_threads = io_threads;
     so.idle_timeout = std::chrono::seconds(idle_timeout_s);
     so.control_token = token.first;
