@@ -1,0 +1,149 @@
+// irradcast's browser viewer (docs/VIEWER-WEB.md): connects to /ws next to the page, downloads
+// the scene, streams the lightmaps into textures and draws the view with irradcast's shading.
+// URL parameters: camera=eye=x,y,z:target=x,y,z:fov=deg (the tools' --camera), width, height,
+// exposure (stops), tonemap (reinhard|aces|clamp), encoding (rgb9e5|half|delta), converge (the
+// server's convergence target, as irradcast-view --converge-at), ui=0 (no overlay). When every
+// tile the server holds is applied and drawn, document.title becomes "irradcast: converged".
+import * as THREE from 'three';
+import { Connection } from './connection.js';
+import { SceneView, TONE_OPS } from './render.js';
+import { ViewCamera, attachControls, parseCamera, formatCamera } from './camera.js';
+import { defaultCamera } from './scene.js';
+import { applyEdit, KIND } from './edits.js';
+import { Overlay } from './overlay.js';
+import { num } from './proto.js';
+
+const ENCODINGS = { rgb9e5: 0, half: 1, delta: 2 };
+
+function readParams() {
+  const q = new URLSearchParams(window.location.search);
+  const size = (k) => {
+    const v = q.get(k);
+    if (v === null) return 0;
+    const n = Number(v);
+    if (!(Number.isInteger(n) && n >= 1 && n <= 16384)) throw new Error(`${k}=${v}: a size in pixels, 1 to 16384`);
+    return n;
+  };
+  const p = { camera: q.get('camera'), width: size('width'), height: size('height'),
+    exposure: Number(q.get('exposure') || 0), tonemap: q.get('tonemap') || 'reinhard',
+    encoding: q.get('encoding') || 'delta', converge: Number(q.get('converge') ?? 0.02), ui: q.get('ui') !== '0' };
+  if (!Number.isFinite(p.exposure)) throw new Error(`exposure=${q.get('exposure')}: a number of stops`);
+  if (!(p.tonemap in TONE_OPS)) throw new Error(`tonemap=${p.tonemap}: reinhard, aces or clamp`);
+  if (!(p.encoding in ENCODINGS)) throw new Error(`encoding=${p.encoding}: rgb9e5, half or delta`);
+  if (!(p.converge >= 0)) throw new Error(`converge=${q.get('converge')}: a number >= 0`);
+  return p;
+}
+
+function main() {
+  let params;
+  try {
+    params = readParams();
+  } catch (e) {
+    document.body.textContent = `irradcast: ${e.message}`;
+    return;
+  }
+  const finish = { exposureScale: { value: 2 ** params.exposure }, toneOp: { value: TONE_OPS[params.tonemap] }, hdrOut: { value: 0 } };
+  const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
+  renderer.setPixelRatio(1);
+  renderer.outputColorSpace = THREE.LinearSRGBColorSpace;  // the shaders encode sRGB themselves
+  renderer.autoClear = true;
+  document.body.appendChild(renderer.domElement);
+  const state = { status: 'connecting', converged: false, stats: null, dirty: true, view: null, camera: null, pendingStats: false };
+  const width = () => params.width || window.innerWidth, height = () => params.height || window.innerHeight;
+  const setCamera = (pose) => { state.camera = new ViewCamera(pose, state.view.bounds); };
+
+  const overlay = new Overlay(params, (change) => {
+    if ('exposure' in change) finish.exposureScale.value = 2 ** change.exposure;
+    if ('tonemap' in change) finish.toneOp.value = TONE_OPS[change.tonemap];
+    state.dirty = true;
+  }, (token, target, vector) => {
+    conn.send({ scene_edit: { token, request_id: Date.now(), ops: [{ kind: KIND.MOVE, target, vector }] } });
+  });
+
+  const wsUrl = new URL('ws', window.location.href);
+  wsUrl.protocol = wsUrl.protocol === 'https:' ? 'wss:' : 'ws:';
+  wsUrl.search = '';
+  const conn = new Connection(wsUrl.href, { encoding: ENCODINGS[params.encoding] }, {
+    sceneReady(model, welcome) {
+      if (state.view) state.view.root.clear();
+      state.view = new SceneView(renderer, model, welcome, finish);
+      const base = state.camera ? state.camera.pose : defaultCamera(model, state.view.bounds);
+      let pose = base;
+      if (!state.camera && params.camera) {
+        try { pose = parseCamera(params.camera, base); } catch (e) { overlay.error(e.message); }
+      }
+      setCamera(pose);
+      overlay.setNodes(model.nodes.map((n, i) => ({ target: n.name || `#${i}`, label: n.name || `#${i}` }))
+        .filter((_, i) => model.nodes[i].mesh >= 0 || model.nodes[i].light >= 0));
+      state.dirty = true;
+    },
+    tile(lightmap, x0, y0, w, h, words) {
+      state.view.applyTile(lightmap, x0, y0, w, h, words);
+      state.dirty = true;
+      state.converged = false;
+    },
+    tileBase: (lightmap, x0, y0, w, h) => state.view.tileWords(lightmap, x0, y0, w, h),
+    edit(m) {
+      try {
+        const c = applyEdit(state.view.scene, m);
+        if (c.nodes) state.view.placeNodes();
+        if (c.materials) state.view.updateMaterials();
+        if (c.sky) state.view.updateSky();
+        state.dirty = true;
+        state.converged = false;
+      } catch (e) {
+        conn.reload(e.message);
+      }
+    },
+    stats(s) { state.stats = s; state.pendingStats = false; },
+    status(text) { state.status = text; },
+    error(text) { overlay.error(text); console.warn(`irradcast: ${text}`); },
+  });
+  window.irradcast = { conn, state, formatCamera: () => state.camera && formatCamera(state.camera.pose, state.camera.distance) };
+
+  // Stats twice a second, for the overlay and convergence.
+  setInterval(() => {
+    if (conn.phase === 'streaming' && !state.pendingStats) {
+      state.pendingStats = true;
+      conn.send({ stats_request: {} });
+    }
+  }, 500);
+
+  const keys = attachControls(renderer.domElement, () => state.camera);
+  let last = performance.now(), lastCameraSent = 0;
+  const frame = (now) => {
+    keys(Math.min(0.1, (now - last) / 1000));
+    last = now;
+    const w = width(), h = height();
+    if (renderer.domElement.width !== w || renderer.domElement.height !== h) {
+      renderer.setSize(w, h, true);
+      state.dirty = true;
+    }
+    const cam = state.camera;
+    if (cam && cam.changed && now - lastCameraSent > 100 && conn.phase === 'streaming') {
+      conn.send(cam.message());
+      cam.changed = false;
+      lastCameraSent = now;
+      state.dirty = true;
+    }
+    if (state.view && state.dirty) {
+      state.view.render(cam, w, h);
+      state.dirty = false;
+    }
+    // Converged: every tile held and drawn, nothing queued for us, and the server's lightmaps
+    // final (engine idle) or at the convergence target; as irradcast-view --until-converged.
+    const { held, total } = conn.tilesHeld(), s = state.stats;
+    const converged = !!(state.view && !state.dirty && total > 0 && held === total && s && num(s.queue_depth) === 0 &&
+      (s.engine_idle || s.convergence <= params.converge));
+    if (converged !== state.converged || document.title === 'irradcast' && converged) {
+      state.converged = converged;
+      document.title = converged ? 'irradcast: converged' : 'irradcast';
+    }
+    overlay.update({ status: state.status, converged, held, total, bytes: conn.counters.bytes,
+      tilesApplied: conn.counters.tiles, edits: conn.counters.edits, stats: s && { ...s, updates: num(s.updates) } });
+    requestAnimationFrame(frame);
+  };
+  requestAnimationFrame(frame);
+}
+
+main();
