@@ -1,7 +1,7 @@
 // irradcast's browser viewer (docs/VIEWER-WEB.md): connects to /ws next to the page, downloads
 // the scene, streams the lightmaps into textures and draws the view with irradcast's shading.
 // URL parameters: camera=eye=x,y,z:target=x,y,z:fov=deg (the tools' --camera), width, height,
-// exposure (stops), tonemap (reinhard|aces|clamp), encoding (rgb9e5|half|delta), converge (the
+// exposure (auto, the default, or stops), tonemap (reinhard|aces|clamp), encoding (rgb9e5|half|delta), converge (the
 // server's convergence target, as irradcast-view --converge-at), ui=0 (no overlay). When every
 // tile the server holds is applied and drawn, document.title becomes "irradcast: converged".
 import * as THREE from 'three';
@@ -25,13 +25,38 @@ function readParams() {
     return n;
   };
   const p = { camera: q.get('camera'), width: size('width'), height: size('height'),
-    exposure: Number(q.get('exposure') || 0), tonemap: q.get('tonemap') || 'reinhard',
+    exposure: q.get('exposure') || 'auto', tonemap: q.get('tonemap') || 'reinhard',
     encoding: q.get('encoding') || 'delta', converge: Number(q.get('converge') ?? 0.02), ui: q.get('ui') !== '0' };
-  if (!Number.isFinite(p.exposure)) throw new Error(`exposure=${q.get('exposure')}: a number of stops`);
+  if (p.exposure !== 'auto' && !(p.exposure.trim() !== '' && Number.isFinite(Number(p.exposure))))
+    throw new Error(`exposure=${p.exposure}: auto or a number of stops`);
   if (!(p.tonemap in TONE_OPS)) throw new Error(`tonemap=${p.tonemap}: reinhard, aces or clamp`);
   if (!(p.encoding in ENCODINGS)) throw new Error(`encoding=${p.encoding}: rgb9e5, half or delta`);
   if (!(p.converge >= 0)) throw new Error(`converge=${q.get('converge')}: a number >= 0`);
   return p;
+}
+
+// Reinhard's key (tonemap.cpp exposure_scale): 0.18 / the log-average luminance of the pixels
+// that have light, measured on an HDR render of the view at most 256 pixels wide.
+const autoTarget = { rt: null };
+function autoExposure(renderer, view, camera, w, h, finish) {
+  const s = Math.min(1, 256 / w), rw = Math.max(1, Math.round(w * s)), rh = Math.max(1, Math.round(h * s));
+  if (!autoTarget.rt || autoTarget.rt.width !== rw || autoTarget.rt.height !== rh) {
+    if (autoTarget.rt) autoTarget.rt.dispose();
+    autoTarget.rt = new THREE.WebGLRenderTarget(rw, rh, { type: THREE.FloatType, depthBuffer: true });
+    autoTarget.px = new Float32Array(4 * rw * rh);
+  }
+  finish.hdrOut.value = 1;
+  view.render(camera, rw, rh, autoTarget.rt);
+  finish.hdrOut.value = 0;
+  renderer.readRenderTargetPixels(autoTarget.rt, 0, 0, rw, rh, autoTarget.px);
+  let sum = 0, n = 0;
+  for (let i = 0; i < rw * rh; ++i) {
+    const p = autoTarget.px, l = 0.2126 * p[4 * i] + 0.7152 * p[4 * i + 1] + 0.0722 * p[4 * i + 2];
+    if (!(l > 0) || !Number.isFinite(l)) continue;
+    sum += Math.log(1e-4 + l);
+    ++n;
+  }
+  return n === 0 ? 1 : 0.18 / Math.exp(sum / n);
 }
 
 function main() {
@@ -42,7 +67,8 @@ function main() {
     document.body.textContent = `irradcast: ${e.message}`;
     return;
   }
-  const finish = { exposureScale: { value: 2 ** params.exposure }, toneOp: { value: TONE_OPS[params.tonemap] }, hdrOut: { value: 0 } };
+  let exposure = params.exposure;
+  const finish = { exposureScale: { value: exposure === 'auto' ? 1 : 2 ** Number(exposure) }, toneOp: { value: TONE_OPS[params.tonemap] }, hdrOut: { value: 0 } };
   const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
   renderer.setPixelRatio(1);
   renderer.outputColorSpace = THREE.LinearSRGBColorSpace;  // the shaders encode sRGB themselves
@@ -53,7 +79,10 @@ function main() {
   const setCamera = (pose) => { state.camera = new ViewCamera(pose, state.view.bounds); };
 
   const overlay = new Overlay(params, (change) => {
-    if ('exposure' in change) finish.exposureScale.value = 2 ** change.exposure;
+    if ('exposure' in change) {
+      exposure = change.exposure;
+      if (exposure !== 'auto') finish.exposureScale.value = 2 ** Number(exposure);
+    }
     if ('tonemap' in change) finish.toneOp.value = TONE_OPS[change.tonemap];
     state.dirty = true;
   }, (token, target, vector) => {
@@ -127,6 +156,7 @@ function main() {
       state.dirty = true;
     }
     if (state.view && state.dirty) {
+      if (exposure === 'auto') finish.exposureScale.value = autoExposure(renderer, state.view, cam, w, h, finish);
       state.view.render(cam, w, h);
       state.dirty = false;
     }

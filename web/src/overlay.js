@@ -9,20 +9,24 @@ export class Overlay {
       <div id="o-status">connecting</div>
       <div id="o-tiles"></div><div id="o-bytes"></div><div id="o-server"></div>
       <div id="o-error" class="err"></div>
-      <label>exposure (stops) <input id="o-ev" type="number" step="0.5"></label>
+      <label>exposure (auto or stops) <input id="o-ev" type="text" size="5"></label>
       <label>tone map <select id="o-op"><option>reinhard</option><option>aces</option><option>clamp</option></select></label>
       <div>drag: orbit, right drag: pan, wheel: dolly, F: fly (WASD QE, arrows)</div>
-      <details><summary>edit (control token)</summary>
-        <label>token <input id="o-token" type="password" autocomplete="off"></label>
+      <details><summary>edit (control token)</summary><form id="o-form" onsubmit="return false">
+        <label>token <input id="o-token" type="password" autocomplete="off">
+        <input type="text" autocomplete="username" hidden></label>
         <label>node <select id="o-node"></select></label>
         <label>step <input id="o-step" type="number" value="0.1" step="0.05"></label>
         <div id="o-move"></div>
-      </details>`;
+      </form></details>`;
     document.body.appendChild(this.el);
     this.$ = (id) => this.el.querySelector(`#o-${id}`);
     this.$('ev').value = params.exposure;
     this.$('op').value = params.tonemap;
-    this.$('ev').addEventListener('input', () => onChange({ exposure: Number(this.$('ev').value) || 0 }));
+    this.$('ev').addEventListener('change', () => {
+      const v = this.$('ev').value.trim();
+      if (v === 'auto' || (v !== '' && Number.isFinite(Number(v)))) onChange({ exposure: v });
+    });
     this.$('op').addEventListener('change', () => onChange({ tonemap: this.$('op').value }));
     for (const [label, v] of [['-x', [-1, 0, 0]], ['+x', [1, 0, 0]], ['-y', [0, -1, 0]], ['+y', [0, 1, 0]],
       ['-z', [0, 0, -1]], ['+z', [0, 0, 1]]]) {
