@@ -44,14 +44,16 @@ export function readPng(file) {
 }
 
 // Means of 16 x 16 blocks, per channel, in 8-bit units: the largest and the mean absolute
-// difference of two same-sized images.
-export function blockDifference(a, b, block = 16) {
+// difference of two same-sized images, and the fraction of blocks whose channels all differ by
+// at most `tight`.
+export function blockDifference(a, b, block = 16, tight = 2) {
   if (a.width !== b.width || a.height !== b.height)
     throw new Error(`image sizes differ: ${a.width} x ${a.height} and ${b.width} x ${b.height}`);
   const bx = Math.floor(a.width / block), by = Math.floor(a.height / block);
-  let max = 0, sum = 0;
+  let max = 0, sum = 0, within = 0;
   for (let j = 0; j < by; ++j)
-    for (let i = 0; i < bx; ++i)
+    for (let i = 0; i < bx; ++i) {
+      let worst = 0;
       for (let k = 0; k < 3; ++k) {
         let sa = 0, sb = 0;
         for (let y = j * block; y < (j + 1) * block; ++y)
@@ -60,10 +62,13 @@ export function blockDifference(a, b, block = 16) {
             sb += b.rgb[3 * (y * a.width + x) + k];
           }
         const d = Math.abs(sa - sb) / (block * block);
-        max = Math.max(max, d);
+        worst = Math.max(worst, d);
         sum += d;
       }
-  return { max, mean: sum / (bx * by * 3), blocks: bx * by };
+      max = Math.max(max, worst);
+      if (worst <= tight) ++within;
+    }
+  return { max, mean: sum / (bx * by * 3), blocks: bx * by, within: within / (bx * by) };
 }
 
 // The mean of all pixels (8-bit units): a rendered image is not black.

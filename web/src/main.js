@@ -130,6 +130,18 @@ function main() {
   });
   window.irradcast = { conn, state, formatCamera: () => state.camera && formatCamera(state.camera.pose, state.camera.distance) };
 
+  // Headless Chromium's --virtual-time-budget lets virtual time (timers, frames) run ahead while
+  // no network fetch is pending, and WebSocket traffic does not count: a --screenshot would be
+  // taken before the scene arrived. A headless browser therefore keeps one small fetch of the
+  // page in flight until the view has converged (or for two minutes of real loading at most).
+  if (/HeadlessChrome/.test(navigator.userAgent)) {
+    (async () => {
+      for (let i = 0; i < 20000 && !state.converged; ++i) {
+        try { await fetch(`index.html?hold=${i}`, { cache: 'no-store' }); } catch (_) { break; }
+      }
+    })();
+  }
+
   // Stats twice a second, for the overlay and convergence.
   setInterval(() => {
     if (conn.phase === 'streaming' && !state.pendingStats) {
