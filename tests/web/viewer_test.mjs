@@ -134,14 +134,14 @@ const tilesApplied = (page) => page.evaluate(() => window.irradcast.conn.counter
 const editsApplied = (page) => page.evaluate(() => window.irradcast.conn.counters.edits);
 
 async function edits(o) {
-  const server = await startServer(o.server, [...SERVER, '--control-token', 'web-test-token']);
+  const server = await startServer(o.server, [...SERVER, '--control-token', 'web-test-token-0123']);
   const b = await browser(o);
   try {
     const url = server.url + query({ width: W, height: H, converge: 0 });
     const page = await openConverged(b, url, W, H);
     // Another client moves the tall block: the page applies the broadcast, converges again and
     // shows what irradcast-view shows.
-    await run(o.edit, ['--connect', `127.0.0.1:${server.port}`, '--token', 'web-test-token', '--move', 'tall_block', '0.1,0,0.05']);
+    await run(o.edit, ['--connect', `127.0.0.1:${server.port}`, '--token', 'web-test-token-0123', '--move', 'tall_block', '0.1,0,0.05']);
     await page.waitForFunction(() => window.irradcast.conn.counters.edits === 1, { timeout: 30000 });
     await page.waitForFunction(() => document.title === 'irradcast: converged', { timeout: 60000, polling: 100 });
     await page.evaluate(() => { document.getElementById('overlay').style.display = 'none'; });
@@ -150,16 +150,18 @@ async function edits(o) {
     compare(shot, await viewPng(o, server, { width: W, height: H }, 'view-edited'), 'after an edit by another client');
     await page.evaluate(() => { document.getElementById('overlay').style.display = ''; });
     // The page's own edit: refused without the token, applied with it.
+    await page.evaluate(() => { document.querySelector('#overlay details').open = true; });
     await page.select('#o-node', 'short_block');
+    const plusX = () => page.$eval('#o-move button:nth-child(2)', (b) => b.click());
     const before = await tilesApplied(page);
-    await page.click('#o-move button:nth-child(2)');  // +x
+    await plusX();
     await page.waitForFunction(() => /PERMISSION_DENIED/.test(document.getElementById('o-error').textContent), { timeout: 20000 });
     assert.equal(await editsApplied(page), 1, 'an edit without the token was applied');
-    await page.type('#o-token', 'web-test-token');
-    await page.click('#o-move button:nth-child(2)');
+    await page.type('#o-token', 'web-test-token-0123');
+    await plusX();
     await page.waitForFunction(() => window.irradcast.conn.counters.edits === 2, { timeout: 30000 });
     await page.waitForFunction((n) => window.irradcast.conn.counters.tiles > n, { timeout: 30000 }, before);
-    assert.ok(!(await page.url()).includes('web-test-token'), 'the token is in the URL');
+    assert.ok(!(await page.url()).includes('web-test-token-0123'), 'the token is in the URL');
     console.log(`edits: ${await editsApplied(page)} applied in the page, ${await tilesApplied(page) - before} tiles after its own`);
   } finally {
     await b.close();

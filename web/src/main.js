@@ -183,9 +183,19 @@ function main() {
     }
     overlay.update({ status: state.status, converged, held, total, bytes: conn.counters.bytes,
       tilesApplied: conn.counters.tiles, edits: conn.counters.edits, stats: s && { ...s, updates: num(s.updates) } });
-    requestAnimationFrame(frame);
+    schedule();
   };
-  requestAnimationFrame(frame);
+  // Frames by requestAnimationFrame; a hidden tab gets none, so it draws by a timer instead (4 a
+  // second at most): its view stays current and it still reports convergence.
+  let scheduled = 0;
+  const schedule = () => {
+    const id = ++scheduled;
+    const run = (now) => { if (id === scheduled) frame(now ?? performance.now()); };
+    if (document.hidden) setTimeout(run, 250);
+    else requestAnimationFrame(run);
+  };
+  document.addEventListener('visibilitychange', schedule);
+  schedule();
 }
 
 main();
