@@ -44,6 +44,7 @@ struct Options {
   int idle_timeout_s = 30;
   int status_every_s = 5;
   int metrics_port = -1;     // -1: no metrics endpoint
+  int http_port = -1;        // -1: no web port
   std::string metrics_bind;  // empty: --bind
   std::string log_level = "info";
   std::string control_token;
@@ -119,6 +120,7 @@ int run(const Options& o, sigset_t signals) {
   ServerOptions so;
   so.bind = o.bind;
   so.port = static_cast<std::uint16_t>(o.port);
+  if (o.http_port >= 0) so.http_port = static_cast<std::uint16_t>(o.http_port);
   so.io_threads = o.io_threads;
   so.idle_timeout = std::chrono::seconds(o.idle_timeout_s);
   so.control_token = token;
@@ -261,6 +263,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 86400));
   app.add_option("--status-every", o.status_every_s, "seconds between status lines (0 = none)")
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--http-port", o.http_port,
+                 "serve the browser viewer at http://ADDR:PORT/ and the protocol over a WebSocket "
+                 "at /ws (https and wss with --tls-cert; 0 = any free port; off when not given)")
+      ->check(CLI::Range(0, 65535))
+      ->default_str("off");
   app.add_option("--metrics-port", o.metrics_port,
                  "serve Prometheus metrics at http://ADDR:PORT/metrics (0 = any free port; off "
                  "when not given)")

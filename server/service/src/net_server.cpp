@@ -1,4 +1,5 @@
-// The network server: the accept loop (admission by PeerTable, a refusal frame for the rest),
+// The network server: the accept loops of the protocol port and the web port (admission by
+// PeerTable, a refusal frame or HTTP reply for the rest),
 // the I/O threads, the engine's listeners that fan out to the sessions (session.h), shutdown and
 // the stats. Each session's protocol is in session_protocol.h.
 #include "irradcast/service/net_server.h"
@@ -41,7 +42,9 @@ struct Server::Impl {
         options(std::move(o)),
         peers(options),
         acceptor(io),
+        http_acceptor(io),
         accept_timer(io),
+        http_accept_timer(io),
         session_server{
             SessionContext{host, options, counters, peers, [this] { return stats(); },
                            std::min(options.max_frame,
@@ -56,7 +59,9 @@ struct Server::Impl {
   std::shared_ptr<asio::ssl::context> tls;  // null: plain TCP
   asio::io_context io;
   tcp::acceptor acceptor;
+  tcp::acceptor http_acceptor;      // the web port (ServerOptions::http_port); closed without one
   asio::steady_timer accept_timer;  // the pause after accept() ran out of descriptors
+  asio::steady_timer http_accept_timer;  // ... on the web port
   std::chrono::milliseconds accept_backoff{0};
   std::vector<std::thread> threads;
   std::optional<asio::executor_work_guard<asio::io_context::executor_type>> work;
@@ -67,11 +72,12 @@ struct Server::Impl {
   mutable std::mutex sessions_mutex;
   std::set<std::shared_ptr<Session>> sessions;
 
-  void accept();
-  void on_accept(std::error_code ec, tcp::socket socket);
-  void admit(tcp::socket socket);
-  void pause_accepting(const std::error_code& ec);
-  void refuse(tcp::socket& socket, const std::string& message);
+  void listen(tcp::acceptor& a, std::uint16_t port);
+  void accept(bool web);
+  void on_accept(std::error_code ec, tcp::socket socket, bool web);
+  void admit(tcp::socket socket, bool web);
+  void pause_accepting(const std::error_code& ec, bool web);
+  void refuse(tcp::socket& socket, const std::string& message, bool web);
   void on_publish(const std::vector<std::uint32_t>& tiles);
   void on_edit(const AppliedEdit& applied);
   void remove(const std::shared_ptr<Session>& s) {
@@ -111,23 +117,30 @@ bool out_of_descriptors(const std::error_code& ec) {
 
 // Closes a connection that is not admitted: one Error frame, best effort (never blocks: the
 // socket is non-blocking and the frame is small), then close.
-void Server::Impl::refuse(tcp::socket& socket, const std::string& message) {
+// On the web port the refusal is an HTTP 503.
+void Server::Impl::refuse(tcp::socket& socket, const std::string& message, bool web) {
   std::error_code ignored;
   if (!tls) {
     socket.non_blocking(true, ignored);
-    const std::string frame = wire::encode_frame(wire::make_error(wire::INTERNAL, message));
+    const std::string frame =
+        web ? "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain; charset=utf-8\r\n"
+              "Content-Length: " +
+                  std::to_string(message.size() + 1) + "\r\nConnection: close\r\n\r\n" + message +
+                  "\n"
+            : wire::encode_frame(wire::make_error(wire::INTERNAL, message));
     socket.write_some(asio::buffer(frame), ignored);
   }
   socket.close(ignored);
 }
 
-void Server::Impl::accept() {
-  acceptor.async_accept(asio::make_strand(io), [this](std::error_code ec, tcp::socket socket) {
-    on_accept(ec, std::move(socket));
-  });
+void Server::Impl::accept(bool web) {
+  (web ? http_acceptor : acceptor)
+      .async_accept(asio::make_strand(io), [this, web](std::error_code ec, tcp::socket socket) {
+        on_accept(ec, std::move(socket), web);
+      });
 }
 
-void Server::Impl::on_accept(std::error_code ec, tcp::socket socket) {
+void Server::Impl::on_accept(std::error_code ec, tcp::socket socket, bool web) {
   if (stopping) return;
   if (!ec) {
     if (accept_backoff.count() > 0) {
@@ -135,22 +148,22 @@ void Server::Impl::on_accept(std::error_code ec, tcp::socket socket) {
       accept_backoff = std::chrono::milliseconds(0);
     }
     ++counters.connections;
-    admit(std::move(socket));
+    admit(std::move(socket), web);
   } else if (ec == asio::error::operation_aborted) {
     return;
   } else {
     ++counters.accept_errors;
     if (out_of_descriptors(ec)) {
-      pause_accepting(ec);
+      pause_accepting(ec, web);
       return;
     }
     log::warn("server", "accept: " + ec.message());
   }
-  accept();
+  accept(web);
 }
 
 // A new connection: a session if the peer table admits it, a refusal otherwise.
-void Server::Impl::admit(tcp::socket socket) {
+void Server::Impl::admit(tcp::socket socket, bool web) {
   const std::string key = peer_key_of(socket);
   switch (peers.admit(key, [this]() -> std::size_t {
     std::lock_guard sl(sessions_mutex);
@@ -160,7 +173,8 @@ void Server::Impl::admit(tcp::socket socket) {
       std::error_code ignored;
       if (options.socket_send_buffer > 0)
         socket.set_option(asio::socket_base::send_buffer_size(options.socket_send_buffer), ignored);
-      auto s = std::make_shared<Session>(session_server, std::move(socket), key, next_session++);
+      auto s =
+          std::make_shared<Session>(session_server, std::move(socket), key, next_session++, web);
       {
         std::lock_guard lock(sessions_mutex);
         sessions.insert(s);
@@ -170,31 +184,36 @@ void Server::Impl::admit(tcp::socket socket) {
     }
     case PeerTable::Admission::Full:
       ++counters.clients_refused;
-      refuse(socket, "the server is full");
+      refuse(socket, "the server is full", web);
       break;
     case PeerTable::Admission::PeerLimit:
       ++counters.peer_refused;
-      refuse(socket, "too many connections from this address (" +
-                         std::to_string(options.max_clients_per_peer) + ")");
+      refuse(socket,
+             "too many connections from this address (" +
+                 std::to_string(options.max_clients_per_peer) + ")",
+             web);
       break;
     case PeerTable::Admission::Banned:
       ++counters.banned_refused;
-      refuse(socket, "this address is refused for a while (wrong control tokens)");
+      refuse(socket, "this address is refused for a while (wrong control tokens)", web);
       break;
   }
 }
 
 // Out of file descriptors (or kernel memory): the pending connection stays in the backlog.
 // Pause accepting, doubling the pause up to 1 s, and say so once.
-void Server::Impl::pause_accepting(const std::error_code& ec) {
+// The two ports share the length of the pause (they run out of the same descriptors), each
+// with its own timer.
+void Server::Impl::pause_accepting(const std::error_code& ec, bool web) {
   if (accept_backoff.count() == 0)
     log::warn("server", "accept: " + ec.message() + " (" + std::to_string(client_count()) +
                             " sessions); pausing accepts until descriptors are free");
   accept_backoff = std::clamp(accept_backoff * 2, std::chrono::milliseconds(10),
                               std::chrono::milliseconds(1000));
-  accept_timer.expires_after(accept_backoff);
-  accept_timer.async_wait([this](std::error_code tec) {
-    if (!tec && !stopping) accept();
+  asio::steady_timer& timer = web ? http_accept_timer : accept_timer;
+  timer.expires_after(accept_backoff);
+  timer.async_wait([this, web](std::error_code tec) {
+    if (!tec && !stopping) accept(web);
   });
 }
 
@@ -239,19 +258,24 @@ Server::~Server() {
   stop();
 }
 
+void Server::Impl::listen(tcp::acceptor& a, std::uint16_t port) {
+  std::error_code ec;
+  asio::ip::address address = asio::ip::make_address(options.bind, ec);
+  if (ec) throw Error("--bind: '" + options.bind + "' is not an IP address");
+  tcp::endpoint endpoint(address, port);
+  a.open(endpoint.protocol(), ec);
+  if (!ec) a.set_option(tcp::acceptor::reuse_address(true), ec);
+  if (!ec) a.bind(endpoint, ec);
+  if (!ec) a.listen(asio::socket_base::max_listen_connections, ec);
+  if (ec)
+    throw Error("cannot listen on " + options.bind + ":" + std::to_string(port) + ": " +
+                ec.message());
+}
+
 void Server::start() {
   Impl& im = *impl_;
-  std::error_code ec;
-  asio::ip::address address = asio::ip::make_address(im.options.bind, ec);
-  if (ec) throw Error("--bind: '" + im.options.bind + "' is not an IP address");
-  tcp::endpoint endpoint(address, im.options.port);
-  im.acceptor.open(endpoint.protocol(), ec);
-  if (!ec) im.acceptor.set_option(tcp::acceptor::reuse_address(true), ec);
-  if (!ec) im.acceptor.bind(endpoint, ec);
-  if (!ec) im.acceptor.listen(asio::socket_base::max_listen_connections, ec);
-  if (ec)
-    throw Error("cannot listen on " + im.options.bind + ":" + std::to_string(im.options.port) +
-                ": " + ec.message());
+  im.listen(im.acceptor, im.options.port);
+  if (im.options.http_port) im.listen(im.http_acceptor, *im.options.http_port);
   std::weak_ptr<Impl> weak = impl_;
   im.host.set_listener([weak](const std::vector<std::uint32_t>& tiles) {
     if (auto s = weak.lock()) s->on_publish(tiles);
@@ -260,13 +284,17 @@ void Server::start() {
     if (auto s = weak.lock()) s->on_edit(applied);
   });
   im.work.emplace(asio::make_work_guard(im.io));
-  im.accept();
+  im.accept(false);
+  if (im.options.http_port) im.accept(true);
   for (int i = 0; i < im.options.io_threads; ++i)
     im.threads.emplace_back([&im] {
       set_thread_name("irradcast-io");
       run_io(im.io, "server", "I/O handler");  // a handler that throws: the others go on
     });
   log::info("server", "listening on " + im.options.bind + ":" + std::to_string(port()));
+  if (im.options.http_port)
+    log::info("server", std::string("web viewer on ") + (im.tls ? "https" : "http") + "://" +
+                            im.options.bind + ":" + std::to_string(http_port()) + "/");
 }
 
 void Server::stop() {
@@ -278,7 +306,9 @@ void Server::stop() {
   asio::post(im.io, [&im] {
     std::error_code ec;
     im.acceptor.close(ec);
+    im.http_acceptor.close(ec);
     im.accept_timer.cancel();
+    im.http_accept_timer.cancel();
   });
   {
     std::lock_guard lock(im.sessions_mutex);
@@ -300,6 +330,12 @@ std::uint16_t Server::port() const {
   std::error_code ec;
   auto ep = impl_->acceptor.local_endpoint(ec);
   return ec ? impl_->options.port : ep.port();
+}
+
+std::uint16_t Server::http_port() const {
+  std::error_code ec;
+  auto ep = impl_->http_acceptor.local_endpoint(ec);
+  return ec ? 0 : ep.port();
 }
 
 ServerStats Server::stats() const {
@@ -326,6 +362,8 @@ ServerStats Server::Impl::stats() const {
   s.token_failures = c.token_failures.load();
   s.edits_dropped = c.edits_dropped.load();
   s.log_lines_suppressed = c.log_lines_suppressed.load();
+  s.websocket_sessions = c.websocket_sessions.load();
+  s.http_requests = c.http_requests.load();
   s.partial_bytes = static_cast<std::uint64_t>(std::max<std::int64_t>(0, c.partial_bytes.load()));
   for (std::size_t r = 0; r < kCloseReasons; ++r)
     s.sessions_closed[r] = c.sessions_closed[r].load();

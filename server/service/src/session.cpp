@@ -3,6 +3,7 @@
 #include "session.h"
 
 #include "irradcast/common/log.h"
+#include "web_site.h"
 
 namespace irradcast {
 
@@ -20,7 +21,8 @@ std::string peer_name(tcp::socket& socket) {
 
 }  // namespace
 
-Session::Session(SessionServer& server, tcp::socket socket, std::string peer_key, std::uint64_t id)
+Session::Session(SessionServer& server, tcp::socket socket, std::string peer_key, std::uint64_t id,
+                 bool web)
     : server_(server),
       strand_(socket.get_executor()),
       stream_(std::move(socket), server_.tls),
@@ -30,7 +32,78 @@ Session::Session(SessionServer& server, tcp::socket socket, std::string peer_key
       hello_timer_(strand_),
       penalty_timer_(strand_),
       stall_timer_(strand_),
-      protocol_(server_.context, id, std::move(peer_key), peer_name(stream_.socket())) {}
+      protocol_(server_.context, id, std::move(peer_key), peer_name(stream_.socket())) {
+  if (web) make_websocket();
+}
+
+// The web port: HTTP requests are answered from the page's files; each binary message of the
+// WebSocket goes to the protocol as one frame (its length prepended), under the protocol's cap
+// for the frames of this moment (Hello's before Welcome).
+void Session::make_websocket() {
+  wire::WsServerConnection::Handlers h;
+  h.ws_path = "/ws";
+  h.http = serve_web;
+  h.binary = [this](std::string payload) {
+    const auto n = static_cast<std::uint32_t>(payload.size());
+    const char length[wire::kFrameHeaderBytes] = {
+        static_cast<char>(n & 0xff), static_cast<char>((n >> 8) & 0xff),
+        static_cast<char>((n >> 16) & 0xff), static_cast<char>((n >> 24) & 0xff)};
+    protocol_.receive(length, sizeof length);
+    protocol_.receive(payload.data(), payload.size());
+  };
+  ws_ = std::make_unique<wire::WsServerConnection>(std::move(h), server_.context.hello_frame_cap);
+}
+
+// After bytes went into the WebSocket layer: counts the upgrade and the HTTP requests, and turns
+// a message the layer refused into the protocol's Error for a bad frame.
+void Session::on_websocket_input() {
+  using End = wire::WsServerConnection::End;
+  ServerCounters& counters = server_.context.counters;
+  if (ws_->is_open() && !ws_counted_) {
+    ws_counted_ = true;
+    ++counters.websocket_sessions;
+  }
+  switch (ws_->end()) {
+    case End::TooLarge:
+      protocol_.transport_failed(wire::FRAME_TOO_LARGE, ws_->end_message());
+      break;
+    case End::BadMessage:
+      protocol_.transport_failed(wire::BAD_FRAME, ws_->end_message());
+      break;
+    case End::HttpDone:
+    case End::Handshake:
+      if (!ws_counted_) {
+        ws_counted_ = true;
+        ++counters.http_requests;
+      }
+      break;
+    default:
+      break;
+  }
+}
+
+// The web port's writes before the protocol's: the WebSocket layer's own bytes (its handshake or
+// HTTP reply, pongs, close replies), and nothing of the protocol before the upgrade. True: the
+// caller writes nothing else now.
+bool Session::pump_websocket() {
+  using End = wire::WsServerConnection::End;
+  if (ws_->has_output()) {
+    write({SessionWrite::Kind::Control, std::make_shared<const std::string>(ws_->take_output())},
+          true);
+    return true;
+  }
+  const End end = ws_->end();
+  if (end == End::HttpDone || end == End::Handshake || end == End::Closed) {
+    close(CloseReason::Disconnect);  // answered, refused or closed by the peer
+    return true;
+  }
+  if (end == End::None && !ws_->is_open()) {
+    // Still HTTP: a protocol failure (the hello timeout) has no WebSocket to go out on.
+    if (protocol_.closing()) close(CloseReason::Disconnect);
+    return true;
+  }
+  return false;
+}
 
 void Session::start() {
   asio::post(strand_, [self = shared_from_this()] {
@@ -134,7 +207,12 @@ void Session::on_read(std::error_code ec, std::size_t n) {
     return;
   }
   server_.context.counters.bytes_received += n;
-  protocol_.receive(buffer_.data(), n);
+  if (ws_) {
+    ws_->receive(buffer_.data(), n);  // complete messages go to the protocol as frames
+    on_websocket_input();
+  } else {
+    protocol_.receive(buffer_.data(), n);
+  }
   drain();
 }
 
@@ -158,7 +236,10 @@ void Session::drain() {
 
 void Session::act() {
   const SessionEvents ev = protocol_.take_events();
-  if (ev.welcomed) hello_timer_.cancel();
+  if (ev.welcomed) {
+    hello_timer_.cancel();
+    if (ws_) ws_->set_max_message(server_.context.options.max_frame);
+  }
   if (ev.closing) {
     // The Error frame is written first; a client that does not read gets a grace period.
     close_timer_.expires_after(std::chrono::seconds(2));
@@ -187,11 +268,20 @@ void Session::on_penalty_over(bool banned) {
 // Starts the next write if none is in flight.
 void Session::pump() {
   if (protocol_.closed() || writing_) return;
+  if (ws_ && pump_websocket()) return;
   SessionWrite w = protocol_.next_write(Clock::now());
   switch (w.kind) {
     case SessionWrite::Kind::None:
       return;
     case SessionWrite::Kind::Close:
+      if (ws_ && !ws_close_sent_) {  // a close frame first
+        ws_close_sent_ = true;
+        write({SessionWrite::Kind::Control,
+               std::make_shared<const std::string>(wire::WsServerConnection::close_frame(
+                   ws_->close_code(), "irradcast: see the Error message"))},
+              true);
+        return;
+      }
       close(CloseReason::Disconnect);
       return;
     case SessionWrite::Kind::Wait:
@@ -208,7 +298,9 @@ void Session::pump() {
   }
 }
 
-void Session::write(SessionWrite w) {
+// raw: bytes of the WebSocket layer; otherwise a protocol frame, which a WebSocket carries as
+// one binary message: its payload after the 4-byte length, behind the message's frame header.
+void Session::write(SessionWrite w, bool raw) {
   writing_ = true;
   write_progress_at_ = Clock::now();
   write_progress_ = 0;
@@ -223,8 +315,14 @@ void Session::write(SessionWrite w) {
     return asio::transfer_all()(ec, n);
   };
   const std::string& data = *w.frame;
+  std::array<asio::const_buffer, 2> buffers{asio::buffer(data), asio::const_buffer()};
+  if (ws_ && !raw) {
+    const std::string_view payload = std::string_view(data).substr(wire::kFrameHeaderBytes);
+    ws_header_ = wire::WsServerConnection::binary_frame_header(payload.size());
+    buffers = {asio::buffer(ws_header_), asio::buffer(payload.data(), payload.size())};
+  }
   asio::async_write(
-      stream_, asio::buffer(data), progress,
+      stream_, buffers, progress,
       asio::bind_executor(strand_, [self = shared_from_this(), frame = std::move(w.frame),
                                     kind = w.kind](std::error_code ec, std::size_t n) {
         self->writing_ = false;

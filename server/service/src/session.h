@@ -1,9 +1,11 @@
 // One client connection: the Asio side of a session. It runs the TLS handshake, reads bytes into
 // the session's protocol (session_protocol.h), writes the frames the protocol hands out one at a
 // time, and runs the timers it asks for (hello, idle, the tile rate cap, a wrong token's delay,
-// the grace period before closing) and the write-stall watch. Every handler runs on the
-// session's strand, so the session needs no locks; the engine thread reaches it only through
-// asio::post.
+// the grace period before closing) and the write-stall watch. A connection to the web port
+// carries the same session over HTTP and a WebSocket (wire/websocket.h): the page's files for a
+// plain request, else one binary message per frame (no length prefix), with the same limits. Every
+// handler runs on the session's strand, so the session needs no locks; the engine thread reaches it
+// only through asio::post.
 #pragma once
 
 // A standard header before asio: asio's config decides between aligned_alloc and operator new
@@ -21,6 +23,7 @@
 #include <vector>
 
 #include "irradcast/wire/transport.h"
+#include "irradcast/wire/websocket.h"
 #include "session_protocol.h"
 
 namespace irradcast {
@@ -39,8 +42,9 @@ class Session : public std::enable_shared_from_this<Session> {
  public:
   // The socket was accepted on a strand of the server's io_context, which becomes the session's
   // strand. peer_key: the address the server counts this session under (PeerTable::admit).
+  // web: the connection came to the web port (HTTP, then a WebSocket at /ws).
   Session(SessionServer& server, asio::ip::tcp::socket socket, std::string peer_key,
-          std::uint64_t id);
+          std::uint64_t id, bool web = false);
 
   void start();
   // Engine thread: tiles that got new versions.
@@ -65,7 +69,11 @@ class Session : public std::enable_shared_from_this<Session> {
   void act();
   void on_penalty_over(bool banned);
   void pump();
-  void write(SessionWrite w);
+  // The web port: what the WebSocket layer needs before protocol frames (websocket.cpp).
+  void make_websocket();
+  void on_websocket_input();
+  bool pump_websocket();
+  void write(SessionWrite w, bool raw = false);
   void close(CloseReason reason);
 
   SessionServer& server_;
@@ -75,6 +83,9 @@ class Session : public std::enable_shared_from_this<Session> {
       stall_timer_;
   std::array<char, 64 * 1024> buffer_{};
   SessionProtocol protocol_;
+  std::unique_ptr<wire::WsServerConnection> ws_;  // the web port's connections only
+  std::string ws_header_;                         // the WebSocket frame header of the write
+  bool ws_close_sent_ = false, ws_counted_ = false;
   bool writing_ = false;
   bool reading_started_ = false, read_pending_ = false;
   bool stall_armed_ = false, rate_waiting_ = false;

@@ -36,7 +36,8 @@ struct ServerCounters {
   std::atomic<std::uint64_t> connections{0}, clients_refused{0}, bytes_sent{0}, bytes_received{0},
       frames_received{0}, tiles_sent{0}, tile_bytes_sent{0}, tiles_coalesced{0},
       scene_bytes_sent{0}, errors_sent{0}, peer_refused{0}, banned_refused{0}, accept_errors{0},
-      token_failures{0}, edits_dropped{0}, log_lines_suppressed{0};
+      token_failures{0}, edits_dropped{0}, log_lines_suppressed{0}, websocket_sessions{0},
+      http_requests{0};
   std::atomic<std::int64_t> partial_bytes{0};  // incomplete frames in every session's decoder
   std::array<std::atomic<std::uint64_t>, kCloseReasons> sessions_closed{};
 };
@@ -101,6 +102,9 @@ class SessionProtocol {
   void hello_timed_out(bool handshaking);
   void idle_timed_out();
   void shutdown() { fail(wire::SERVER_SHUTDOWN, "the server is shutting down"); }
+  // The transport under the frames failed (a WebSocket message that is malformed, text or too
+  // large): the same Error and close as a bad frame on TCP.
+  void transport_failed(wire::ErrorCode code, const std::string& message) { fail(code, message); }
 
   // Output: what to write next; `now` drives the tile byte-rate cap.
   SessionWrite next_write(Clock::time_point now);

@@ -11,6 +11,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "irradcast/service/engine_host.h"
@@ -20,6 +21,10 @@ namespace irradcast {
 struct ServerOptions {
   std::string bind = "0.0.0.0";
   std::uint16_t port = 7450;  // 0 = any free port (see Server::port())
+  // The web port (docs/PROTOCOL.md, "WebSocket"): the viewer page at / and the protocol over a
+  // WebSocket at /ws, on the same address, with TLS when the protocol port has it. None: no web
+  // port; 0: any free port (Server::http_port()).
+  std::optional<std::uint16_t> http_port;
   int io_threads = 2;
   std::size_t max_frame = 16u << 20;              // largest frame accepted after Hello
   std::chrono::milliseconds idle_timeout{30000};  // close after this long without a frame
@@ -105,6 +110,8 @@ struct ServerStats {
   std::uint64_t token_failures = 0;        // SceneEdits with a wrong token
   std::uint64_t edits_dropped = 0;         // edit broadcasts dropped for clients that lagged
   std::uint64_t log_lines_suppressed = 0;  // session log lines over the per-session rate
+  std::uint64_t websocket_sessions = 0;    // web port connections upgraded to a WebSocket
+  std::uint64_t http_requests = 0;         // web port requests answered with a page or an error
   std::uint64_t partial_bytes = 0;         // incomplete frames held now, all sessions
   std::uint64_t bytes_sent = 0;            // every frame
   std::uint64_t bytes_received = 0;
@@ -133,6 +140,8 @@ class Server {
   // Idempotent.
   void stop();
   std::uint16_t port() const;
+  // The web port; 0 when ServerOptions::http_port is not set.
+  std::uint16_t http_port() const;
   ServerStats stats() const;
 
   struct Impl;
