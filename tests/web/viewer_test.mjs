@@ -100,7 +100,7 @@ async function wsError(page, bytes) {
     setTimeout(() => resolve({ got, code: 'open' }), 20000);
   }), Array.from(bytes));
   const errors = r.got.map((m) => Envelope.decode(Uint8Array.from(m))).filter((e) => e.msg === 'error');
-  assert.ok(errors.length === 1, `the page got ${errors.length} Errors (${r.got.length} messages)`);
+  assert.ok(errors.length === 1, `the page got ${errors.length} Errors (${r.got.length} messages, close ${r.code})`);
   assert.notEqual(r.code, 'open', 'the server kept the WebSocket open');
   return errors[0].error;
 }
@@ -110,17 +110,19 @@ async function errors(o) {
   const b = await browser(o);
   try {
     const page = await openConverged(b, server.url + query({ width: 64, height: 48, ui: 0 }), 64, 48);
+    // The same code for the same bytes; the same message where the message describes the bytes
+    // (an oversized one names the transport's unit: a frame on TCP, a message on a WebSocket).
     const cases = [
-      { what: 'not an Envelope', bytes: Buffer.from([0xff, 0xff, 0xff, 0xff]), code: ErrorCode.BAD_FRAME },
+      { what: 'not an Envelope', bytes: Buffer.from([0xff, 0xff, 0xff, 0xff]), code: ErrorCode.BAD_FRAME, same: true },
       { what: 'an oversized first message', bytes: Buffer.concat([Buffer.from([0x0a, 0xe8, 0x80, 0x02]), Buffer.alloc(0x8000 + 0x68)]),
-        code: ErrorCode.FRAME_TOO_LARGE },
+        code: ErrorCode.FRAME_TOO_LARGE, same: false },
     ];
     for (const c of cases) {
       const ws = await wsError(page, c.bytes), tcp = await tcpError(server.port, c.bytes);
       console.log(`${c.what}: WebSocket ${ws.code} "${ws.message}"; TCP ${tcp.code} "${tcp.message}"`);
       assert.equal(ws.code, c.code, `${c.what}: the WebSocket's Error code`);
       assert.equal(tcp.code, c.code, `${c.what}: the TCP Error code`);
-      assert.equal(ws.message, tcp.message, `${c.what}: the same Error message over WebSocket and TCP`);
+      if (c.same) assert.equal(ws.message, tcp.message, `${c.what}: the same Error message over WebSocket and TCP`);
     }
     // The page itself still streams.
     assert.equal(await page.title(), 'irradcast: converged');

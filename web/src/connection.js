@@ -4,7 +4,7 @@
 // applied SceneEdit broadcasts in revision order, Stats, Pings for the idle timer, reconnection
 // with back-off. Every message from the server is checked; a bad one ends the connection with a
 // one-line reason shown in the overlay.
-import { decode, encode, num, PROTOCOL_VERSION, SceneData, ERROR_NAMES } from './proto.js';
+import { decode, encode, num, PROTOCOL_VERSION, decodeSceneData, ERROR_NAMES } from './proto.js';
 import { sha256 } from './sha256.js';
 import { decodeTile, inflateUpTo } from './codec.js';
 import { readScene } from './scene.js';
@@ -135,7 +135,7 @@ export class Connection {
     d.at += c.data.length;
     if (d.at < d.data.length) return;
     if (!equalBytes(sha256(d.data), this.welcome.scene_hash)) throw new Error('scene package: the SHA-256 does not match the Welcome');
-    const model = readScene(SceneData.decode(inflateUpTo(d.data, MAX_SCENE_BYTES, 'scene package')));
+    const model = readScene(decodeSceneData(inflateUpTo(d.data, MAX_SCENE_BYTES, 'scene package')));
     const w = this.welcome;
     if (w.lightmaps.length !== model.objects.length) throw new Error('the Welcome\'s lightmaps do not match the scene');
     model.objects.forEach((o, i) => {
