@@ -13,7 +13,8 @@ const MAX_SCENE_BYTES = 1 << 30;
 const equalBytes = (a, b) => a && b && a.length === b.length && a.every((x, i) => x === b[i]);
 
 export class Connection {
-  // handlers: sceneReady(scene, welcome), tile(), edit(message), stats(stats), status(text), error(text)
+  // handlers: sceneReady(model, welcome), subscribed(), tile(lightmap, x0, y0, w, h, words),
+  // tileBase(lightmap, x0, y0, w, h), edit(message), stats(stats), status(text), error(text)
   constructor(url, options, handlers) {
     this.url = url;
     this.options = options;
@@ -154,6 +155,7 @@ export class Connection {
 
   subscribe() {
     this.send({ subscribe: { all: true, encoding: this.options.encoding } });
+    this.h.subscribed();
     this.h.status('streaming');
   }
 

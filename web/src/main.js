@@ -59,57 +59,28 @@ function autoExposure(renderer, view, camera, w, h, finish) {
   return n === 0 ? 1 : 0.18 / Math.exp(sum / n);
 }
 
-function main() {
-  let params;
-  try {
-    params = readParams();
-  } catch (e) {
-    document.body.textContent = `irradcast: ${e.message}`;
-    return;
-  }
-  let exposure = params.exposure;
-  const finish = { exposureScale: { value: exposure === 'auto' ? 1 : 2 ** Number(exposure) }, toneOp: { value: TONE_OPS[params.tonemap] }, hdrOut: { value: 0 } };
-  const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
-  renderer.setPixelRatio(1);
-  renderer.outputColorSpace = THREE.LinearSRGBColorSpace;  // the shaders encode sRGB themselves
-  renderer.autoClear = true;
-  document.body.appendChild(renderer.domElement);
-  const state = { status: 'connecting', converged: false, stats: null, dirty: true, view: null, camera: null, pendingStats: false };
-  const width = () => params.width || window.innerWidth, height = () => params.height || window.innerHeight;
-  const setCamera = (pose) => { state.camera = new ViewCamera(pose, state.view.bounds); };
-
-  const overlay = new Overlay(params, (change) => {
-    if ('exposure' in change) {
-      exposure = change.exposure;
-      if (exposure !== 'auto') finish.exposureScale.value = 2 ** Number(exposure);
-    }
-    if ('tonemap' in change) finish.toneOp.value = TONE_OPS[change.tonemap];
-    state.dirty = true;
-  }, (token, target, vector) => {
-    conn.send({ scene_edit: { token, request_id: Date.now(), ops: [{ kind: KIND.MOVE, target, vector }] } });
-  });
-
-  const wsUrl = new URL('ws', window.location.href);
-  wsUrl.protocol = wsUrl.protocol === 'https:' ? 'wss:' : 'ws:';
-  wsUrl.search = '';
-  const conn = new Connection(wsUrl.href, { encoding: ENCODINGS[params.encoding] }, {
+// The connection's handlers: the scene into a SceneView, tiles into its textures, edits into its
+// model.
+function handlers(ctx) {
+  const { state, overlay, params } = ctx;
+  return {
     sceneReady(model, welcome) {
       if (state.view) state.view.root.clear();
-      state.view = new SceneView(renderer, model, welcome, finish);
+      state.view = new SceneView(ctx.renderer, model, welcome, ctx.finish);
       const base = state.camera ? state.camera.pose : defaultCamera(model, state.view.bounds);
       let pose = base;
       if (!state.camera && params.camera) {
         try { pose = parseCamera(params.camera, base); } catch (e) { overlay.error(e.message); }
       }
-      setCamera(pose);
+      state.camera = new ViewCamera(pose, state.view.bounds);
       overlay.setNodes(model.nodes.map((n, i) => ({ target: n.name || `#${i}`, label: n.name || `#${i}` }))
         .filter((_, i) => model.nodes[i].mesh >= 0 || model.nodes[i].light >= 0));
       state.dirty = true;
     },
+    subscribed() { if (state.camera) state.camera.changed = true; },  // the server learns the camera again
     tile(lightmap, x0, y0, w, h, words) {
       state.view.applyTile(lightmap, x0, y0, w, h, words);
       state.dirty = true;
-      state.converged = false;
     },
     tileBase: (lightmap, x0, y0, w, h) => state.view.tileWords(lightmap, x0, y0, w, h),
     edit(m) {
@@ -119,29 +90,103 @@ function main() {
         if (c.materials) state.view.updateMaterials();
         if (c.sky) state.view.updateSky();
         state.dirty = true;
-        state.converged = false;
       } catch (e) {
-        conn.reload(e.message);
+        ctx.conn.reload(e.message);
       }
     },
     stats(s) { state.stats = s; state.pendingStats = false; },
     status(text) { state.status = text; },
     error(text) { overlay.error(text); console.warn(`irradcast: ${text}`); },
-  });
-  window.irradcast = { conn, state, formatCamera: () => state.camera && formatCamera(state.camera.pose, state.camera.distance) };
+  };
+}
 
-  // Headless Chromium's --virtual-time-budget lets virtual time (timers, frames) run ahead while
-  // no network fetch is pending, and WebSocket traffic does not count: a --screenshot would be
-  // taken before the scene arrived. A headless browser therefore keeps one small fetch of the
-  // page in flight until the view has converged (or for two minutes of real loading at most).
-  if (/HeadlessChrome/.test(navigator.userAgent)) {
-    (async () => {
-      for (let i = 0; i < 20000 && !state.converged; ++i) {
-        try { await fetch(`index.html?hold=${i}`, { cache: 'no-store' }); } catch (_) { break; }
-      }
-    })();
+// Headless Chromium's --virtual-time-budget lets virtual time (timers, frames) run ahead while no
+// network fetch is pending, and WebSocket traffic does not count: a --screenshot would be taken
+// before the scene arrived. A headless browser therefore keeps one small fetch of the page in
+// flight until the view has converged (20000 fetches at most).
+function holdVirtualTime(state) {
+  if (!/HeadlessChrome/.test(navigator.userAgent)) return;
+  (async () => {
+    for (let i = 0; i < 20000 && !state.converged; ++i) {
+      try { await fetch(`index.html?hold=${i}`, { cache: 'no-store' }); } catch (_) { break; }
+    }
+  })();
+}
+
+// One frame: keys, size, the camera to the server, drawing when something changed, convergence
+// and the overlay.
+function frame(ctx, now) {
+  const { state, conn, renderer, params } = ctx;
+  ctx.keys(Math.min(0.1, (now - ctx.last) / 1000));
+  ctx.last = now;
+  const w = params.width || window.innerWidth, h = params.height || window.innerHeight;
+  if (renderer.domElement.width !== w || renderer.domElement.height !== h) {
+    renderer.setSize(w, h, true);
+    state.dirty = true;
   }
+  const cam = state.camera;
+  if (cam && cam.changed && now - ctx.cameraSent > 100 && conn.phase === 'streaming') {
+    conn.send(cam.message());
+    cam.changed = false;
+    ctx.cameraSent = now;
+    state.dirty = true;
+  }
+  let drew = false;
+  if (state.view && state.dirty) {
+    if (ctx.exposure === 'auto') ctx.finish.exposureScale.value = autoExposure(renderer, state.view, cam, w, h, ctx.finish);
+    state.view.render(cam, w, h);
+    state.dirty = false;
+    drew = true;
+  }
+  // Converged: every tile held and drawn, nothing queued for us, and the server's lightmaps final
+  // (engine idle) or at the convergence target; as irradcast-view --until-converged. Stats asked
+  // for after the last draw count.
+  const { held, total } = conn.tilesHeld(), s = state.stats;
+  if (drew) state.stats = null;
+  const converged = !drew && !!(state.view && total > 0 && held === total && s && num(s.queue_depth) === 0 &&
+    (s.engine_idle || s.convergence <= params.converge));
+  if (converged !== state.converged) {
+    state.converged = converged;
+    document.title = converged ? 'irradcast: converged' : 'irradcast';
+  }
+  ctx.overlay.update({ status: state.status, converged, held, total, bytes: conn.counters.bytes,
+    tilesApplied: conn.counters.tiles, edits: conn.counters.edits, stats: s && { ...s, updates: num(s.updates) } });
+}
 
+function main() {
+  let params;
+  try {
+    params = readParams();
+  } catch (e) {
+    document.body.textContent = `irradcast: ${e.message}`;
+    return;
+  }
+  const ctx = { params, exposure: params.exposure, last: performance.now(), cameraSent: 0 };
+  ctx.finish = { exposureScale: { value: ctx.exposure === 'auto' ? 1 : 2 ** Number(ctx.exposure) },
+    toneOp: { value: TONE_OPS[params.tonemap] }, hdrOut: { value: 0 } };
+  const renderer = ctx.renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
+  renderer.setPixelRatio(1);
+  renderer.outputColorSpace = THREE.LinearSRGBColorSpace;  // the shaders encode sRGB themselves
+  document.body.appendChild(renderer.domElement);
+  const state = ctx.state = { status: 'connecting', converged: false, stats: null, dirty: true, view: null, camera: null,
+    pendingStats: false };
+  ctx.overlay = new Overlay(params, (change) => {
+    if ('exposure' in change) {
+      ctx.exposure = change.exposure;
+      if (ctx.exposure !== 'auto') ctx.finish.exposureScale.value = 2 ** Number(ctx.exposure);
+    }
+    if ('tonemap' in change) ctx.finish.toneOp.value = TONE_OPS[change.tonemap];
+    state.dirty = true;
+  }, (token, target, vector) => {
+    ctx.conn.send({ scene_edit: { token, request_id: Date.now(), ops: [{ kind: KIND.MOVE, target, vector }] } });
+  });
+  // /ws next to the page, so that a reverse proxy may serve it under any path.
+  const wsUrl = new URL('ws', window.location.href);
+  wsUrl.protocol = wsUrl.protocol === 'https:' ? 'wss:' : 'ws:';
+  wsUrl.search = '';
+  const conn = ctx.conn = new Connection(wsUrl.href, { encoding: ENCODINGS[params.encoding] }, handlers(ctx));
+  window.irradcast = { conn, state, formatCamera: () => state.camera && formatCamera(state.camera.pose, state.camera.distance) };
+  holdVirtualTime(state);
   // Stats twice a second, for the overlay and convergence.
   setInterval(() => {
     if (conn.phase === 'streaming' && !state.pendingStats) {
@@ -149,48 +194,17 @@ function main() {
       conn.send({ stats_request: {} });
     }
   }, 500);
-
-  const keys = attachControls(renderer.domElement, () => state.camera);
-  let last = performance.now(), lastCameraSent = 0;
-  const frame = (now) => {
-    keys(Math.min(0.1, (now - last) / 1000));
-    last = now;
-    const w = width(), h = height();
-    if (renderer.domElement.width !== w || renderer.domElement.height !== h) {
-      renderer.setSize(w, h, true);
-      state.dirty = true;
-    }
-    const cam = state.camera;
-    if (cam && cam.changed && now - lastCameraSent > 100 && conn.phase === 'streaming') {
-      conn.send(cam.message());
-      cam.changed = false;
-      lastCameraSent = now;
-      state.dirty = true;
-    }
-    if (state.view && state.dirty) {
-      if (exposure === 'auto') finish.exposureScale.value = autoExposure(renderer, state.view, cam, w, h, finish);
-      state.view.render(cam, w, h);
-      state.dirty = false;
-    }
-    // Converged: every tile held and drawn, nothing queued for us, and the server's lightmaps
-    // final (engine idle) or at the convergence target; as irradcast-view --until-converged.
-    const { held, total } = conn.tilesHeld(), s = state.stats;
-    const converged = !!(state.view && !state.dirty && total > 0 && held === total && s && num(s.queue_depth) === 0 &&
-      (s.engine_idle || s.convergence <= params.converge));
-    if (converged !== state.converged || document.title === 'irradcast' && converged) {
-      state.converged = converged;
-      document.title = converged ? 'irradcast: converged' : 'irradcast';
-    }
-    overlay.update({ status: state.status, converged, held, total, bytes: conn.counters.bytes,
-      tilesApplied: conn.counters.tiles, edits: conn.counters.edits, stats: s && { ...s, updates: num(s.updates) } });
-    schedule();
-  };
+  ctx.keys = attachControls(renderer.domElement, () => state.camera);
   // Frames by requestAnimationFrame; a hidden tab gets none, so it draws by a timer instead (4 a
   // second at most): its view stays current and it still reports convergence.
   let scheduled = 0;
   const schedule = () => {
     const id = ++scheduled;
-    const run = (now) => { if (id === scheduled) frame(now ?? performance.now()); };
+    const run = (now) => {
+      if (id !== scheduled) return;
+      frame(ctx, now ?? performance.now());
+      schedule();
+    };
     if (document.hidden) setTimeout(run, 250);
     else requestAnimationFrame(run);
   };
