@@ -9,7 +9,7 @@
 //   errors  malformed and oversized WebSocket messages sent from a page get the Error a TCP
 //           client gets for the same bytes
 //   edits   another client's edit (irradcast-edit) shows up in the page, the page's own edit
-//           needs the control token typed into the overlay
+//           needs the control token typed into the overlay; mouse and keyboard move the camera
 //   tabs    16 tabs at once all converge
 import assert from 'node:assert/strict';
 import net from 'node:net';
@@ -164,6 +164,23 @@ async function edits(o) {
     await page.waitForFunction(() => window.irradcast.conn.counters.edits === 2, { timeout: 30000 });
     await page.waitForFunction((n) => window.irradcast.conn.counters.tiles > n, { timeout: 30000 }, before);
     assert.ok(!(await page.url()).includes('web-test-token-0123'), 'the token is in the URL');
+    // Orbit by mouse, then fly forward by keyboard: the camera moves (the overlay, which covers
+    // most of this small page, put aside).
+    await page.evaluate(() => { document.getElementById('overlay').style.display = 'none'; });
+    const cam0 = await page.evaluate(() => window.irradcast.formatCamera());
+    await page.mouse.move(150, 75);
+    await page.mouse.down();
+    await page.mouse.move(120, 70, { steps: 4 });
+    await page.mouse.up();
+    const cam1 = await page.evaluate(() => window.irradcast.formatCamera());
+    await page.focus('canvas');
+    await page.keyboard.press('f');
+    await page.keyboard.down('w');
+    await new Promise((r) => setTimeout(r, 300));
+    await page.keyboard.up('w');
+    const cam2 = await page.evaluate(() => window.irradcast.formatCamera());
+    console.log(`camera: ${cam0} -> (orbit) ${cam1} -> (fly) ${cam2}`);
+    assert.ok(cam0 !== cam1 && cam1 !== cam2, 'the controls did not move the camera');
     console.log(`edits: ${await editsApplied(page)} applied in the page, ${await tilesApplied(page) - before} tiles after its own`);
   } finally {
     await b.close();
