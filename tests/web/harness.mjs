@@ -104,7 +104,7 @@ export const chromiumArgs = ['--no-sandbox', '--use-angle=swiftshader', '--enabl
 
 export async function browser(o) {
   return puppeteer.launch({ executablePath: o.chromium, headless: true, userDataDir: mkdtempSync(path.join(tmp, 'profile-')),
-    args: ['--headless=new', ...chromiumArgs], protocolTimeout: 120000 });
+    args: ['--headless=new', ...chromiumArgs], protocolTimeout: 600000 });
 }
 
 // Opens the page and waits for "irradcast: converged"; page errors fail the test.

@@ -65,7 +65,7 @@ function handlers(ctx) {
   const { state, overlay, params } = ctx;
   return {
     sceneReady(model, welcome) {
-      if (state.view) state.view.root.clear();
+      if (state.view) state.view.dispose();
       state.view = new SceneView(ctx.renderer, model, welcome, ctx.finish);
       const base = state.camera ? state.camera.pose : defaultCamera(model, state.view.bounds);
       let pose = base;
@@ -131,19 +131,24 @@ function frame(ctx, now) {
     ctx.cameraSent = now;
     state.dirty = true;
   }
+  // Draws when something changed, leaving at least as much time between draws as the last one
+  // took (a software renderer on a large scene keeps the page responsive while tiles stream).
   let drew = false;
-  if (state.view && state.dirty) {
+  if (state.view && state.dirty && now - ctx.drawnAt >= ctx.drawMs) {
+    const t0 = performance.now();
     if (ctx.exposure === 'auto') ctx.finish.exposureScale.value = autoExposure(renderer, state.view, cam, w, h, ctx.finish);
     state.view.render(cam, w, h);
     state.dirty = false;
     drew = true;
+    ctx.drawnAt = performance.now();
+    ctx.drawMs = ctx.drawnAt - t0;
   }
   // Converged: every tile held and drawn, nothing queued for us, and the server's lightmaps final
   // (engine idle) or at the convergence target; as irradcast-view --until-converged. Stats asked
   // for after the last draw count.
   const { held, total } = conn.tilesHeld(), s = state.stats;
   if (drew) state.stats = null;
-  const converged = !drew && !!(state.view && total > 0 && held === total && s && num(s.queue_depth) === 0 &&
+  const converged = !drew && !state.dirty && !!(state.view && total > 0 && held === total && s && num(s.queue_depth) === 0 &&
     (s.engine_idle || s.convergence <= params.converge));
   if (converged !== state.converged) {
     state.converged = converged;
@@ -161,7 +166,7 @@ function main() {
     document.body.textContent = `irradcast: ${e.message}`;
     return;
   }
-  const ctx = { params, exposure: params.exposure, last: performance.now(), cameraSent: 0 };
+  const ctx = { params, exposure: params.exposure, last: performance.now(), cameraSent: 0, drawnAt: 0, drawMs: 0 };
   ctx.finish = { exposureScale: { value: ctx.exposure === 'auto' ? 1 : 2 ** Number(ctx.exposure) },
     toneOp: { value: TONE_OPS[params.tonemap] }, hdrOut: { value: 0 } };
   const renderer = ctx.renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });

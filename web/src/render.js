@@ -229,7 +229,7 @@ export class SceneView {
     const s = this.scene.sky, u = this.skyUniforms;
     u.skyColor.value.copy(s.color);
     u.skyStrength.value = s.strength;
-    if (u.skyMap.value) u.skyMap.value.dispose();
+    if (u.skyMap.value && u.skyMap.value !== this.white) u.skyMap.value.dispose();
     u.skyMap.value = s.map ? rgb9e5Texture(s.map.width, s.map.height, s.map.words, THREE.NearestFilter) : this.white;
     u.skyMapOn.value = s.map ? 1 : 0;
   }
@@ -254,6 +254,19 @@ export class SceneView {
     const lm = this.lightmaps[lightmap], out = new Uint32Array(w * h);
     for (let j = 0; j < h; ++j) out.set(lm.words.subarray((y0 + j) * lm.width + x0, (y0 + j) * lm.width + x0 + w), j * w);
     return out;
+  }
+
+  // Frees the GPU side (a new scene replaces this one).
+  dispose() {
+    for (const m of this.meshes) {
+      m.geometry.dispose();
+      for (const mat of m.material) mat.dispose();
+    }
+    for (const t of [...this.textures, ...this.lightmaps.map((l) => l.texture), this.white]) t.dispose();
+    if (this.skyUniforms.skyMap.value !== this.white) this.skyUniforms.skyMap.value.dispose();
+    this.sky.geometry.dispose();
+    this.sky.material.dispose();
+    this.root.clear();
   }
 
   render(camera, width, height, target = null) {
