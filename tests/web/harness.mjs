@@ -45,6 +45,10 @@ export function freePort() {
 
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
+// Servers still running when the test ends (a failure skipped its stop()) are killed with it.
+const running = new Set();
+process.on('exit', () => { for (const p of running) p.kill('SIGKILL'); });
+
 // irradcast-server on loopback with a TCP port and an HTTP port; resolves once GET / answers.
 export async function startServer(exe, args, name = 'server') {
   const port = await freePort(), http = await freePort();
@@ -55,7 +59,8 @@ export async function startServer(exe, args, name = 'server') {
   proc.stdout.pipe(out);
   proc.stderr.pipe(out);
   let exited = null;
-  proc.on('exit', (code, sig) => { exited = `exit ${code} ${sig || ''}`; });
+  running.add(proc);
+  proc.on('exit', (code, sig) => { exited = `exit ${code} ${sig || ''}`; running.delete(proc); });
   for (let i = 0; i < 600; ++i) {
     if (exited) throw new Error(`${name} stopped (${exited}): ${readFileSync(log, 'utf8')}`);
     try {
