@@ -12,7 +12,8 @@ PACKAGES=(
   # Vulkan compute backend: loader, lavapipe, shader compiler, validation layers
   libvulkan-dev mesa-vulkan-drivers glslang-tools glslang-dev spirv-tools vulkan-validationlayers
   # distribution over machines (NATS with JetStream), HTTP/WebSocket for the browser viewer
-  nats-server libnats-dev libboost-dev libwebsocketpp-dev
+  # (websocketpp, docs/PROTOCOL.md#websocket; node builds the page: web/build.mjs)
+  nats-server libnats-dev libwebsocketpp-dev
   # relocatable bundle (deploy/bundle.sh)
   patchelf
   # tests and benchmarks (Chromium: the browser viewer's tests)

@@ -126,6 +126,12 @@ void write_clients(Writer& w, const ServerStats& s) {
             s.edits_dropped);
   w.counter("irradcast_log_lines_suppressed_total",
             "Log lines a session caused over its rate, not written.", s.log_lines_suppressed);
+  w.counter("irradcast_websocket_sessions_total",
+            "Web port connections upgraded to a WebSocket (each also counts as a session).",
+            s.websocket_sessions);
+  w.counter("irradcast_http_requests_total",
+            "Web port requests answered over plain HTTP (the page's files and refusals).",
+            s.http_requests);
   w.gauge("irradcast_partial_frame_bytes", "Bytes of incomplete frames the sessions hold.",
           s.partial_bytes);
   w.family("irradcast_sessions_closed_total", "counter", "Sessions that ended, by reason.");

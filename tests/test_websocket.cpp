@@ -1,0 +1,313 @@
+// The web port end to end over loopback: the viewer page's files over HTTP, and the protocol over
+// a WebSocket (websocketpp's client role) against the same session as on TCP: the same tiles,
+// the same Error for bad input, the same per-client limits, TLS.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "irradcast/client/client_session.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/service/net_server.h"
+#include "irradcast/web/assets.h"
+#include "service_fixture.h"
+#include "tls_cert.h"
+#include "websocket_client.h"
+
+using namespace irradcast;
+using namespace std::chrono_literals;
+using test::WsConnection;
+
+namespace {
+
+ServerOptions web_loopback(std::chrono::milliseconds idle = 5000ms) {
+  ServerOptions o = test::loopback(idle);
+  o.http_port = 0;
+  return o;
+}
+
+// Drives a ClientSession over a connection (WsConnection or RawConnection) until every tile
+// arrived at the version the tile store holds; false if the connection ended first.
+template <class Connection>
+bool download_everything(Connection& c, ClientSession& s, const TileStore& store) {
+  c.send(s.hello());
+  auto current = [&] {
+    if (!s.tiles().all_received()) return false;
+    for (std::uint32_t i = 0; i < store.tile_count(); ++i)
+      if (s.tiles().versions()[i] != store.version(i)) return false;
+    return true;
+  };
+  while (!current()) {
+    const auto e = c.read(5000ms);
+    if (!e) return false;
+    const ClientStep step = s.on_frame(*e);
+    for (const auto& m : step.send) c.send(m);
+    if (step.event == ClientStep::Event::NeedScene) c.send(s.download());
+  }
+  return true;
+}
+
+std::string status_line(const std::string& response) {
+  return response.substr(0, response.find("\r\n"));
+}
+std::string body_of(const std::string& response) {
+  const auto p = response.find("\r\n\r\n");
+  return p == std::string::npos ? "" : response.substr(p + 4);
+}
+std::string get(std::uint16_t port, const std::string& target) {
+  return test::http_exchange(port, "GET " + target + " HTTP/1.1\r\nHost: x\r\n\r\n");
+}
+
+// A hand-made client frame: FIN + opcode byte, masked with a zero key.
+std::string masked_frame(unsigned char first, const std::string& payload) {
+  std::string f(1, static_cast<char>(first));
+  f += static_cast<char>(0x80 | payload.size());  // payloads below 126 bytes
+  f += std::string(4, '\0');
+  return f + payload;
+}
+
+}  // namespace
+
+TEST(WebSocket, ARoundTripGivesTheSameTilesAsTcp) {
+  EngineHost host(make_cornell_box(), "cornell", test::quick_host(2));
+  Server server(host, web_loopback());
+  server.start();
+  host.start();
+  host.wait_for_updates(2);
+  ASSERT_TRUE(test::eventually([&] { return host.stats().idle; }));
+
+  WsConnection ws(server.http_port());
+  ASSERT_TRUE(ws.opened());
+  ClientSession over_ws({}), over_tcp({});
+  ASSERT_TRUE(download_everything(ws, over_ws, host.tiles()));
+  test::RawConnection tcp(server.port());
+  ASSERT_TRUE(download_everything(tcp, over_tcp, host.tiles()));
+
+  EXPECT_EQ(over_ws.scene_hash(), over_tcp.scene_hash());
+  EXPECT_EQ(over_ws.tiles().versions(), over_tcp.tiles().versions());
+  const auto& a = over_ws.tiles().lightmaps();
+  const auto& b = over_tcp.tiles().lightmaps();
+  ASSERT_EQ(a.size(), b.size());
+  double lit = 0.0;
+  for (std::size_t m = 0; m < a.size(); ++m) {
+    ASSERT_EQ(a[m].texels.size(), b[m].texels.size());
+    for (std::size_t t = 0; t < a[m].texels.size(); ++t) {
+      ASSERT_EQ(a[m].texels[t], b[m].texels[t]) << "lightmap " << m << " texel " << t;
+      lit += a[m].texels[t].x;
+    }
+  }
+  EXPECT_GT(lit, 0.0);
+  // A ping over the WebSocket gets its pong.
+  ws.send(ClientSession::ping(7, 1));
+  std::optional<wire::Envelope> pong;
+  while ((pong = ws.read()) && !pong->has_pong()) {
+  }
+  ASSERT_TRUE(pong);
+  EXPECT_EQ(pong->pong().nonce(), 7u);
+  const ServerStats ss = server.stats();
+  EXPECT_EQ(ss.websocket_sessions, 1u);
+  EXPECT_EQ(ss.http_requests, 0u);
+  server.stop();
+  host.stop();
+}
+
+TEST(WebSocket, ServesThePageAndNothingElse) {
+  EngineHost host(make_cornell_box(), "cornell", test::quick_host(1));
+  Server server(host, web_loopback());
+  server.start();
+  const std::uint16_t port = server.http_port();
+  ASSERT_NE(port, 0);
+  ASSERT_NE(web::find_asset("/index.html"), nullptr);
+  ASSERT_NE(web::find_asset("/viewer.js"), nullptr);
+
+  const std::string page = get(port, "/");
+  EXPECT_EQ(status_line(page), "HTTP/1.1 200 OK");
+  EXPECT_NE(page.find("Content-Type: text/html; charset=utf-8\r\n"), std::string::npos);
+  EXPECT_NE(page.find("X-Content-Type-Options: nosniff\r\n"), std::string::npos);
+  EXPECT_NE(page.find("Content-Security-Policy: default-src 'self'"), std::string::npos);
+  EXPECT_NE(page.find("Cache-Control: no-cache\r\n"), std::string::npos);
+  EXPECT_EQ(body_of(page), web::find_asset("/index.html")->body);
+  // The page's URL parameters do not change what is served.
+  EXPECT_EQ(body_of(get(port, "/?camera=eye=0,0,1:target=0,0,0&ui=0")), body_of(page));
+  const std::string js = get(port, "/viewer.js");
+  EXPECT_EQ(status_line(js), "HTTP/1.1 200 OK");
+  EXPECT_NE(js.find("Content-Type: text/javascript; charset=utf-8\r\n"), std::string::npos);
+  EXPECT_EQ(body_of(js), web::find_asset("/viewer.js")->body);
+
+  // Only the table's names: no path ever reaches the file system.
+  for (const char* target : {"/nope", "/../web/index.html", "/%2e%2e/etc/passwd", "/index.html/",
+                             "//index.html", "http://x/index.html", "/web/index.html"})
+    EXPECT_EQ(status_line(get(port, target)), "HTTP/1.1 404 Not Found") << target;
+  EXPECT_EQ(status_line(test::http_exchange(port, "POST / HTTP/1.1\r\nHost: x\r\n\r\n")),
+            "HTTP/1.1 405 Method Not Allowed");
+  // /ws without an upgrade; an upgrade elsewhere.
+  EXPECT_EQ(status_line(get(port, "/ws")), "HTTP/1.1 426 Upgrade Required");
+  WsConnection elsewhere(port, nullptr, "/index.html");
+  EXPECT_FALSE(elsewhere.opened());
+  // Not HTTP, a huge header: a 4xx reply and a close, no crash.
+  EXPECT_EQ(status_line(test::http_exchange(port, "GARBAGE\r\n\r\n")).substr(0, 12),
+            "HTTP/1.1 400");
+  const std::string huge =
+      "GET / HTTP/1.1\r\nHost: x\r\nX-Big: " + std::string(64 << 10, 'a') + "\r\n\r\n";
+  EXPECT_EQ(status_line(test::http_exchange(port, huge)).substr(0, 12), "HTTP/1.1 431");
+
+  // The server still serves a viewer.
+  WsConnection ws(port);
+  ASSERT_TRUE(ws.opened());
+  EXPECT_TRUE(ws.join());
+  // (The refused connections' sessions end just after their replies.)
+  EXPECT_TRUE(test::eventually([&] { return server.stats().clients == 1; }));
+  const ServerStats ss = server.stats();
+  EXPECT_EQ(ss.http_requests, 15u);
+  EXPECT_EQ(ss.websocket_sessions, 1u);
+  EXPECT_EQ(ss.clients, 1u);
+  server.stop();
+}
+
+// Each kind of bad input, once over TCP and once over the WebSocket: the same Error code, then a
+// close (a WebSocket close frame with the matching code).
+TEST(WebSocket, BadInputGetsTheSameErrorsAsTcp) {
+  EngineHost host(make_cornell_box(), "cornell", test::quick_host(1));
+  ServerOptions so = web_loopback();
+  so.max_frame = 256u << 10;
+  Server server(host, so);
+  server.start();
+  wire::Envelope ping;
+  ping.mutable_ping()->set_nonce(1);
+  const std::string garbage("\xff\xff\xff\xff", 4);
+  const std::string big(1u << 20, 'x');
+  struct Case {
+    const char* name;
+    bool hello_first;
+    std::function<void(test::RawConnection&)> tcp;
+    std::function<void(WsConnection&)> ws;
+    wire::ErrorCode code;
+    std::uint16_t close_code;
+  };
+  const std::vector<Case> cases = {
+      {"not an Envelope", false, [&](auto& c) { c.write(std::string("\4\0\0\0", 4) + garbage); },
+       [&](auto& c) { c.send_message(garbage); }, wire::BAD_FRAME, 1000},
+      {"a frame other than Hello first", false, [&](auto& c) { c.send(ping); },
+       [&](auto& c) { c.send(ping); }, wire::UNEXPECTED_MESSAGE, 1000},
+      {"oversized before Hello", false,
+       [&](auto& c) { c.write(std::string("\0\0\x10\0", 4) + big); },
+       [&](auto& c) { c.send_message(big); }, wire::FRAME_TOO_LARGE, 1009},
+      {"oversized after Hello", true, [&](auto& c) { c.write(std::string("\0\0\x10\0", 4) + big); },
+       [&](auto& c) { c.send_message(big); }, wire::FRAME_TOO_LARGE, 1009},
+      {"a text message", true, [&](auto& c) { c.write(std::string("\4\0\0\0", 4) + garbage); },
+       [&](auto& c) { c.send_message("hello", false); }, wire::BAD_FRAME, 1002},
+      {"an unmasked frame", true, [&](auto& c) { c.write(std::string("\4\0\0\0", 4) + garbage); },
+       [&](auto& c) {
+         c.write_raw(
+             std::string("\x82\x03"
+                         "abc",
+                         5));
+       },
+       wire::BAD_FRAME, 1002},
+      {"a reserved opcode", true, [&](auto& c) { c.write(std::string("\4\0\0\0", 4) + garbage); },
+       [&](auto& c) { c.write_raw(masked_frame(0x83, "abc")); }, wire::BAD_FRAME, 1002},
+      {"reserved bits", true, [&](auto& c) { c.write(std::string("\4\0\0\0", 4) + garbage); },
+       [&](auto& c) { c.write_raw(masked_frame(0xC2, "abc")); }, wire::BAD_FRAME, 1002},
+  };
+  for (const Case& k : cases) {
+    SCOPED_TRACE(k.name);
+    test::RawConnection tcp(server.port());
+    if (k.hello_first) {
+      ASSERT_TRUE(tcp.join());
+    }
+    k.tcp(tcp);
+    const auto tcp_error = tcp.error_then_close();
+    ASSERT_TRUE(tcp_error);
+    EXPECT_TRUE(tcp.eof);
+
+    WsConnection ws(server.http_port());
+    ASSERT_TRUE(ws.opened());
+    if (k.hello_first) {
+      ASSERT_TRUE(ws.join());
+    }
+    k.ws(ws);
+    const auto ws_error = ws.error_then_close();
+    ASSERT_TRUE(ws_error);
+    EXPECT_TRUE(ws.raw.eof);
+    EXPECT_EQ(ws_error->code(), k.code) << ws_error->message();
+    EXPECT_EQ(tcp_error->code(), k.code) << tcp_error->message();
+    EXPECT_EQ(ws.ws.remote_close_code(), k.close_code);
+  }
+  // The server goes on.
+  WsConnection ws(server.http_port());
+  EXPECT_TRUE(ws.join());
+  EXPECT_TRUE(test::eventually([&] { return server.stats().clients == 1; }));
+  const ServerStats ss = server.stats();
+  EXPECT_EQ(ss.sessions_closed[static_cast<std::size_t>(CloseReason::BadFrame)], 10u);
+  EXPECT_EQ(ss.sessions_closed[static_cast<std::size_t>(CloseReason::FrameTooLarge)], 4u);
+  EXPECT_EQ(ss.websocket_sessions, cases.size() + 1);
+  server.stop();
+}
+
+TEST(WebSocket, PerClientLimitsAndTimeoutsHoldAsOnTcp) {
+  EngineHost host(make_cornell_box(), "cornell", test::quick_host(1));
+  ServerOptions so = web_loopback(1500ms);
+  so.max_clients_per_peer = 2;
+  so.hello_timeout = 700ms;
+  Server server(host, so);
+  server.start();
+  {
+    WsConnection a(server.http_port()), b(server.http_port());
+    ASSERT_TRUE(a.join());
+    ASSERT_TRUE(b.join());
+    // The third connection from this address: an HTTP refusal, like the TCP port's Error.
+    const std::string third = get(server.http_port(), "/");
+    EXPECT_EQ(status_line(third), "HTTP/1.1 503 Service Unavailable");
+    EXPECT_NE(body_of(third).find("too many connections from this address"), std::string::npos);
+    // Idle: the same Error as on TCP, then a close.
+    const auto idle = a.error_then_close(5000ms);
+    ASSERT_TRUE(idle);
+    EXPECT_EQ(idle->code(), wire::IDLE_TIMEOUT);
+    b.error_then_close(5000ms);
+  }
+  ASSERT_TRUE(test::eventually([&] { return server.stats().clients == 0; }));
+  // No Hello in time: the same Error as on TCP once upgraded; a bare close before.
+  test::RawConnection tcp(server.port());
+  WsConnection ws(server.http_port());
+  ASSERT_TRUE(ws.opened());
+  const auto tcp_error = tcp.error_then_close(5000ms);
+  const auto ws_error = ws.error_then_close(5000ms);
+  ASSERT_TRUE(tcp_error);
+  ASSERT_TRUE(ws_error);
+  EXPECT_EQ(ws_error->code(), tcp_error->code());
+  test::RawConnection silent(server.http_port());  // (two per peer: after the others)
+  silent.error_then_close(5000ms);
+  EXPECT_TRUE(silent.eof) << "a connection that never sends a request is closed";
+  ASSERT_TRUE(test::eventually([&] { return server.stats().clients == 0; }));
+  const ServerStats ss = server.stats();
+  EXPECT_EQ(ss.sessions_closed[static_cast<std::size_t>(CloseReason::IdleTimeout)], 2u);
+  EXPECT_EQ(ss.sessions_closed[static_cast<std::size_t>(CloseReason::HelloTimeout)], 3u);
+  EXPECT_EQ(ss.peer_refused, 1u);
+  server.stop();
+}
+
+TEST(WebSocket, TheWebPortUsesTheServersTls) {
+  const std::filesystem::path dir =
+      std::filesystem::path(testing::TempDir()) / "irradcast_websocket_tls";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const test::TlsFiles files = test::make_tls_files(dir.string());
+  EngineHost host(make_cornell_box(), "cornell", test::quick_host(1));
+  ServerOptions so = web_loopback();
+  so.tls_cert = files.cert;
+  so.tls_key = files.key;
+  Server server(host, so);
+  server.start();
+  auto tls = wire::make_client_tls(files.ca);
+  const std::string page =
+      test::http_exchange(server.http_port(), "GET / HTTP/1.1\r\nHost: x\r\n\r\n", tls.get());
+  EXPECT_EQ(status_line(page), "HTTP/1.1 200 OK");
+  EXPECT_EQ(body_of(page), web::find_asset("/index.html")->body);
+  WsConnection wss(server.http_port(), tls.get());
+  ASSERT_TRUE(wss.opened());
+  EXPECT_TRUE(wss.join());
+  // Plain HTTP on the TLS port gets no page.
+  const std::string plain = get(server.http_port(), "/");
+  EXPECT_EQ(plain.find("200 OK"), std::string::npos);
+  server.stop();
+}
