@@ -43,16 +43,25 @@ async function image(o) {
   const server = await startServer(o.server, SERVER);
   const b = await browser(o);
   try {
+    // The page's default tiles are RGB9E5; `half` asks for half floats (irradcast-view keeps
+    // RGB9E5: the two quantisations differ far below the bounds).
     const views = [
       { name: 'default', params: {} },
       { name: 'camera', params: { camera: 'eye=0.45,0.4,-0.3:target=0.25,0.2,0.3:fov=55', tonemap: 'aces', exposure: 1 } },
+      { name: 'half', params: { encoding: 'half' }, view: 'default' },
     ];
     for (const v of views) {
       const page = await openConverged(b, server.url + query({ width: W, height: H, ui: 0, converge: 0, ...v.params }), W, H);
       const shot = path.join(tmpDir, `page-${v.name}.png`);
       await page.screenshot({ path: shot });
+      const enc = await page.evaluate(() => window.irradcast.conn.counters.byEncoding);
+      console.log(`page (${v.name}): tiles by encoding rgb9e5 / half / delta: ${enc.join(' / ')}`);
+      assert.ok(v.params.encoding === 'half' ? enc[1] > 0 && enc[0] + enc[2] === 0 : enc[0] > 0 && enc[1] === 0,
+        `page (${v.name}): tiles in the wrong encoding`);
       await page.close();
-      compare(shot, await viewPng(o, server, { width: W, height: H, ...v.params }, `view-${v.name}`), `page (${v.name})`);
+      const reference = v.view ? path.join(tmpDir, `view-${v.view}.png`)
+        : await viewPng(o, server, { width: W, height: H, ...v.params }, `view-${v.name}`);
+      compare(shot, reference, `page (${v.name})`);
     }
     // A plain headless screenshot: the page converges within the virtual time budget.
     const plain = path.join(tmpDir, 'plain.png');

@@ -22,7 +22,7 @@ export class Connection {
     this.scene = null;         // { model, hash, welcome }
     this.versions = null;      // per lightmap, per tile: version held (0 = none)
     this.epoch = 0;
-    this.counters = { bytes: 0, tiles: 0, frames: 0, edits: 0, connections: 0 };
+    this.counters = { bytes: 0, tiles: 0, frames: 0, edits: 0, connections: 0, byEncoding: [0, 0, 0] };
     this.backoff = 250;
     this.connect();
   }
@@ -173,6 +173,7 @@ export class Connection {
     const words = decodeTile(t.encoding, t.payload, tw, th, () => this.h.tileBase(t.lightmap, x0, y0, tw, th));
     this.versions[t.lightmap][k] = version;
     ++this.counters.tiles;
+    ++this.counters.byEncoding[t.encoding];
     this.h.tile(t.lightmap, x0, y0, tw, th, words);
   }
 

@@ -26,7 +26,7 @@ function readParams() {
   };
   const p = { camera: q.get('camera'), width: size('width'), height: size('height'),
     exposure: q.get('exposure') || 'auto', tonemap: q.get('tonemap') || 'reinhard',
-    encoding: q.get('encoding') || 'delta', converge: Number(q.get('converge') ?? 0.02), ui: q.get('ui') !== '0' };
+    encoding: q.get('encoding') || 'rgb9e5', converge: Number(q.get('converge') ?? 0.02), ui: q.get('ui') !== '0' };
   if (p.exposure !== 'auto' && !(p.exposure.trim() !== '' && Number.isFinite(Number(p.exposure))))
     throw new Error(`exposure=${p.exposure}: auto or a number of stops`);
   if (!(p.tonemap in TONE_OPS)) throw new Error(`tonemap=${p.tonemap}: reinhard, aces or clamp`);
