@@ -58,9 +58,9 @@ export async function startServer(exe, args, name = 'server') {
     { stdio: ['ignore', 'pipe', 'pipe'] });
   proc.stdout.pipe(out);
   proc.stderr.pipe(out);
-  let exited = null;
+  let exited = null, exitCode = null;
   running.add(proc);
-  proc.on('exit', (code, sig) => { exited = `exit ${code} ${sig || ''}`; running.delete(proc); });
+  proc.on('exit', (code, sig) => { exited = `exit ${code} ${sig || ''}`; exitCode = code; running.delete(proc); });
   for (let i = 0; i < 600; ++i) {
     if (exited) throw new Error(`${name} stopped (${exited}): ${readFileSync(log, 'utf8')}`);
     try {
@@ -71,13 +71,16 @@ export async function startServer(exe, args, name = 'server') {
   }
   return {
     port, http, log, url: `http://127.0.0.1:${http}/`,
+    // SIGTERM: the server stops cleanly and exits 0 (under ASan also without leaks or errors).
     async stop() {
-      if (exited) return;
-      const done = new Promise((r) => proc.on('exit', r));
-      proc.kill('SIGTERM');
-      const t = setTimeout(() => proc.kill('SIGKILL'), 10000);
-      await done;
-      clearTimeout(t);
+      if (!exited) {
+        const done = new Promise((r) => proc.on('exit', r));
+        proc.kill('SIGTERM');
+        const t = setTimeout(() => proc.kill('SIGKILL'), 20000);
+        await done;
+        clearTimeout(t);
+      }
+      if (exitCode !== 0) throw new Error(`${name} ended with ${exited}: ${readFileSync(log, 'utf8').slice(-4000)}`);
     },
   };
 }
