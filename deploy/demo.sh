@@ -4,13 +4,16 @@
 # scene, streams the irradiance tiles while the server refines them, composes its own viewpoint,
 # and writes it once the server's lightmaps are final. Then the server is stopped with SIGINT.
 # Images and per-viewer reports land in out/demo/; the server's log in out/demo/server.log.
-#   PORT=7450 UPDATES=16 bash deploy/demo.sh
+# The browser viewer (docs/VIEWER-WEB.md) is at the URL the demo prints; KEEP=1 keeps the server
+# running after the viewers (Ctrl-C stops it) so that the page can be explored.
+#   PORT=7450 HTTP_PORT=7451 UPDATES=16 KEEP=0 bash deploy/demo.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash deploy/install-deps.sh
 bash deploy/build.sh build
 out=out/demo
 port=${PORT:-7450}
+http_port=${HTTP_PORT:-7451}
 updates=${UPDATES:-16}
 mkdir -p "$out"
 rm -f "$out"/view*.png "$out"/view*.json
@@ -19,7 +22,7 @@ head -c 18 /dev/urandom | base64 >"$out/token"
 chmod 600 "$out/token"
 
 ./build/server/irradcast-server --scene cornell --port "$port" --bind 127.0.0.1 \
-  --max-updates "$updates" --status-every 2 --control-token-file "$out/token" \
+  --http-port "$http_port" --max-updates "$updates" --status-every 2 --control-token-file "$out/token" \
   >"$out/server.log" 2>&1 &
 server=$!
 trap 'kill -INT $server 2>/dev/null || true' EXIT
@@ -29,6 +32,7 @@ for _ in $(seq 100); do
   sleep 0.1
 done
 echo "demo: server on 127.0.0.1:$port (log: $out/server.log), $updates engine updates"
+echo "demo: browser viewer: http://127.0.0.1:$http_port/"
 
 cameras=(
   ""                                                         # the scene's own camera
@@ -61,8 +65,13 @@ echo "demo: live edit: move the light, repaint the red wall"
   | sed 's/^/demo: /' || status=1
 view_round "_edited"
 
-kill -INT $server
-wait $server || status=1
+if [ "${KEEP:-0}" = 1 ]; then
+  echo "demo: the server keeps running: http://127.0.0.1:$http_port/ (Ctrl-C stops it)"
+  wait $server || true
+else
+  kill -INT $server
+  wait $server || status=1
+fi
 trap - EXIT
 echo
 echo "demo: viewer  bytes received  time to converged image"

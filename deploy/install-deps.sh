@@ -32,7 +32,8 @@ for p in "${PACKAGES[@]}"; do
   fi
 done
 
-# node and npm (Debian 12: node 18) for deploy/k8s-check, unless a node is installed already.
+# node and npm (Debian 12: node 18) for the browser viewer's build (web/build.mjs) and the
+# manifests' check (deploy/k8s-check), unless a node is installed already.
 command -v node >/dev/null 2>&1 || missing+=(nodejs)
 command -v npm >/dev/null 2>&1 || missing+=(npm)
 
@@ -48,14 +49,20 @@ else
   echo "install-deps: done"
 fi
 
-# npm packages of the manifests' schema check (kubernetes-models: the Kubernetes JSON schemas
-# compiled for ajv; yaml), exactly as deploy/k8s-check/package-lock.json pins them; only when
-# node_modules is missing or older than the lock file.
-k8s_check="$(cd "$(dirname "$0")" && pwd)/k8s-check"
-stamp="$k8s_check/node_modules/.package-lock.json"
-# (The container image's dependency layer has this script alone, without the lock file.)
-if [ -f "$k8s_check/package-lock.json" ] &&
-  { [ ! -f "$stamp" ] || [ "$k8s_check/package-lock.json" -nt "$stamp" ]; }; then
-  echo "install-deps: npm ci in deploy/k8s-check"
-  (cd "$k8s_check" && npm ci --no-audit --no-fund --loglevel=error)
-fi
+# npm packages, exactly as each folder's package-lock.json pins them; `npm ci` only when its
+# node_modules is missing or older than the lock file. web/: the browser viewer (three.js,
+# protobufjs, fzstd, esbuild, puppeteer-core for its tests; nothing is fetched when the page
+# loads). deploy/k8s-check/: the manifests' schema check (kubernetes-models' JSON schemas for
+# ajv, yaml). (The container image's dependency layer has this script alone, without the lock
+# files: then there is nothing to install.)
+root="$(cd "$(dirname "$0")/.." && pwd)"
+for dir in "$root/web" "$root/deploy/k8s-check"; do
+  stamp="$dir/node_modules/.package-lock.json"
+  [ -f "$dir/package-lock.json" ] || continue
+  if [ ! -f "$stamp" ] || [ "$dir/package-lock.json" -nt "$stamp" ]; then
+    echo "install-deps: npm ci in ${dir#"$root"/}"
+    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
+  else
+    echo "install-deps: ${dir#"$root"/}/node_modules is current"
+  fi
+done

@@ -1,0 +1,227 @@
+// The browser viewer in a real browser (issue 21, part 4): `node tests/web/viewer_test.mjs CASE
+// --server irradcast-server --view irradcast-view --edit irradcast-edit [--chromium PATH]`.
+// Each case starts its own irradcast-server (cornell at a low texel count) on loopback ports and
+// headless Chromium (puppeteer-core, SwiftShader WebGL):
+//   image   the page's converged screenshot against irradcast-view's PNG of the same camera, tone
+//           map and exposure, by 16 x 16 block means (bound below: rasterised and ray-traced
+//           primary hits differ only at edges); also a plain `chromium --headless=new
+//           --screenshot --virtual-time-budget=30000 URL`
+//   errors  malformed and oversized WebSocket messages sent from a page get the Error a TCP
+//           client gets for the same bytes
+//   edits   another client's edit (irradcast-edit) shows up in the page, the page's own edit
+//           needs the control token typed into the overlay; mouse and keyboard move the camera
+//   tabs    16 tabs at once all converge
+import assert from 'node:assert/strict';
+import net from 'node:net';
+import { writeFileSync } from 'node:fs';
+import { readPng, blockDifference, meanLevel } from './png.mjs';
+import { options, startServer, viewPng, browser, openConverged, query, run, Envelope, ErrorCode, tmpDir, path,
+  chromiumArgs } from './harness.mjs';
+
+// Bounds on the differences of 16 x 16 block means, 8-bit units. Rasterised and ray-traced primary
+// hits differ at edges: a silhouette that runs along a row of pixel centres is in one image and
+// not the other, which moves a block's mean by up to 255 / 16 (one row of 16); elsewhere the two
+// agree to rounding. So: every block within 16, 90% of the blocks within 2 in every channel, the
+// mean over all blocks within 1.
+const MAX_BLOCK = 16, TIGHT_FRACTION = 0.9, MEAN_BLOCK = 1;
+const SERVER = ['--scene', 'cornell', '--texels-per-scene', '48', '--tile-size', '16', '--max-updates', '6',
+  '--threads', '1', '--io-threads', '2', '--log-level', 'warn'];
+const W = 192, H = 150;
+
+function compare(pagePng, viewPngFile, what) {
+  const a = readPng(pagePng), b = readPng(viewPngFile);
+  const d = blockDifference(a, b);
+  console.log(`${what}: ${d.blocks} blocks, largest block difference ${d.max.toFixed(2)}, ` +
+    `${(100 * d.within).toFixed(1)}% within 2, mean ${d.mean.toFixed(3)} (bounds ${MAX_BLOCK}, ` +
+    `${100 * TIGHT_FRACTION}%, ${MEAN_BLOCK}); mean level ${meanLevel(a).toFixed(1)} / ${meanLevel(b).toFixed(1)}`);
+  assert.ok(meanLevel(b) > 10, `${what}: irradcast-view's image is black`);
+  assert.ok(d.max <= MAX_BLOCK && d.within >= TIGHT_FRACTION && d.mean <= MEAN_BLOCK,
+    `${what}: the page's image differs from irradcast-view's`);
+}
+
+async function image(o) {
+  const server = await startServer(o.server, SERVER);
+  const b = await browser(o);
+  try {
+    // The page's default tiles are RGB9E5; `half` asks for half floats (irradcast-view keeps
+    // RGB9E5: the two quantisations differ far below the bounds).
+    const views = [
+      { name: 'default', params: {} },
+      { name: 'camera', params: { camera: 'eye=0.45,0.4,-0.3:target=0.25,0.2,0.3:fov=55', tonemap: 'aces', exposure: 1 } },
+      { name: 'half', params: { encoding: 'half' }, view: 'default' },
+    ];
+    for (const v of views) {
+      const page = await openConverged(b, server.url + query({ width: W, height: H, ui: 0, converge: 0, ...v.params }), W, H);
+      const shot = path.join(tmpDir, `page-${v.name}.png`);
+      await page.screenshot({ path: shot });
+      const enc = await page.evaluate(() => window.irradcast.conn.counters.byEncoding);
+      console.log(`page (${v.name}): tiles by encoding rgb9e5 / half / delta: ${enc.join(' / ')}`);
+      assert.ok(v.params.encoding === 'half' ? enc[1] > 0 && enc[0] + enc[2] === 0 : enc[0] > 0 && enc[1] === 0,
+        `page (${v.name}): tiles in the wrong encoding`);
+      await page.close();
+      const reference = v.view ? path.join(tmpDir, `view-${v.view}.png`)
+        : await viewPng(o, server, { width: W, height: H, ...v.params }, `view-${v.name}`);
+      compare(shot, reference, `page (${v.name})`);
+    }
+    // A plain headless screenshot: the page converges within the virtual time budget.
+    const plain = path.join(tmpDir, 'plain.png');
+    await run(o.chromium, ['--headless=new', ...chromiumArgs, `--user-data-dir=${path.join(tmpDir, 'plain-profile')}`,
+      `--screenshot=${plain}`, `--window-size=${W},${H}`, '--virtual-time-budget=30000',
+      server.url + query({ ui: 0, converge: 0 })], 90000);
+    compare(plain, path.join(tmpDir, 'view-default.png'), 'chromium --screenshot');
+  } finally {
+    await b.close();
+    await server.stop();
+  }
+}
+
+// One message as a TCP frame (4-byte little-endian length) on a new connection: the Error the
+// server answers.
+function tcpError(port, bytes) {
+  return new Promise((resolve, reject) => {
+    const s = net.connect(port, '127.0.0.1');
+    let buf = Buffer.alloc(0);
+    const t = setTimeout(() => { s.destroy(); reject(new Error('no answer over TCP')); }, 20000);
+    s.on('connect', () => { const len = Buffer.alloc(4); len.writeUInt32LE(bytes.length); s.write(Buffer.concat([len, bytes])); });
+    s.on('data', (d) => {
+      buf = Buffer.concat([buf, d]);
+      while (buf.length >= 4 && buf.length >= 4 + buf.readUInt32LE(0)) {
+        const env = Envelope.decode(buf.subarray(4, 4 + buf.readUInt32LE(0)));
+        buf = buf.subarray(4 + buf.readUInt32LE(0));
+        if (env.msg === 'error') { clearTimeout(t); s.destroy(); resolve(env.error); return; }
+      }
+    });
+    s.on('error', () => {});
+    s.on('close', () => { clearTimeout(t); reject(new Error('TCP connection closed without an Error')); });
+  });
+}
+
+// The same bytes as one binary WebSocket message from the page: the Error the server answers,
+// and whether it closed the socket afterwards.
+async function wsError(page, bytes) {
+  const r = await page.evaluate((data) => new Promise((resolve) => {
+    const ws = new WebSocket(new URL('ws', location.href).href.replace(/^http/, 'ws'));
+    ws.binaryType = 'arraybuffer';
+    const got = [];
+    ws.onopen = () => ws.send(new Uint8Array(data));
+    ws.onmessage = (e) => got.push(Array.from(new Uint8Array(e.data)));
+    ws.onclose = (e) => resolve({ got, code: e.code });
+    setTimeout(() => resolve({ got, code: 'open' }), 20000);
+  }), Array.from(bytes));
+  const errors = r.got.map((m) => Envelope.decode(Uint8Array.from(m))).filter((e) => e.msg === 'error');
+  assert.ok(errors.length === 1, `the page got ${errors.length} Errors (${r.got.length} messages, close ${r.code})`);
+  assert.notEqual(r.code, 'open', 'the server kept the WebSocket open');
+  return errors[0].error;
+}
+
+async function errors(o) {
+  const server = await startServer(o.server, SERVER);
+  const b = await browser(o);
+  try {
+    const page = await openConverged(b, server.url + query({ width: 64, height: 48, ui: 0 }), 64, 48);
+    // The same code for the same bytes; the same message where the message describes the bytes
+    // (an oversized one names the transport's unit: a frame on TCP, a message on a WebSocket).
+    const cases = [
+      { what: 'not an Envelope', bytes: Buffer.from([0xff, 0xff, 0xff, 0xff]), code: ErrorCode.BAD_FRAME, same: true },
+      { what: 'an oversized first message', bytes: Buffer.concat([Buffer.from([0x0a, 0xe8, 0x80, 0x02]), Buffer.alloc(0x8000 + 0x68)]),
+        code: ErrorCode.FRAME_TOO_LARGE, same: false },
+    ];
+    for (const c of cases) {
+      const ws = await wsError(page, c.bytes), tcp = await tcpError(server.port, c.bytes);
+      console.log(`${c.what}: WebSocket ${ws.code} "${ws.message}"; TCP ${tcp.code} "${tcp.message}"`);
+      assert.equal(ws.code, c.code, `${c.what}: the WebSocket's Error code`);
+      assert.equal(tcp.code, c.code, `${c.what}: the TCP Error code`);
+      if (c.same) assert.equal(ws.message, tcp.message, `${c.what}: the same Error message over WebSocket and TCP`);
+    }
+    // The page itself still streams.
+    assert.equal(await page.title(), 'irradcast: converged');
+  } finally {
+    await b.close();
+    await server.stop();
+  }
+}
+
+const tilesApplied = (page) => page.evaluate(() => window.irradcast.conn.counters.tiles);
+const editsApplied = (page) => page.evaluate(() => window.irradcast.conn.counters.edits);
+
+async function edits(o) {
+  const server = await startServer(o.server, [...SERVER, '--control-token', 'web-test-token-0123']);
+  const b = await browser(o);
+  try {
+    const url = server.url + query({ width: W, height: H, converge: 0 });
+    const page = await openConverged(b, url, W, H);
+    // Another client moves the tall block: the page applies the broadcast, converges again and
+    // shows what irradcast-view shows.
+    await run(o.edit, ['--connect', `127.0.0.1:${server.port}`, '--token', 'web-test-token-0123', '--move', 'tall_block', '0.1,0,0.05']);
+    await page.waitForFunction(() => window.irradcast.conn.counters.edits === 1, { timeout: 30000 });
+    await page.waitForFunction(() => document.title === 'irradcast: converged', { timeout: 60000, polling: 100 });
+    await page.evaluate(() => { document.getElementById('overlay').style.display = 'none'; });
+    const shot = path.join(tmpDir, 'page-edited.png');
+    await page.screenshot({ path: shot });
+    compare(shot, await viewPng(o, server, { width: W, height: H }, 'view-edited'), 'after an edit by another client');
+    await page.evaluate(() => { document.getElementById('overlay').style.display = ''; });
+    // The page's own edit: refused without the token, applied with it.
+    await page.evaluate(() => { document.querySelector('#overlay details').open = true; });
+    await page.select('#o-node', 'short_block');
+    const plusX = () => page.$eval('#o-move button:nth-child(2)', (b) => b.click());
+    const before = await tilesApplied(page);
+    await plusX();
+    await page.waitForFunction(() => /PERMISSION_DENIED/.test(document.getElementById('o-error').textContent), { timeout: 20000 });
+    assert.equal(await editsApplied(page), 1, 'an edit without the token was applied');
+    await page.type('#o-token', 'web-test-token-0123');
+    await plusX();
+    await page.waitForFunction(() => window.irradcast.conn.counters.edits === 2, { timeout: 30000 });
+    await page.waitForFunction((n) => window.irradcast.conn.counters.tiles > n, { timeout: 30000 }, before);
+    assert.ok(!(await page.url()).includes('web-test-token-0123'), 'the token is in the URL');
+    // Orbit by mouse, then fly forward by keyboard: the camera moves (the overlay, which covers
+    // most of this small page, put aside).
+    await page.evaluate(() => { document.getElementById('overlay').style.display = 'none'; });
+    const cam0 = await page.evaluate(() => window.irradcast.formatCamera());
+    await page.mouse.move(150, 75);
+    await page.mouse.down();
+    await page.mouse.move(120, 70, { steps: 4 });
+    await page.mouse.up();
+    const cam1 = await page.evaluate(() => window.irradcast.formatCamera());
+    await page.focus('canvas');
+    await page.keyboard.press('f');
+    await page.keyboard.down('w');
+    await new Promise((r) => setTimeout(r, 300));
+    await page.keyboard.up('w');
+    const cam2 = await page.evaluate(() => window.irradcast.formatCamera());
+    console.log(`camera: ${cam0} -> (orbit) ${cam1} -> (fly) ${cam2}`);
+    assert.ok(cam0 !== cam1 && cam1 !== cam2, 'the controls did not move the camera');
+    console.log(`edits: ${await editsApplied(page)} applied in the page, ${await tilesApplied(page) - before} tiles after its own`);
+  } finally {
+    await b.close();
+    await server.stop();
+  }
+}
+
+async function tabs(o) {
+  const server = await startServer(o.server, SERVER);
+  const b = await browser(o);
+  try {
+    const t0 = Date.now();
+    const pages = await Promise.all([...Array(16).keys()].map(() =>
+      openConverged(b, server.url + query({ width: 64, height: 48, ui: 0, converge: 0 }), 64, 48, 90000)));
+    const held = await Promise.all(pages.map((p) => p.evaluate(() => window.irradcast.conn.tilesHeld())));
+    for (const h of held) assert.ok(h.total > 0 && h.held === h.total, 'a tab without every tile');
+    console.log(`tabs: ${pages.length} converged, ${held[0].total} tiles each, after ${((Date.now() - t0) / 1000).toFixed(1)} s`);
+  } finally {
+    await b.close();
+    await server.stop();
+  }
+}
+
+const CASES = { image, errors, edits, tabs };
+const o = options(process.argv);
+try {
+  if (!o.cases.length || o.cases.some((c) => !CASES[c])) throw new Error(`cases: ${Object.keys(CASES).join(', ')}`);
+  for (const c of o.cases) await CASES[c](o);
+  console.log('ok');
+  process.exit(0);
+} catch (e) {
+  console.error(`FAIL: ${e.stack || e.message}`);
+  writeFileSync(path.join(tmpDir, 'failed'), String(e));
+  process.exit(1);
+}

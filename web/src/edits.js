@@ -1,0 +1,72 @@
+// Applied SceneEdit broadcasts on the page's scene model (common/src/scene_edit.cpp apply_edit):
+// transforms and visibility of nodes, materials' albedo and emission, the sky. Lights change
+// nothing the page draws (their light reaches it through the lightmaps). An edit that does not
+// resolve throws, and the page loads the scene again.
+import * as THREE from 'three';
+import { readSky } from './scene.js';
+
+const KIND = { MOVE: 0, ROTATE: 1, SCALE: 2, SET_TRANSFORM: 3, SHOW: 4, HIDE: 5, LIGHT_COLOR: 6,
+  LIGHT_INTENSITY: 7, MATERIAL_ALBEDO: 8, MATERIAL_EMISSION: 9, SKY: 10 };
+export { KIND };
+
+function find(items, target) {
+  if (/^#\d{1,9}$/.test(target)) {
+    const i = Number(target.slice(1));
+    return i < items.length ? i : -1;
+  }
+  return items.findIndex((x) => x.name === target);
+}
+
+const vec = (v) => new THREE.Vector3(v ? v.x || 0 : 0, v ? v.y || 0 : 0, v ? v.z || 0 : 0);
+
+function transformed(local, op) {
+  const v = vec(op.vector);
+  switch (op.kind) {
+    case KIND.MOVE: return new THREE.Matrix4().makeTranslation(v.x, v.y, v.z).multiply(local);
+    case KIND.ROTATE: {
+      const o = new THREE.Vector3().setFromMatrixPosition(local);
+      const r = new THREE.Matrix4().makeRotationAxis(v.normalize(), THREE.MathUtils.degToRad(op.value || 0));
+      return new THREE.Matrix4().makeTranslation(o.x, o.y, o.z).multiply(r)
+        .multiply(new THREE.Matrix4().makeTranslation(-o.x, -o.y, -o.z)).multiply(local);
+    }
+    case KIND.SCALE: return local.clone().multiply(new THREE.Matrix4().makeScale(v.x, v.y, v.z));
+    default: {
+      if (!op.matrix || op.matrix.length !== 16) throw new Error('a transform edit without 16 values');
+      return new THREE.Matrix4().fromArray(op.matrix);
+    }
+  }
+}
+
+// Applies the ops in order; returns what changed: { nodes, materials, sky }.
+export function applyEdit(scene, message) {
+  const changed = { nodes: false, materials: false, sky: false };
+  for (const op of message.ops || []) {
+    const kind = op.kind || 0, target = op.target || '';
+    if (kind <= KIND.HIDE) {
+      const i = find(scene.nodes, target);
+      if (i < 0) throw new Error(`edit: no node '${target}'`);
+      if (kind === KIND.SHOW || kind === KIND.HIDE) scene.nodes[i].hidden = kind === KIND.HIDE;
+      else scene.nodes[i].local = transformed(scene.nodes[i].local, op);
+      changed.nodes = true;
+    } else if (kind === KIND.MATERIAL_ALBEDO || kind === KIND.MATERIAL_EMISSION) {
+      const i = find(scene.materials, target);
+      if (i < 0) throw new Error(`edit: no material '${target}'`);
+      const m = scene.materials[i];
+      if (kind === KIND.MATERIAL_ALBEDO) m.baseColor = vec(op.vector);
+      else { m.emissive = vec(op.vector); m.emissiveStrength = op.value || 0; }
+      changed.materials = true;
+    } else if (kind === KIND.SKY) {
+      const parts = op.sky_parts || 0, sky = scene.sky;
+      if (parts & 1) { sky.color = vec(op.vector); sky.map = null; }
+      if (parts & 4) {
+        if (!op.sky_map) throw new Error('edit: a sky file without its map');
+        sky.map = readSky({ map: op.sky_map }).map;
+      }
+      if (parts & 2) sky.strength = op.value || 0;
+      changed.sky = true;
+    } else if (kind !== KIND.LIGHT_COLOR && kind !== KIND.LIGHT_INTENSITY) {
+      throw new Error(`edit: unknown operation ${kind}`);
+    }
+  }
+  return changed;
+}

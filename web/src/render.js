@@ -1,0 +1,286 @@
+// The page's rendering on three.js (WebGL2): per object a mesh whose corners carry the lightmap
+// coordinates, one RGB9_E5 texture per lightmap updated tile by tile with texSubImage2D, and
+// irradcast's shading (common/src/compositor.cpp): albedo / pi * E + emission, then the
+// exposure and tone map of irradcast-view (common/src/tonemap.cpp) and the sRGB transfer
+// function. The sky (common/src/sky.cpp) is the background.
+import * as THREE from 'three';
+import { placeNodes } from './scene.js';
+
+export const TONE_OPS = { reinhard: 0, aces: 1, clamp: 2 };
+
+const finishGlsl = `
+uniform float exposureScale;
+uniform int toneOp;
+vec3 srgbEncode(vec3 c) {
+  c = clamp(c, 0.0, 1.0);
+  return mix(1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, 12.92 * c, lessThanEqual(c, vec3(0.0031308)));
+}
+vec3 finish(vec3 c) {
+  c = max(c * exposureScale, 0.0);
+  if (toneOp == 0) {
+    float l = dot(c, vec3(0.2126, 0.7152, 0.0722));
+    if (l > 0.0) c *= 1.0 / (1.0 + l);
+  } else if (toneOp == 1) {
+    c = clamp((c * (2.51 * c + 0.03)) / (c * (2.43 * c + 0.59) + 0.14), 0.0, 1.0);
+  }
+  return srgbEncode(c);
+}`;
+
+const surfaceVertex = `
+in vec3 position; in vec2 uv0; in vec2 uv1; in vec2 luv;
+uniform mat4 modelMatrix, viewMatrix, projectionMatrix;
+out vec2 vUv0; out vec2 vUv1; out vec2 vLuv;
+void main() {
+  vUv0 = uv0; vUv1 = uv1; vLuv = luv;
+  gl_Position = projectionMatrix * viewMatrix * modelMatrix * vec4(position, 1.0);
+}`;
+
+const surfaceFragment = `
+precision highp float;
+${finishGlsl}
+uniform sampler2D lightmap;
+uniform vec3 baseColor; uniform float baseAlpha; uniform sampler2D baseTex; uniform int baseTexOn;
+uniform int baseUv; uniform int alphaMask; uniform float alphaCutoff;
+uniform vec3 emission; uniform sampler2D emTex; uniform int emTexOn; uniform int emUv;
+uniform int emDoubleSided; uniform int hdrOut;
+in vec2 vUv0; in vec2 vUv1; in vec2 vLuv;
+out vec4 fragColor;
+void main() {
+  vec4 t = baseTexOn == 1 ? texture(baseTex, baseUv == 1 ? vUv1 : vUv0) : vec4(1.0);
+  if (alphaMask == 1 && baseAlpha * t.a < alphaCutoff) discard;
+  vec3 e = texture(lightmap, vLuv / vec2(textureSize(lightmap, 0))).rgb;
+  vec3 c = baseColor * t.rgb * e * 0.31830988618379067;
+  if (any(greaterThan(emission, vec3(0.0))) && (emDoubleSided == 1 || gl_FrontFacing))
+    c += emission * (emTexOn == 1 ? texture(emTex, emUv == 1 ? vUv1 : vUv0).rgb : vec3(1.0));
+  fragColor = hdrOut == 1 ? vec4(c, 1.0) : vec4(finish(c), 1.0);
+}`;
+
+const skyVertex = `
+in vec3 position;
+void main() { gl_Position = vec4(position.xy, 1.0, 1.0); }`;
+
+const skyFragment = `
+precision highp float;
+${finishGlsl}
+uniform vec3 camForward, camRight, camUp; uniform vec2 tanHalf; uniform vec2 viewport;
+uniform vec3 skyColor; uniform float skyStrength; uniform int skyMapOn; uniform sampler2D skyMap;
+uniform int hdrOut;
+out vec4 fragColor;
+void main() {
+  vec2 s = (2.0 * gl_FragCoord.xy / viewport - 1.0) * tanHalf;
+  vec3 d = normalize(camForward + s.x * camRight + s.y * camUp);
+  vec3 c = skyColor;
+  if (skyMapOn == 1) {
+    ivec2 size = textureSize(skyMap, 0);
+    float u = 0.5 + atan(d.x, -d.z) * 0.15915494309189535;
+    float v = acos(clamp(d.y, -1.0, 1.0)) * 0.3183098861837907;
+    ivec2 t = clamp(ivec2(floor(vec2(u, v) * vec2(size))), ivec2(0), size - 1);
+    c = texelFetch(skyMap, t, 0).rgb;
+  }
+  c *= skyStrength;
+  fragColor = hdrOut == 1 ? vec4(c, 1.0) : vec4(finish(c), 1.0);
+}`;
+
+function rgb9e5Texture(width, height, words, filter) {
+  const t = new THREE.DataTexture(words, width, height, THREE.RGBFormat, THREE.UnsignedInt5999Type);
+  t.minFilter = t.magFilter = filter;
+  t.wrapS = t.wrapT = THREE.ClampToEdgeWrapping;
+  t.generateMipmaps = false;
+  t.flipY = false;
+  t.needsUpdate = true;
+  return t;
+}
+
+function colorTexture(tex) {
+  const t = new THREE.DataTexture(tex.rgba8, tex.width, tex.height, THREE.RGBAFormat, THREE.UnsignedByteType);
+  t.colorSpace = THREE.SRGBColorSpace;  // SRGB8_ALPHA8: decoded before filtering, as sample_srgb
+  t.minFilter = t.magFilter = THREE.LinearFilter;
+  t.wrapS = t.wrapT = THREE.RepeatWrapping;
+  t.generateMipmaps = false;
+  t.flipY = false;
+  t.needsUpdate = true;
+  return t;
+}
+
+// Geometry of one object: three corners per triangle (the layout's coordinates are per corner),
+// grouped by material.
+function objectGeometry(scene, obj) {
+  const mesh = scene.meshes[obj.mesh], tris = mesh.triangles.length / 3;
+  const matOf = (t) => (t < mesh.triangleMaterial.length && mesh.triangleMaterial[t] < scene.materials.length
+    ? mesh.triangleMaterial[t] : -1);
+  const order = [...Array(tris).keys()].sort((a, b) => matOf(a) - matOf(b));
+  const pos = new Float32Array(9 * tris), uv0 = new Float32Array(6 * tris), uv1 = new Float32Array(6 * tris);
+  const luv = new Float32Array(6 * tris);
+  const g = new THREE.BufferGeometry(), groups = [];
+  order.forEach((t, k) => {
+    const m = matOf(t);
+    if (!groups.length || groups[groups.length - 1].material !== m) groups.push({ start: 3 * k, count: 0, material: m });
+    groups[groups.length - 1].count += 3;
+    for (let c = 0; c < 3; ++c) {
+      const v = mesh.triangles[3 * t + c], o = 3 * k + c;
+      for (let a = 0; a < 3; ++a) pos[3 * o + a] = mesh.positions[3 * v + a];
+      for (let a = 0; a < 2; ++a) {
+        if (mesh.uv0) uv0[2 * o + a] = mesh.uv0[2 * v + a];
+        if (mesh.uv1) uv1[2 * o + a] = mesh.uv1[2 * v + a];
+        luv[2 * o + a] = obj.cornerUv[6 * t + 2 * c + a];
+      }
+    }
+  });
+  g.setAttribute('position', new THREE.BufferAttribute(pos, 3));
+  g.setAttribute('uv0', new THREE.BufferAttribute(uv0, 2));
+  g.setAttribute('uv1', new THREE.BufferAttribute(uv1, 2));
+  g.setAttribute('luv', new THREE.BufferAttribute(luv, 2));
+  return { geometry: g, groups };
+}
+
+const FALLBACK = { baseColor: new THREE.Vector3(0.8, 0.8, 0.8), baseTexture: -1, baseUv: 0, emissive: new THREE.Vector3(),
+  emissiveTexture: -1, emissiveUv: 0, emissiveStrength: 1, doubleSided: false, mask: false, alphaCutoff: 0.5, baseAlpha: 1 };
+
+export class SceneView {
+  constructor(renderer, scene, welcome, finish) {
+    this.renderer = renderer;
+    this.scene = scene;
+    this.finish = finish;  // shared uniforms: exposureScale, toneOp, hdrOut
+    this.root = new THREE.Scene();
+    this.white = colorTexture({ rgba8: new Uint8Array([255, 255, 255, 255]), width: 1, height: 1 });
+    this.textures = scene.textures.map(colorTexture);
+    this.lightmaps = scene.objects.map((o) => {
+      const words = new Uint32Array(Math.max(1, o.width * o.height));
+      return { width: o.width, height: o.height, words,
+        texture: rgb9e5Texture(Math.max(1, o.width), Math.max(1, o.height), words, THREE.LinearFilter) };
+    });
+    this.tileSize = welcome.tile_size;
+    this.materials = [];  // per scene material, the ShaderMaterials that show it
+    this.meshes = scene.objects.map((o, i) => this.buildObject(o, i));
+    this.buildSky();
+    this.placeNodes();
+    this.bounds = new THREE.Box3();
+    this.meshes.forEach((m) => this.bounds.expandByObject(m));
+    if (this.bounds.isEmpty()) this.bounds.set(new THREE.Vector3(-1, -1, -1), new THREE.Vector3(1, 1, 1));
+  }
+
+  buildObject(obj, index) {
+    const { geometry, groups } = objectGeometry(this.scene, obj);
+    const mats = groups.map((gr, k) => {
+      geometry.addGroup(gr.start, gr.count, k);
+      const mat = new THREE.RawShaderMaterial({
+        glslVersion: THREE.GLSL3, vertexShader: surfaceVertex, fragmentShader: surfaceFragment,
+        side: THREE.DoubleSide,
+        uniforms: { ...this.finish, lightmap: { value: this.lightmaps[index].texture } },
+      });
+      mat.sceneMaterial = gr.material;
+      this.setMaterial(mat, gr.material);
+      return mat;
+    });
+    const m = new THREE.Mesh(geometry, mats);
+    m.matrixAutoUpdate = false;
+    m.frustumCulled = false;
+    this.root.add(m);
+    return m;
+  }
+
+  // The uniforms of one ShaderMaterial from scene material i (-1: the fallback).
+  setMaterial(mat, i) {
+    const m = i >= 0 ? this.scene.materials[i] : FALLBACK;
+    const u = mat.uniforms, tex = (t) => (t >= 0 ? this.textures[t] : this.white);
+    const emissive = m.emissiveStrength > 0 && Math.max(m.emissive.x, m.emissive.y, m.emissive.z) > 0;
+    Object.assign(u, {
+      baseColor: { value: m.baseColor.clone() }, baseAlpha: { value: m.baseAlpha },
+      baseTex: { value: tex(m.baseTexture) }, baseTexOn: { value: m.baseTexture >= 0 ? 1 : 0 },
+      baseUv: { value: m.baseUv }, alphaMask: { value: m.mask ? 1 : 0 }, alphaCutoff: { value: m.alphaCutoff },
+      emission: { value: emissive ? m.emissive.clone().multiplyScalar(m.emissiveStrength) : new THREE.Vector3() },
+      emTex: { value: tex(m.emissiveTexture) }, emTexOn: { value: m.emissiveTexture >= 0 ? 1 : 0 },
+      emUv: { value: m.emissiveUv }, emDoubleSided: { value: m.doubleSided ? 1 : 0 },
+    });
+    mat.uniformsNeedUpdate = true;
+  }
+
+  // After a material edit.
+  updateMaterials() {
+    for (const mesh of this.meshes) for (const mat of mesh.material) this.setMaterial(mat, mat.sceneMaterial);
+  }
+
+  // After a transform or visibility edit.
+  placeNodes() {
+    const { world, visible } = placeNodes(this.scene);
+    this.scene.objects.forEach((o, i) => {
+      this.meshes[i].matrix.copy(world[o.node]);
+      this.meshes[i].matrixWorldNeedsUpdate = true;
+      this.meshes[i].visible = visible[o.node];
+    });
+  }
+
+  buildSky() {
+    const g = new THREE.BufferGeometry();
+    g.setAttribute('position', new THREE.BufferAttribute(new Float32Array([-1, -1, 0, 3, -1, 0, -1, 3, 0]), 3));
+    this.skyUniforms = { ...this.finish, camForward: { value: new THREE.Vector3() }, camRight: { value: new THREE.Vector3() },
+      camUp: { value: new THREE.Vector3() }, tanHalf: { value: new THREE.Vector2() }, viewport: { value: new THREE.Vector2() },
+      skyColor: { value: new THREE.Vector3() }, skyStrength: { value: 1 }, skyMapOn: { value: 0 }, skyMap: { value: null } };
+    const mat = new THREE.RawShaderMaterial({ glslVersion: THREE.GLSL3, vertexShader: skyVertex,
+      fragmentShader: skyFragment, uniforms: this.skyUniforms, depthTest: false, depthWrite: false });
+    this.sky = new THREE.Mesh(g, mat);
+    this.sky.frustumCulled = false;
+    this.sky.renderOrder = -1;
+    this.root.add(this.sky);
+    this.updateSky();
+  }
+
+  updateSky() {
+    const s = this.scene.sky, u = this.skyUniforms;
+    u.skyColor.value.copy(s.color);
+    u.skyStrength.value = s.strength;
+    if (u.skyMap.value && u.skyMap.value !== this.white) u.skyMap.value.dispose();
+    u.skyMap.value = s.map ? rgb9e5Texture(s.map.width, s.map.height, s.map.words, THREE.NearestFilter) : this.white;
+    u.skyMapOn.value = s.map ? 1 : 0;
+  }
+
+  // Copies a decoded tile (RGB9E5 words) into the CPU copy and the texture's sub-rectangle.
+  applyTile(lightmap, x0, y0, w, h, words) {
+    const lm = this.lightmaps[lightmap];
+    for (let j = 0; j < h; ++j) lm.words.set(words.subarray(j * w, (j + 1) * w), (y0 + j) * lm.width + x0);
+    const props = this.renderer.properties.get(lm.texture);
+    if (!props.__webglTexture || lm.texture.version !== props.__version) return;  // uploaded whole at the next draw
+    const gl = this.renderer.getContext();
+    this.renderer.state.bindTexture(gl.TEXTURE_2D, props.__webglTexture);
+    gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
+    gl.pixelStorei(gl.UNPACK_PREMULTIPLY_ALPHA_WEBGL, false);
+    gl.pixelStorei(gl.UNPACK_ALIGNMENT, 4);
+    gl.pixelStorei(gl.UNPACK_ROW_LENGTH, 0);
+    gl.texSubImage2D(gl.TEXTURE_2D, 0, x0, y0, w, h, gl.RGB, gl.UNSIGNED_INT_5_9_9_9_REV, words);
+  }
+
+  // The words of a tile's rectangle (a delta's base).
+  tileWords(lightmap, x0, y0, w, h) {
+    const lm = this.lightmaps[lightmap], out = new Uint32Array(w * h);
+    for (let j = 0; j < h; ++j) out.set(lm.words.subarray((y0 + j) * lm.width + x0, (y0 + j) * lm.width + x0 + w), j * w);
+    return out;
+  }
+
+  // Frees the GPU side (a new scene replaces this one).
+  dispose() {
+    for (const m of this.meshes) {
+      m.geometry.dispose();
+      for (const mat of m.material) mat.dispose();
+    }
+    for (const t of [...this.textures, ...this.lightmaps.map((l) => l.texture), this.white]) t.dispose();
+    if (this.skyUniforms.skyMap.value !== this.white) this.skyUniforms.skyMap.value.dispose();
+    this.sky.geometry.dispose();
+    this.sky.material.dispose();
+    this.root.clear();
+  }
+
+  render(camera, width, height, target = null) {
+    const u = this.skyUniforms, f = camera.pose.forward.clone().normalize();
+    const right = new THREE.Vector3().crossVectors(f, camera.pose.up).normalize();
+    u.camForward.value.copy(f);
+    u.camRight.value.copy(right);
+    u.camUp.value.crossVectors(right, f);
+    const th = Math.tan(0.5 * camera.pose.yfov);
+    u.tanHalf.value.set(th * width / height, th);
+    u.viewport.value.set(width, height);
+    camera.apply(this.bounds, width / height);
+    this.renderer.setRenderTarget(target);
+    this.renderer.render(this.root, camera.three);
+    this.renderer.setRenderTarget(null);
+  }
+}
