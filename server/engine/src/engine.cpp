@@ -46,7 +46,7 @@ void accumulate(std::vector<glm::vec3>& mean, const std::vector<glm::vec3>& est,
 }
 
 PassTiming timing(const PassResult& r) {
-  return {r.seconds, r.rays};
+  return {r.seconds, r.rays, r.device_seconds, r.bytes_up, r.bytes_down, r.submissions};
 }
 
 }  // namespace
