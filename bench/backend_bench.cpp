@@ -58,21 +58,12 @@ struct BackendRun {
   double update_seconds = 0.0;  // timed updates, total
 };
 
-void add(PassTiming& sum, const PassTiming& t) {
-  sum.seconds += t.seconds;
-  sum.rays += t.rays;
-  sum.device_seconds += t.device_seconds;
-  sum.bytes_up += t.bytes_up;
-  sum.bytes_down += t.bytes_down;
-  sum.submissions += t.submissions;
-}
-
 void add(std::vector<PassTotals>& totals, const std::string& pass, const PassTiming& t) {
   for (PassTotals& p : totals)
     if (p.pass == pass) {
       p.seconds += t.seconds;
       p.rays += t.rays;
-      add(p.sum, t);
+      p.sum += t;
       return;
     }
   totals.push_back({pass, t.seconds, t.rays, t});
@@ -174,7 +165,7 @@ void print_transfers(const std::string& spec, int updates, const std::vector<Bac
     };
     for (const PassTotals& p : r.passes) {
       line(p.pass, p.sum);
-      add(total, p.sum);
+      total += p.sum;
     }
     total.seconds = r.update_seconds;
     line("update", total);

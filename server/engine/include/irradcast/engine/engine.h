@@ -23,14 +23,8 @@
 
 namespace irradcast {
 
-// One pass's cost as the backend reported it (PassResult).
-struct PassTiming {
-  double seconds = 0.0;
-  std::uint64_t rays = 0;
-  double device_seconds = 0.0;
-  std::uint64_t bytes_up = 0, bytes_down = 0;
-  std::uint32_t submissions = 0;
-};
+// One pass's cost as the backend reported it.
+using PassTiming = PassResult;
 
 struct UpdateStats {
   PassTiming direct;

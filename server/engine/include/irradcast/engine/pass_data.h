@@ -100,6 +100,16 @@ struct PassResult {
   std::uint64_t bytes_up = 0;     // host to device: written in place or through staging
   std::uint64_t bytes_down = 0;   // device to host: results read back
   std::uint32_t submissions = 0;  // queue submissions, each waited for on a fence
+  // Adds every field (totals over passes or updates).
+  PassResult& operator+=(const PassResult& o) {
+    rays += o.rays;
+    seconds += o.seconds;
+    device_seconds += o.device_seconds;
+    bytes_up += o.bytes_up;
+    bytes_down += o.bytes_down;
+    submissions += o.submissions;
+    return *this;
+  }
 };
 
 // What one indirect bounce cost: the probe gather (zero for methods without probes) and the
