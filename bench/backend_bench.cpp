@@ -47,6 +47,7 @@ struct PassTotals {
   std::string pass;  // direct, probes_k, scatter_k
   double seconds = 0.0;
   std::uint64_t rays = 0;
+  PassTiming sum;  // everything the backend reported, summed over the timed updates
 };
 
 struct BackendRun {
@@ -62,9 +63,10 @@ void add(std::vector<PassTotals>& totals, const std::string& pass, const PassTim
     if (p.pass == pass) {
       p.seconds += t.seconds;
       p.rays += t.rays;
+      p.sum += t;
       return;
     }
-  totals.push_back({pass, t.seconds, t.rays});
+  totals.push_back({pass, t.seconds, t.rays, t});
 }
 
 void add(BackendRun& run, const UpdateStats& st) {
@@ -94,13 +96,17 @@ std::vector<BackendRun> run_backends(const Options& o, const PreparedScene& s,
   std::vector<BackendRun> runs;
   std::vector<std::unique_ptr<Engine>> engines;
   for (const std::string& b : backends) {
+    // vulkan-host: Vulkan with the probes' running means on the host (two submissions per
+    // bounce, as before they stayed on the device), for a before/after comparison in one run.
+    const bool host_means = b == "vulkan-host";
     BackendOptions bo;
-    bo.kind = parse_backend(b);
+    bo.kind = parse_backend(host_means ? "vulkan" : b);
     bo.vulkan_device = o.vulkan_device;
     const auto start = Clock::now();
     BackendChoice choice = make_backend(bo, s.world(), s.rays(), s.lights());
+    if (host_means) dynamic_cast<VulkanBackend&>(*choice.backend).set_resident_probes(false);
     BackendRun run;
-    run.name = choice.backend->name();
+    run.name = host_means ? b : choice.backend->name();
     run.describe = choice.backend->describe();
     engines.push_back(std::make_unique<Engine>(s.world(), s.atlas(), s.gbuffers(), s.rays(),
                                                std::move(choice.backend), params));
@@ -127,13 +133,43 @@ json scene_json(const std::string& spec, std::size_t texels, int updates,
     j["setup_seconds"] = r.setup_seconds;
     j["seconds_per_update"] = r.update_seconds / updates;
     for (const PassTotals& p : r.passes)
-      j["passes"].push_back({{"pass", p.pass},
-                             {"seconds_per_update", p.seconds / updates},
-                             {"rays_per_update", p.rays / static_cast<std::uint64_t>(updates)},
-                             {"rays_per_second", p.rays / p.seconds}});
+      j["passes"].push_back(
+          {{"pass", p.pass},
+           {"seconds_per_update", p.seconds / updates},
+           {"device_seconds_per_update", p.sum.device_seconds / updates},
+           {"bytes_up_per_update", p.sum.bytes_up / static_cast<std::uint64_t>(updates)},
+           {"bytes_down_per_update", p.sum.bytes_down / static_cast<std::uint64_t>(updates)},
+           {"submissions_per_update", static_cast<double>(p.sum.submissions) / updates},
+           {"rays_per_update", p.rays / static_cast<std::uint64_t>(updates)},
+           {"rays_per_second", p.rays / p.seconds}});
     scene_json["backends"].push_back(j);
   }
   return scene_json;
+}
+
+// Per backend and pass, per update: wall time against the device's own time (timestamps), the
+// bytes each way and the submissions (each one a fence wait); the CPU backend reports no
+// device numbers.
+void print_transfers(const std::string& spec, int updates, const std::vector<BackendRun>& runs) {
+  for (const BackendRun& r : runs) {
+    if (r.name == "embree") continue;
+    PassTiming total;
+    auto line = [&](const std::string& pass, const PassTiming& t) {
+      std::printf(
+          "%-10s %-8s %-10s wall %8.2f ms  device %8.2f ms  up %9.1f KiB  down %9.1f KiB"
+          "  submissions %5.2f  %8.2f Mrays/s\n",
+          spec.c_str(), r.name.c_str(), pass.c_str(), 1e3 * t.seconds / updates,
+          1e3 * t.device_seconds / updates, t.bytes_up / 1024.0 / updates,
+          t.bytes_down / 1024.0 / updates, static_cast<double>(t.submissions) / updates,
+          t.seconds > 0.0 ? t.rays / t.seconds / 1e6 : 0.0);
+    };
+    for (const PassTotals& p : r.passes) {
+      line(p.pass, p.sum);
+      total += p.sum;
+    }
+    total.seconds = r.update_seconds;
+    line("update", total);
+  }
 }
 
 // The table rows of one scene: per pass, then the whole update, then the set-up times.
@@ -165,6 +201,7 @@ void print_rows(const std::string& spec, std::size_t texels, const Options& o,
   for (const BackendRun& r : runs)
     std::printf("%-10s set-up + %d warm-up update(s) %-8s %.2f s (%s)\n", spec.c_str(), o.warmup,
                 r.name.c_str(), r.setup_seconds, r.describe.c_str());
+  print_transfers(spec, updates, runs);
 }
 
 // The chart's bars of one scene: per pass kind (bounces summed) and the whole update.
@@ -190,6 +227,7 @@ json run_references(const std::string& spec, const Options& o, const PreparedSce
   json out;
   const int reference_spp = o.reference_spp;
   for (const std::string& b : backends) {
+    if (b == "vulkan-host") continue;  // the same reference as vulkan
     ReferenceLightmapStats st;
     std::string device = "embree";
     if (parse_backend(b) == BackendKind::Vulkan) {
@@ -260,7 +298,9 @@ int main(int argc, char** argv) {
   CLI::App app{"irradcast-bench-backend: engine passes per backend (Embree vs Vulkan), one run"};
   Options o;
   app.add_option("--scenes", o.scenes_text, "scenes, comma separated");
-  app.add_option("--backends", o.backends_text, "backends, comma separated: embree, vulkan");
+  app.add_option("--backends", o.backends_text,
+                 "backends, comma separated: embree, vulkan, vulkan-host (the probes' means on "
+                 "the host)");
   app.add_option("--vulkan-device", o.vulkan_device, "Vulkan device index (--list-devices)");
   app.add_option("--texels-per-scene", o.texels_per_scene, "lightmap density")
       ->check(CLI::Range(4.0f, 8192.0f));

@@ -40,7 +40,9 @@ layout(std430, binding = 11) readonly buffer Probes { vec4 probes[]; };  // (pos
 // 20 uint per texel: 8 probe indices, 8 weights (float bits), count, -, -, -.
 layout(std430, binding = 12) readonly buffer ProbeWeights { uint probe_weights[]; };
 layout(std430, binding = 13) readonly buffer Prev { vec4 prev[]; };  // E_prev, every lightmap
-layout(std430, binding = 14) readonly buffer ProbeRadiance { vec4 probe_radiance[]; };
+// The probes' radiance: the scatter reads it from probe_offset; with FLAG_PROBE_MEAN the gather
+// folds its estimates into the running means there (every bounce's means stay on the device).
+layout(std430, binding = 14) buffer ProbeRadiance { vec4 probe_radiance[]; };
 layout(std430, binding = 15) writeonly buffer Result { vec4 result[]; };
 // 3 vec4 per triangle, objects[o].x + t: the corners' shading normals; w of the first is 0 when
 // the mesh has none (the geometric normal is used). Read by the reference path tracer.
@@ -53,6 +55,7 @@ layout(std430, binding = 17) readonly buffer SkyData { float sky[]; };
 
 const uint FLAG_AREA = 1u, FLAG_UNBIASED = 2u, FLAG_FIXED = 4u, FLAG_PROBES = 8u;
 const uint FLAG_CAMERA = 16u, FLAG_SKY = 32u, FLAG_SKY_MAP = 64u;
+const uint FLAG_PROBE_MEAN = 128u;
 
 layout(push_constant) uniform Params {
   uint base;     // first item of this dispatch
@@ -71,6 +74,10 @@ layout(push_constant) uniform Params {
   uint emissive_count;
   vec3 bounds_hi;
   int probe_res;
+  uint probe_offset;   // first probe_radiance entry of this bounce's probes
+  float probe_weight;  // FLAG_PROBE_MEAN: this update's weight in the running means
+  uint pad0;
+  uint pad1;
 } pc;
 
 // ---- random numbers: PCG (RXS-M-XS, 32 bit) per item, seeded from (seed, item, update, pass).

@@ -1,7 +1,8 @@
 #version 450
 #extension GL_GOOGLE_include_directive : require
 // Probe gather: one jittered ray per octahedral probe texel, the previous bounce's radiance at
-// its hit (EmbreeBackend::gather_probes). Item = probe * res^2 + texel.
+// its hit (EmbreeBackend::gather_probes). Item = probe * res^2 + texel. The estimate goes to the
+// result, or with FLAG_PROBE_MEAN into the bounce's running mean (TraceBackend::probe_bounce).
 #include "common.glsl"
 
 const uint STREAM_PROBE = 2u;
@@ -22,5 +23,14 @@ void main() {
     Hit h = trace(pos.xyz, octahedral_decode(uv), 0.0, 3.4e38, false);
     if (h.object >= 0) l = radiance_at(h);
   }
-  result[item] = vec4(l, 0.0);
+  if ((pc.flags & FLAG_PROBE_MEAN) != 0u) {
+    // The host's running mean, mean += (estimate - mean) * weight, operation for operation
+    // (precise: no fused multiply-add), so the device keeps the same bits.
+    uint at = pc.probe_offset + item;
+    precise vec3 m = probe_radiance[at].rgb;
+    precise vec3 next = m + (l - m) * pc.probe_weight;
+    probe_radiance[at] = vec4(next, 0.0);
+  } else {
+    result[item] = vec4(l, 0.0);
+  }
 }

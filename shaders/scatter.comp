@@ -14,7 +14,7 @@ vec3 sample_probe(uint probe, vec3 dir) {
   vec2 f = floor(uv);
   vec2 a = uv - f;
   int x = int(f.x), y = int(f.y);
-  uint base = probe * uint(res * res);
+  uint base = pc.probe_offset + probe * uint(res * res);
   int x0 = clamp(x, 0, res - 1), x1 = clamp(x + 1, 0, res - 1);
   int y0 = clamp(y, 0, res - 1), y1 = clamp(y + 1, 0, res - 1);
   vec3 top = mix(probe_radiance[base + uint(y0 * res + x0)].rgb,

@@ -276,6 +276,37 @@ TEST(VulkanBackend, DeterministicAndTheStagingPathGivesTheSameBits) {
   EXPECT_GT(test::mean_valid(s, la), 0.0);
 }
 
+// The probes' running means kept on the device (VulkanBackend::probe_bounce: gather into the
+// means, scatter, one submission per bounce) give exactly the bits of the means kept on the
+// host (TraceBackend's default, two submissions per bounce), update after update; and the pass
+// costs say so: one submission per pass or bounce, no probe radiance crossing either way.
+TEST(VulkanBackend, ProbeMeansOnTheDeviceGiveTheHostsBits) {
+  EngineSetup s(textured_cornell(), 24.0f);
+  EngineParams p;
+  auto host_backend = vulkan(s);
+  host_backend->set_resident_probes(false);
+  auto a = s.engine(p, vulkan(s)), b = s.engine(p, std::move(host_backend));
+  for (int u = 0; u < 3; ++u) {
+    const UpdateStats sa = a->update(), sb = b->update();
+    ASSERT_EQ(sa.scatter.size(), 2u);
+    ASSERT_EQ(sb.scatter.size(), 2u);
+    EXPECT_EQ(sa.direct.submissions, 1u);
+    for (int k = 0; k < 2; ++k) {
+      EXPECT_EQ(sa.probes[k].submissions + sa.scatter[k].submissions, 1u) << k;
+      EXPECT_EQ(sb.probes[k].submissions + sb.scatter[k].submissions, 2u) << k;
+      EXPECT_EQ(sa.probes[k].bytes_down, 0u) << k;
+      EXPECT_GT(sb.probes[k].bytes_down, 0u) << k;
+      EXPECT_EQ(sa.probes[k].rays, sb.probes[k].rays) << k;
+      EXPECT_EQ(sa.scatter[k].bytes_down, sb.scatter[k].bytes_down) << k;
+      EXPECT_GT(sa.scatter[k].device_seconds, 0.0) << k;
+    }
+  }
+  const auto la = a->lightmaps(), lb = b->lightmaps();
+  ASSERT_EQ(la.size(), lb.size());
+  for (std::size_t o = 0; o < la.size(); ++o) EXPECT_EQ(la[o].texels, lb[o].texels) << o;
+  EXPECT_GT(test::mean_valid(s, la), 0.0);
+}
+
 // The reference path tracer's lightmaps on the device against the CPU's (PathTracer), the
 // control being the CPU against itself with another seed: per texel, the RMS luminance
 // difference (relative to the scene mean) at most 1.25 x the control's; the scene mean within

@@ -59,7 +59,6 @@ CellsMethod::CellsMethod(const EngineParams& params, const World& world, const R
                             " is short for cells of " + std::to_string(params_.cell_size) +
                             ": expect probe error; use a cell size of at most " +
                             std::to_string(2.5f * params_.tracing_range));
-  probe_mean_.assign(params_.indirect_bounces + 1, std::vector<glm::vec3>());
 }
 
 void CellsMethod::place_probes(const SurfaceTexels& texels, const SceneChange* change,
@@ -183,17 +182,9 @@ PassResult CellsMethod::prepare(const PassInput& /*in*/) {
 
 BounceResult CellsMethod::bounce(const PassInput& in, const RadianceField& prev,
                                  std::vector<glm::vec3>& out) {
+  if (params_.uses_probes()) return backend_->probe_bounce(in, prev, probe_weight_, means_, out);
   BounceResult r;
-  std::vector<glm::vec3>& mean = probe_mean_[in.bounce];
-  if (params_.uses_probes()) {
-    std::vector<glm::vec3> est;
-    r.probes = backend_->gather_probes(in, prev, est);
-    if (mean.size() != est.size()) mean.assign(est.size(), glm::vec3(0.0f));
-    const float w = probe_weight_;
-    tbb::parallel_for(std::size_t(0), est.size(),
-                      [&](std::size_t i) { mean[i] += (est[i] - mean[i]) * w; });
-  }
-  r.scatter = backend_->scatter(in, prev, mean, out);
+  r.scatter = backend_->scatter(in, prev, {}, out);
   return r;
 }
 

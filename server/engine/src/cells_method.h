@@ -39,9 +39,10 @@ class CellsMethod final : public IndirectMethod {
   const World* world_;
   const RayScene* rays_;
   TraceBackend* backend_;
-  // Running mean of every probe texel's radiance, per bounce; every full update gathers every
-  // probe, so one count serves them all (restarted by every edit).
-  std::vector<std::vector<glm::vec3>> probe_mean_;
+  // Running mean of every probe texel's radiance, per bounce, kept by the backend
+  // (TraceBackend::probe_bounce); every full update gathers every probe, so one count serves
+  // them all (restarted by every edit).
+  ProbeMeans means_;
   std::uint32_t probe_samples_ = 0;
   float probe_weight_ = 1.0f;  // of this update's probe estimate in the running mean
 };

@@ -45,10 +45,6 @@ void accumulate(std::vector<glm::vec3>& mean, const std::vector<glm::vec3>& est,
   });
 }
 
-PassTiming timing(const PassResult& r) {
-  return {r.seconds, r.rays};
-}
-
 }  // namespace
 
 std::uint64_t UpdateStats::total_rays() const {
@@ -173,7 +169,7 @@ UpdateStats Engine::update() {
   PassInput in{*world_, *atlas_,  texels_, probes_.weights, probes_.grid, params_, texels,
                offsets, updates_, 0,       generation_};
   std::vector<glm::vec3> est;
-  stats.direct = timing(backend_->direct(in, est));
+  stats.direct = backend_->direct(in, est);
   accumulate(mean_[0], est, samples_, texels);
   if (partial) {
     // While catching up after an edit: the direct light only. The bounces would read texels
@@ -214,14 +210,14 @@ void Engine::bounces(PassInput& in, const std::vector<glm::vec3>& direct, Update
   const int k = params_.indirect_bounces;
   const std::vector<std::uint32_t>& texels = in.unit_texels;
   std::vector<glm::vec3> est, total = direct;
-  stats.prepare = timing(method_->prepare(in));
+  stats.prepare = method_->prepare(in);
   std::vector<Lightmap> prev = to_lightmaps(mean_[0]);
   for (int b = 1; b <= k; ++b) {
     in.bounce = static_cast<std::uint32_t>(b);
     RadianceField field{world_, atlas_, &prev};
     const BounceResult r = method_->bounce(in, field, est);
-    stats.probes.push_back(timing(r.probes));
-    stats.scatter.push_back(timing(r.scatter));
+    stats.probes.push_back(r.probes);
+    stats.scatter.push_back(r.scatter);
     accumulate(mean_[b], est, bounce_samples_, texels);
     for (std::uint32_t i : texels) total[i] += est[i];
     if (b < k) prev = to_lightmaps(mean_[b]);

@@ -61,8 +61,9 @@ enum Flags : std::uint32_t {
   kFlagFixed = 4,
   kFlagProbes = 8,
   kFlagCamera = 16,
-  kFlagSky = 32,     // the scene has a sky (Sky::enabled)
-  kFlagSkyMap = 64,  // ... a map with its sampling tables (SkyDistribution::valid)
+  kFlagSky = 32,         // the scene has a sky (Sky::enabled)
+  kFlagSkyMap = 64,      // ... a map with its sampling tables (SkyDistribution::valid)
+  kFlagProbeMean = 128,  // the gather folds its estimates into the running means
 };
 
 // shaders/common.glsl's push constant block (std430 offsets).
@@ -75,8 +76,14 @@ struct PushConstants {
   std::uint32_t emissive_count = 0;
   float bounds_hi[3] = {0.0f, 0.0f, 0.0f};
   std::int32_t probe_res = 0;
+  std::uint32_t probe_offset = 0;
+  float probe_weight = 0.0f;
+  std::uint32_t pad[2] = {0, 0};
 };
-static_assert(sizeof(PushConstants) == 80);
+static_assert(sizeof(PushConstants) == 96);
+
+// Timestamps per submission: its start, marks between dispatches, its end.
+constexpr std::uint32_t kTimestamps = 4;
 
 struct Buffer {
   VkBuffer buffer = VK_NULL_HANDLE;
@@ -144,9 +151,28 @@ struct VulkanBackend::Impl {
       if (!data.empty()) std::memcpy(dst, data.data(), data.size() * sizeof(T));
     });
   }
-  // Records the pending uploads, `count` items of one pass and the read-back of `count`
-  // results, submits and waits; the results land in `out`. With `w_sum`, the results' w are
-  // added to it: every result's, or only those at `w_at`.
+  // One submission, in pieces: begin() starts the command buffer (a timestamp, then the
+  // pending uploads and a barrier), dispatch() records one pipeline over `count` items,
+  // read_back() the copy of `out_size` results to the host, and submit() submits, waits on the
+  // fence and reads the device time. Each piece adds to the pass's counters (`stats`).
+  void begin();
+  // A timestamp between two dispatches of one submission: submit() then reports the device
+  // time of each stretch in `intervals`.
+  void mark();
+  void dispatch(PipelineId pipeline, PushConstants pc, std::uint32_t count);
+  void read_back(std::size_t out_size);
+  void submit();
+  // The results read back by the last submission: `out_size` of them into `out`. With
+  // `w_sum`, the results' w are added to it: every result's, or only those at `w_at`.
+  void take_results(std::vector<glm::vec3>& out, std::size_t out_size, double* w_sum = nullptr,
+                    const std::vector<std::uint32_t>* w_at = nullptr) const;
+  // The result buffer (and its staging copy) large enough for `out_size` results.
+  void prepare_result(std::size_t out_size);
+  // The running probe means of `id` (ProbeMeans) for `bounces` bounces of `per_bounce` probe
+  // texels each in kProbeRadiance; returns true when they are new (to be zeroed first).
+  bool resident_means(std::uint64_t id, std::size_t per_bounce, int bounces);
+  // One pass in one submission: the pending uploads, `count` items of `pipeline`, the read-back
+  // of `out_size` results into `out` (w_sum, w_at as for take_results).
   void run(PipelineId pipeline, PushConstants pc, std::uint32_t count, std::vector<glm::vec3>& out,
            std::size_t out_size, double* w_sum = nullptr,
            const std::vector<std::uint32_t>* w_at = nullptr);
@@ -196,6 +222,22 @@ struct VulkanBackend::Impl {
   VkCommandPool command_pool = VK_NULL_HANDLE;
   VkCommandBuffer commands = VK_NULL_HANDLE;
   VkFence fence = VK_NULL_HANDLE;
+  VkQueryPool timestamps = VK_NULL_HANDLE;  // kTimestamps; none without timestamps
+  double timestamp_ns = 0.0;                // nanoseconds per tick
+  std::uint64_t timestamp_mask = 0;         // the queue's valid timestamp bits
+  std::uint32_t next_query = 0;             // the next timestamp of this submission
+  std::vector<double> intervals;            // device seconds between this submission's marks
+  bool readback_pending = false;            // read_back() recorded a staging copy
+  // Whose running probe means kProbeRadiance holds (probe_bounce), for how many probe texels
+  // per bounce and bounces; anything else written there (scatter()) clears it.
+  struct MeansKey {
+    std::uint64_t id = 0;
+    std::size_t per_bounce = 0;
+    int bounces = 0;
+    bool operator==(const MeansKey&) const = default;
+  } means_key;
+  bool resident_probes = true;  // probe_bounce on the device (false: TraceBackend's default)
+  PassResult stats;             // the current pass's counters
   Buffer device_buffers[kBindings];
   Buffer staging[kBindings];
   std::vector<std::pair<int, VkDeviceSize>> uploads;
@@ -216,6 +258,7 @@ struct VulkanBackend::Impl {
       if (std::uncaught_exceptions() > exceptions) {
         impl->engine_key = EngineKey{};
         impl->prev_key = PrevKey{};
+        impl->means_key = MeansKey{};
         impl->uploads.clear();
       }
     }
@@ -229,12 +272,12 @@ struct VulkanBackend::Impl {
     std::lock_guard lock(mutex);
     ForgetOnThrow guard{this};
     const auto start = std::chrono::steady_clock::now();
+    stats = PassResult{};
     prepare(in);
     if (prev) write_previous(*prev, in);
-    PassResult r;
-    r.rays = body();
-    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return r;
+    stats.rays = body();
+    stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return stats;
   }
 
   EngineKey engine_key;

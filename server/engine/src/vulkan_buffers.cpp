@@ -1,6 +1,7 @@
 // The Vulkan backend's storage buffers and submission (vulkan_backend_impl.h): memory types,
-// buffers (device-local with staging, or host-visible written in place), uploads, and one pass's
-// dispatches, read-back and wait.
+// buffers (device-local with staging, or host-visible written in place), uploads, and the
+// pieces of one submission (begin, dispatches, read-back, submit with its fence wait and the
+// device time from two timestamps).
 #include "vulkan_backend_impl.h"
 
 #include <algorithm>
@@ -94,6 +95,7 @@ void VulkanBackend::Impl::ensure(int binding, VkDeviceSize bytes) {
 // copy recorded before the next dispatch.
 void VulkanBackend::Impl::write(int binding, VkDeviceSize bytes,
                                 const std::function<void(void*)>& fill) {
+  stats.bytes_up += bytes;
   bytes = std::max<VkDeviceSize>(bytes, 16);
   ensure(binding, bytes);
   if (device_buffers[binding].mapped) {
@@ -108,26 +110,18 @@ void VulkanBackend::Impl::write(int binding, VkDeviceSize bytes,
   uploads.emplace_back(binding, bytes);
 }
 
-// Records the pending uploads, `count` items of one pass and the read-back of `count`
-// results, submits and waits; the results land in `out`. With `w_sum`, the results' w are
-// added to it: every result's, or only those at `w_at`.
-void VulkanBackend::Impl::run(PipelineId pipeline, PushConstants pc, std::uint32_t count,
-                              std::vector<glm::vec3>& out, std::size_t out_size, double* w_sum,
-                              const std::vector<std::uint32_t>* w_at) {
-  const VkDeviceSize result_bytes = std::max<VkDeviceSize>(out_size * sizeof(glm::vec4), 16);
-  ensure(kResult, result_bytes);
-  const bool readback = device_buffers[kResult].mapped == nullptr;
-  if (readback && staging[kResult].size < result_bytes) {
-    destroy(staging[kResult]);
-    create(staging[kResult], result_bytes, true);
-  }
+void VulkanBackend::Impl::begin() {
   if (descriptors_dirty) update_descriptors();
-
-  VkCommandBufferBeginInfo begin{};
-  begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
-  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  VkCommandBufferBeginInfo info{};
+  info.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+  info.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
   vk_check(vkResetCommandBuffer(commands, 0), "vkResetCommandBuffer");
-  vk_check(vkBeginCommandBuffer(commands, &begin), "vkBeginCommandBuffer");
+  vk_check(vkBeginCommandBuffer(commands, &info), "vkBeginCommandBuffer");
+  next_query = 0;
+  if (timestamps) {
+    vkCmdResetQueryPool(commands, timestamps, 0, kTimestamps);
+    vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, next_query++);
+  }
   for (auto [binding, bytes] : uploads) {
     VkBufferCopy region{0, 0, bytes};
     vkCmdCopyBuffer(commands, staging[binding].buffer, device_buffers[binding].buffer, 1, &region);
@@ -135,6 +129,15 @@ void VulkanBackend::Impl::run(PipelineId pipeline, PushConstants pc, std::uint32
   if (!uploads.empty())
     barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
             VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
+  readback_pending = false;
+}
+
+void VulkanBackend::Impl::mark() {
+  if (timestamps && next_query + 1 < kTimestamps)
+    vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, timestamps, next_query++);
+}
+
+void VulkanBackend::Impl::dispatch(PipelineId pipeline, PushConstants pc, std::uint32_t count) {
   vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipelines[pipeline]);
   vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_layout, 0, 1,
                           &descriptor_set, 0, nullptr);
@@ -146,37 +149,97 @@ void VulkanBackend::Impl::run(PipelineId pipeline, PushConstants pc, std::uint32
     const std::uint64_t items = std::min<std::uint64_t>(chunk, count - base);
     vkCmdDispatch(commands, static_cast<std::uint32_t>((items + 63u) / 64u), 1, 1);
   }
-  if (readback) {
+}
+
+void VulkanBackend::Impl::read_back(std::size_t out_size) {
+  const VkDeviceSize result_bytes = std::max<VkDeviceSize>(out_size * sizeof(glm::vec4), 16);
+  stats.bytes_down += out_size * sizeof(glm::vec4);
+  if (device_buffers[kResult].mapped == nullptr) {
     barrier(VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
             VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
     VkBufferCopy region{0, 0, result_bytes};
     vkCmdCopyBuffer(commands, device_buffers[kResult].buffer, staging[kResult].buffer, 1, &region);
     barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
             VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
+    readback_pending = true;
   } else {
     barrier(VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
             VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
   }
+}
+
+void VulkanBackend::Impl::submit() {
+  if (timestamps)
+    vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, next_query++);
   vk_check(vkEndCommandBuffer(commands), "vkEndCommandBuffer");
-  VkSubmitInfo submit{};
-  submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
-  submit.commandBufferCount = 1;
-  submit.pCommandBuffers = &commands;
+  VkSubmitInfo info{};
+  info.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+  info.commandBufferCount = 1;
+  info.pCommandBuffers = &commands;
   vk_check(vkResetFences(vk.device, 1, &fence), "vkResetFences");
-  vk_check(vkQueueSubmit(vk.queue, 1, &submit, fence), "vkQueueSubmit");
+  vk_check(vkQueueSubmit(vk.queue, 1, &info, fence), "vkQueueSubmit");
   vk_check(vkWaitForFences(vk.device, 1, &fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
+  ++stats.submissions;
   // Scene and engine data are written once: their staging copies are not needed again.
   for (auto [binding, bytes] : uploads)
     if (binding != kPrev && binding != kProbeRadiance) destroy(staging[binding]);
   uploads.clear();
-  const auto* src = static_cast<const glm::vec4*>(readback ? staging[kResult].mapped
-                                                           : device_buffers[kResult].mapped);
+  intervals.clear();
+  if (timestamps) {
+    std::uint64_t ticks[kTimestamps] = {};
+    const VkResult r = vkGetQueryPoolResults(vk.device, timestamps, 0, next_query, sizeof(ticks),
+                                             ticks, sizeof(std::uint64_t),
+                                             VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT);
+    vk_check(r, "vkGetQueryPoolResults");
+    for (std::uint32_t q = 1; q < next_query; ++q) {
+      const std::uint64_t elapsed = (ticks[q] - ticks[q - 1]) & timestamp_mask;
+      intervals.push_back(static_cast<double>(elapsed) * timestamp_ns * 1e-9);
+      stats.device_seconds += intervals.back();
+    }
+  }
+}
+
+void VulkanBackend::Impl::take_results(std::vector<glm::vec3>& out, std::size_t out_size,
+                                       double* w_sum,
+                                       const std::vector<std::uint32_t>* w_at) const {
+  const auto* src = static_cast<const glm::vec4*>(
+      readback_pending ? staging[kResult].mapped : device_buffers[kResult].mapped);
   out.resize(out_size);
   for (std::size_t i = 0; i < out_size; ++i) out[i] = glm::vec3(src[i]);
   if (w_sum && w_at)
     for (std::uint32_t i : *w_at) *w_sum += i < out_size ? src[i].w : 0.0f;
   else if (w_sum)
     for (std::size_t i = 0; i < out_size; ++i) *w_sum += src[i].w;
+}
+
+void VulkanBackend::Impl::prepare_result(std::size_t out_size) {
+  const VkDeviceSize result_bytes = std::max<VkDeviceSize>(out_size * sizeof(glm::vec4), 16);
+  ensure(kResult, result_bytes);
+  if (device_buffers[kResult].mapped == nullptr && staging[kResult].size < result_bytes) {
+    destroy(staging[kResult]);
+    create(staging[kResult], result_bytes, true);
+  }
+}
+
+bool VulkanBackend::Impl::resident_means(std::uint64_t id, std::size_t per_bounce, int bounces) {
+  const MeansKey key{id, per_bounce, bounces};
+  if (key == means_key) return false;
+  const VkDeviceSize bytes = static_cast<VkDeviceSize>(per_bounce) *
+                             static_cast<VkDeviceSize>(std::max(bounces, 1)) * sizeof(glm::vec4);
+  ensure(kProbeRadiance, std::max<VkDeviceSize>(bytes, 16));
+  means_key = key;
+  return true;
+}
+
+void VulkanBackend::Impl::run(PipelineId pipeline, PushConstants pc, std::uint32_t count,
+                              std::vector<glm::vec3>& out, std::size_t out_size, double* w_sum,
+                              const std::vector<std::uint32_t>* w_at) {
+  prepare_result(out_size);
+  begin();
+  dispatch(pipeline, pc, count);
+  read_back(out_size);
+  submit();
+  take_results(out, out_size, w_sum, w_at);
 }
 
 void VulkanBackend::Impl::barrier(VkPipelineStageFlags src_stage, VkAccessFlags src,

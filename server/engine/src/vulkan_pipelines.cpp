@@ -1,6 +1,6 @@
 // The Vulkan backend's device objects (vulkan_backend_impl.h): the limits it checks, the
 // descriptor set over the storage buffers, the compute pipelines of the embedded SPIR-V shaders,
-// the command buffer and its fence; and their release.
+// the command buffer, its fence and timestamp queries; and their release.
 #include "vulkan_backend_impl.h"
 
 #include <array>
@@ -51,6 +51,8 @@ void VulkanBackend::Impl::release() {
     destroy(staging[b]);
   }
   if (fence) vkDestroyFence(vk.device, fence, nullptr);
+  if (timestamps) vkDestroyQueryPool(vk.device, timestamps, nullptr);
+  timestamps = VK_NULL_HANDLE;
   if (command_pool) vkDestroyCommandPool(vk.device, command_pool, nullptr);
   for (VkPipeline& p : pipelines) {
     if (p) vkDestroyPipeline(vk.device, p, nullptr);
@@ -145,6 +147,21 @@ void VulkanBackend::Impl::create_commands() {
   VkFenceCreateInfo fi{};
   fi.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
   vk_check(vkCreateFence(vk.device, &fi, nullptr, &fence), "vkCreateFence");
+  // Timestamps around each submission, where the compute queue has them.
+  std::uint32_t families = 0;
+  vkGetPhysicalDeviceQueueFamilyProperties(vk.physical, &families, nullptr);
+  std::vector<VkQueueFamilyProperties> family(families);
+  vkGetPhysicalDeviceQueueFamilyProperties(vk.physical, &families, family.data());
+  const std::uint32_t valid_bits =
+      vk.queue_family < families ? family[vk.queue_family].timestampValidBits : 0;
+  if (valid_bits == 0 || properties.limits.timestampPeriod <= 0.0f) return;
+  timestamp_mask = valid_bits >= 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << valid_bits) - 1;
+  timestamp_ns = properties.limits.timestampPeriod;
+  VkQueryPoolCreateInfo qi{};
+  qi.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
+  qi.queryType = VK_QUERY_TYPE_TIMESTAMP;
+  qi.queryCount = kTimestamps;
+  vk_check(vkCreateQueryPool(vk.device, &qi, nullptr, &timestamps), "vkCreateQueryPool");
 }
 
 void VulkanBackend::Impl::update_descriptors() {

@@ -23,10 +23,8 @@
 
 namespace irradcast {
 
-struct PassTiming {
-  double seconds = 0.0;
-  std::uint64_t rays = 0;
-};
+// One pass's cost as the backend reported it.
+using PassTiming = PassResult;
 
 struct UpdateStats {
   PassTiming direct;

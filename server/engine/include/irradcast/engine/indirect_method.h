@@ -20,13 +20,6 @@ namespace irradcast {
 
 class TraceBackend;
 
-// What one indirect bounce cost: the probe gather (zero for methods without probes) and the
-// bounce itself.
-struct BounceResult {
-  PassResult probes;
-  PassResult scatter;
-};
-
 class IndirectMethod {
  public:
   // Ends one timed step of a scene change ("probes (12)"), for Engine::change_timings().

@@ -91,10 +91,32 @@ struct PassInput {
   std::uint64_t generation = 0;
 };
 
-// What one pass cost.
+// What one pass cost. `seconds` is wall time around the whole pass (uploads, submission, waits
+// and read-back included); the rest is what a device backend measures (zero on the CPU).
 struct PassResult {
   std::uint64_t rays = 0;
   double seconds = 0.0;
+  double device_seconds = 0.0;    // the device's own time (timestamp queries) for its commands
+  std::uint64_t bytes_up = 0;     // host to device: written in place or through staging
+  std::uint64_t bytes_down = 0;   // device to host: results read back
+  std::uint32_t submissions = 0;  // queue submissions, each waited for on a fence
+  // Adds every field (totals over passes or updates).
+  PassResult& operator+=(const PassResult& o) {
+    rays += o.rays;
+    seconds += o.seconds;
+    device_seconds += o.device_seconds;
+    bytes_up += o.bytes_up;
+    bytes_down += o.bytes_down;
+    submissions += o.submissions;
+    return *this;
+  }
+};
+
+// What one indirect bounce cost: the probe gather (zero for methods without probes) and the
+// bounce itself.
+struct BounceResult {
+  PassResult probes;
+  PassResult scatter;
 };
 
 struct ProbeStats {

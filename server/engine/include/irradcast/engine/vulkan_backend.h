@@ -41,6 +41,14 @@ class VulkanBackend final : public TraceBackend {
   PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) override;
   PassResult gather_probes(const PassInput& in, const RadianceField& prev,
                            std::vector<glm::vec3>& out) override;
+  // The gather folds its estimates into running means kept in device memory (one region per
+  // bounce, zeroed for a new ProbeMeans), then the scatter reads them: one submission, no probe
+  // data crossing to the host. Bit for bit what the default computes on the host.
+  BounceResult probe_bounce(const PassInput& in, const RadianceField& prev, float weight,
+                            ProbeMeans& means, std::vector<glm::vec3>& out) override;
+  // Off: probe_bounce runs TraceBackend's default (gather, means on the host, scatter: two
+  // submissions), for irradcast-bench-backend's before/after comparison. On by default.
+  void set_resident_probes(bool on);
   PassResult scatter(const PassInput& in, const RadianceField& prev,
                      const std::vector<glm::vec3>& probe_radiance,
                      std::vector<glm::vec3>& out) override;
