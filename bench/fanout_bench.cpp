@@ -78,13 +78,7 @@ Point run_users(const Options& o, std::uint16_t port, const Child& server, int n
 
 // OUT/fanout.json.
 fs::path write_report(const Options& o, const std::vector<Point>& points) {
-  json j;
-  j["scene"] = o.scene;
-  j["cores"] = std::thread::hardware_concurrency();
-  j["warmup_updates"] = o.warmup_updates;
-  j["window_s"] = o.window_s;
-  double load[3] = {0, 0, 0};
-  if (getloadavg(load, 3) > 0) j["load_average"] = {load[0], load[1], load[2]};
+  json j = report_header(o);
   for (const Point& p : points) {
     json pj = json::parse(p.report.json(false));
     pj["server_io_cores"] = p.io_cores;

@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -153,6 +154,17 @@ LoadReport run_thin_users(const Options& o, const std::vector<HostPort>& servers
       std::fprintf(stderr, "[fanout] %d users: %.0f/%.0f s, %d full, %d failed, p99 %.1f ms\n", n,
                    pr.elapsed_s, lo.duration_s, pr.full_image, pr.failed, pr.latency_p99_ms);
   });
+}
+
+nlohmann::json report_header(const Options& o) {
+  nlohmann::json j;
+  j["scene"] = o.scene;
+  j["cores"] = std::thread::hardware_concurrency();
+  j["warmup_updates"] = o.warmup_updates;
+  j["window_s"] = o.window_s;
+  double load[3] = {0, 0, 0};
+  if (getloadavg(load, 3) > 0) j["load_average"] = {load[0], load[1], load[2]};
+  return j;
 }
 
 plot::Series series(const std::string& label, plot::Color color, bool points) {

@@ -7,6 +7,8 @@
 
 #include <sys/types.h>
 
+#include <nlohmann/json.hpp>
+
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -73,6 +75,9 @@ void wait_listening(std::uint16_t port, double seconds, const std::string& what)
 // n thin users over `servers` (user i first on server i mod size), for long enough that every
 // user has its first full image and then o.window_s seconds.
 LoadReport run_thin_users(const Options& o, const std::vector<HostPort>& servers, int n);
+
+// The JSON report's fields that describe the run (scene, cores, warm-up, window, load average).
+nlohmann::json report_header(const Options& o);
 
 plot::Series series(const std::string& label, plot::Color color, bool points);
 std::string ms(double v);

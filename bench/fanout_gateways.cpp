@@ -117,13 +117,7 @@ std::string row_label(const Row& r) {
 }
 
 void write_json(const Options& o, const std::vector<Row>& rows) {
-  json j;
-  j["scene"] = o.scene;
-  j["cores"] = std::thread::hardware_concurrency();
-  j["warmup_updates"] = o.warmup_updates;
-  j["window_s"] = o.window_s;
-  double load[3] = {0, 0, 0};
-  if (getloadavg(load, 3) > 0) j["load_average"] = {load[0], load[1], load[2]};
+  json j = report_header(o);
   for (const Row& r : rows) {
     json rj = json::parse(r.report.json(false));
     rj["gateways"] = r.gateways;

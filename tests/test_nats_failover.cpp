@@ -22,31 +22,6 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-// Polls `v` until it holds every tile of `want` at `want`'s version; false after the limit.
-bool holds_versions_of(ViewClient& v, const TileStore& want) {
-  auto matches = [&] {
-    for (std::uint32_t i = 0; i < want.tile_count(); ++i) {
-      const TileStore::Tile& t = want.tile(i);
-      if (v.tile_version(t.lightmap, t.tx, t.ty) != want.version(i)) return false;
-    }
-    return true;
-  };
-  const auto deadline = Clock::now() + 15s;
-  while (!matches() && Clock::now() < deadline) v.poll(20ms);
-  return matches();
-}
-
-bool same_versions(const TileStore& a, const TileStore& b) {
-  if (a.tile_count() != b.tile_count()) return false;
-  for (std::uint32_t i = 0; i < a.tile_count(); ++i)
-    if (a.version(i) != b.version(i)) return false;
-  return true;
-}
-
-ImageRGB view_of(const ViewClient& v) {
-  return v.compose(default_camera(v.scene(), v.world()), 48, 36);
-}
-
 HostPort address_of(const Server& s) {
   return {"127.0.0.1", s.port()};
 }
@@ -61,8 +36,8 @@ TEST(NatsFailover, KillingAGatewayMovesAFailoverViewerToTheOtherWhichConverges) 
   test::NatsGatewayNode b(nats.url());
   ASSERT_TRUE(origin.settle());
   ASSERT_TRUE(test::eventually([&] {
-    return same_versions(origin.host.tiles(), a->gateway.tiles()) &&
-           same_versions(origin.host.tiles(), b.gateway.tiles());
+    return test::same_versions(origin.host.tiles(), a->gateway.tiles()) &&
+           test::same_versions(origin.host.tiles(), b.gateway.tiles());
   }));
 
   ViewClientOptions vo;
@@ -73,7 +48,7 @@ TEST(NatsFailover, KillingAGatewayMovesAFailoverViewerToTheOtherWhichConverges) 
   ViewClient v(vo);
   v.connect();
   EXPECT_EQ(v.server().port, a->server->port());
-  ASSERT_TRUE(holds_versions_of(v, origin.host.tiles()));
+  ASSERT_TRUE(test::converge(v, origin.host.tiles()));
   const std::uint64_t tiles_before = v.counters().tiles_applied;
   const std::uint16_t port_b = b.server->port();
 
@@ -97,9 +72,9 @@ TEST(NatsFailover, KillingAGatewayMovesAFailoverViewerToTheOtherWhichConverges) 
       parse_edit_json(R"({"op": "move", "node": "tall_block", "by": [0.05, 0, 0]})"));
   ASSERT_TRUE(test::eventually([&] { return origin.host.stats().updates > updates_before; }, 15s));
   ASSERT_TRUE(origin.settle());
-  ASSERT_TRUE(
-      test::eventually([&] { return same_versions(origin.host.tiles(), b.gateway.tiles()); }, 15s));
-  ASSERT_TRUE(holds_versions_of(v, origin.host.tiles()));
+  ASSERT_TRUE(test::eventually(
+      [&] { return test::same_versions(origin.host.tiles(), b.gateway.tiles()); }, 15s));
+  ASSERT_TRUE(test::converge(v, origin.host.tiles()));
   EXPECT_EQ(v.scene_revision(), 1u);
   EXPECT_GT(v.counters().tiles_applied, tiles_before);
 
@@ -107,14 +82,8 @@ TEST(NatsFailover, KillingAGatewayMovesAFailoverViewerToTheOtherWhichConverges) 
   direct_options.connect_timeout = 10000ms;
   ViewClient direct(direct_options);
   direct.connect();
-  ASSERT_TRUE(holds_versions_of(direct, origin.host.tiles()));
-  const ImageRGB via = view_of(v), reference = view_of(direct);
-  ASSERT_EQ(via.width, reference.width);
-  ASSERT_EQ(via.height, reference.height);
-  std::size_t differ = 0;
-  for (std::size_t i = 0; i < via.pixels.size(); ++i)
-    differ += via.pixels[i] != reference.pixels[i];
-  EXPECT_EQ(differ, 0u) << "the failover viewer's image differs from the origin viewer's";
+  ASSERT_TRUE(test::converge(direct, origin.host.tiles()));
+  test::expect_same_image(test::view_of(v), test::view_of(direct), "the failover viewer");
   v.close();
   direct.close();
 }
