@@ -13,7 +13,9 @@
 #include <memory>
 #include <string>
 
+#include "irradcast/client/view_client.h"
 #include "irradcast/common/builtin.h"
+#include "irradcast/common/camera.h"
 #include "irradcast/service/engine_host.h"
 #include "irradcast/service/nats_gateway.h"
 #include "irradcast/service/nats_origin.h"
@@ -132,5 +134,43 @@ struct NatsGatewayNode {
   NatsGateway gateway;
   std::unique_ptr<Server> server;
 };
+
+// Polls viewer `v` until it holds every tile at the versions `want` has (the tile store it must
+// match); false after the limit.
+inline bool converge(ViewClient& v, const TileStore& want,
+                     std::chrono::milliseconds limit = std::chrono::milliseconds(15000)) {
+  auto matches = [&] {
+    for (std::uint32_t i = 0; i < want.tile_count(); ++i) {
+      const TileStore::Tile& t = want.tile(i);
+      if (v.tile_version(t.lightmap, t.tx, t.ty) != want.version(i)) return false;
+    }
+    return true;
+  };
+  const auto deadline = std::chrono::steady_clock::now() + limit;
+  while (!matches() && std::chrono::steady_clock::now() < deadline)
+    v.poll(std::chrono::milliseconds(20));
+  return matches();
+}
+
+// Two tile stores hold the same versions of every tile.
+inline bool same_versions(const TileStore& a, const TileStore& b) {
+  if (a.tile_count() != b.tile_count()) return false;
+  for (std::uint32_t i = 0; i < a.tile_count(); ++i)
+    if (a.version(i) != b.version(i)) return false;
+  return true;
+}
+
+// A small view of what viewer `v` holds, from the scene's default camera.
+inline ImageRGB view_of(const ViewClient& v) {
+  return v.compose(default_camera(v.scene(), v.world()), 48, 36);
+}
+
+inline void expect_same_image(const ImageRGB& a, const ImageRGB& b, const char* what) {
+  ASSERT_EQ(a.width, b.width);
+  ASSERT_EQ(a.height, b.height);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < a.pixels.size(); ++i) differ += a.pixels[i] != b.pixels[i];
+  EXPECT_EQ(differ, 0u) << what << ": pixels differ from the origin viewer's";
+}
 
 }  // namespace irradcast::test

@@ -30,40 +30,10 @@ namespace {
 
 const std::string kToken = "secret-token-for-nats-tests";
 
-// A viewer of `server` that polls until it holds every tile at the versions `want` has (the
-// tile store it must match); false after the limit.
-bool converge(ViewClient& v, const TileStore& want, std::chrono::milliseconds limit = 15000ms) {
-  auto matches = [&] {
-    for (std::uint32_t i = 0; i < want.tile_count(); ++i) {
-      const TileStore::Tile& t = want.tile(i);
-      if (v.tile_version(t.lightmap, t.tx, t.ty) != want.version(i)) return false;
-    }
-    return true;
-  };
-  const auto deadline = std::chrono::steady_clock::now() + limit;
-  while (!matches() && std::chrono::steady_clock::now() < deadline) v.poll(20ms);
-  return matches();
-}
-
-// The gateway's store holds the origin's versions of every tile.
-bool same_versions(const TileStore& a, const TileStore& b) {
-  if (a.tile_count() != b.tile_count()) return false;
-  for (std::uint32_t i = 0; i < a.tile_count(); ++i)
-    if (a.version(i) != b.version(i)) return false;
-  return true;
-}
-
-ImageRGB view_of(const ViewClient& v) {
-  return v.compose(default_camera(v.scene(), v.world()), 48, 36);
-}
-
-void expect_same_image(const ImageRGB& a, const ImageRGB& b, const char* what) {
-  ASSERT_EQ(a.width, b.width);
-  ASSERT_EQ(a.height, b.height);
-  std::size_t differ = 0;
-  for (std::size_t i = 0; i < a.pixels.size(); ++i) differ += a.pixels[i] != b.pixels[i];
-  EXPECT_EQ(differ, 0u) << what << ": pixels differ from the origin viewer's";
-}
+using test::converge;
+using test::expect_same_image;
+using test::same_versions;
+using test::view_of;
 
 ViewClientOptions viewer_of(const Server& s, const std::string& name) {
   ViewClientOptions o = test::client_of(s, name);
