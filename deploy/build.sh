@@ -6,6 +6,11 @@ dir=${1:-build}
 shift || true
 generator=()
 if command -v ninja >/dev/null 2>&1; then generator=(-G Ninja); fi
+# ccache where the machine has one (not installed by install-deps.sh): rebuilds of the same
+# sources in another tree (CI's clean clone, the sanitizer and Release trees) come from the cache.
+if command -v ccache >/dev/null 2>&1; then
+  generator+=(-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+fi
 if [ ! -f "$dir/CMakeCache.txt" ]; then
   cmake -S . -B "$dir" "${generator[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo "$@"
 else
