@@ -96,13 +96,13 @@ struct NatsGateway::Impl {
   std::uint64_t last_edit = 0;             // the newest edit revision forwarded
 
   std::unique_ptr<nats_link::Connection> conn;
-  natsSubscription* sub = nullptr;  // worker thread
+  nats_link::Subscription sub;  // the stream's; worker thread
   std::thread worker;
 
   void run();
   void subscribe();
   void send_cameras();
-  static void on_message(natsConnection*, natsSubscription*, natsMsg* msg, void* self);
+  void on_message(natsMsg* msg);
   void handle(const std::string& kind, const std::string& data);
   void on_state(const std::string& data);
   void on_chunk(const std::string& data);
@@ -121,8 +121,8 @@ struct NatsGateway::Impl {
   }
 };
 
-void NatsGateway::Impl::on_message(natsConnection*, natsSubscription*, natsMsg* msg, void* self) {
-  Impl& im = *static_cast<Impl*>(self);
+void NatsGateway::Impl::on_message(natsMsg* msg) {
+  Impl& im = *this;
   const std::string subject = natsMsg_GetSubject(msg) ? natsMsg_GetSubject(msg) : "";
   const std::string data = nats_link::data_of(msg);
   natsMsg_Destroy(msg);
@@ -312,7 +312,7 @@ void NatsGateway::Impl::run() {
     if (subscribed != conn->generation() && now >= retry) {
       const std::uint64_t generation = conn->generation();
       subscribe();
-      if (sub) subscribed = generation;
+      if (sub.active()) subscribed = generation;
       retry = now + std::chrono::milliseconds(500);
     }
     if (send) {
@@ -324,18 +324,15 @@ void NatsGateway::Impl::run() {
 }
 
 void NatsGateway::Impl::subscribe() {
-  if (sub) natsSubscription_Destroy(sub);
-  sub = nullptr;
   jsSubOptions so;
   jsSubOptions_Init(&so);
   so.Stream = subjects.stream.c_str();
   so.Ordered = true;
   so.Config.DeliverPolicy = js_DeliverAll;
   jsErrCode jerr = static_cast<jsErrCode>(0);
-  const natsStatus s = js_Subscribe(&sub, conn->js(), subjects.filter.c_str(), on_message, this,
-                                    nullptr, &so, &jerr);
+  const natsStatus s = sub.subscribe(conn->js(), subjects.filter, &so, &jerr,
+                                     [this](natsConnection*, natsMsg* msg) { on_message(msg); });
   if (s != NATS_OK) {
-    sub = nullptr;
     log::debug("gateway", "no stream " + subjects.stream + " yet: " + nats_link::describe(s));
     return;
   }
@@ -391,7 +388,7 @@ NatsGateway::~NatsGateway() {
   }
   im.cv.notify_all();
   im.worker.join();
-  if (im.sub) natsSubscription_Destroy(im.sub);
+  im.sub.close();  // no handler runs after this: the state it uses can go
   im.conn.reset();
 }
 

@@ -2,7 +2,10 @@
 // subjects (nats_subjects.h).
 #include "nats_link.h"
 
+#include <chrono>
+#include <condition_variable>
 #include <cstdio>
+#include <memory>
 
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
@@ -53,6 +56,94 @@ void reply(natsConnection* nc, natsMsg* msg, const google::protobuf::MessageLite
   if (!to || !*to) return;
   const std::string bytes = m.SerializeAsString();
   natsConnection_Publish(nc, to, bytes.data(), static_cast<int>(bytes.size()));
+}
+
+struct Subscription::Gate {
+  std::mutex running;  // held while the handler runs
+  Handler handler;
+  std::mutex mutex;
+  std::condition_variable cv;
+  bool watched = false, complete = false;
+
+  static void on_message(natsConnection* nc, natsSubscription*, natsMsg* msg, void* self) {
+    Gate& g = *static_cast<Gate*>(self);
+    std::lock_guard lock(g.running);
+    if (g.handler)
+      g.handler(nc, msg);
+    else
+      natsMsg_Destroy(msg);
+  }
+  static void on_complete(void* self) {
+    Gate& g = *static_cast<Gate*>(self);
+    std::lock_guard lock(g.mutex);
+    g.complete = true;
+    g.cv.notify_all();
+  }
+};
+
+namespace {
+// Gates whose subscription never reported completion in time: libnats may still call them (they
+// drop the message), so they stay, reachable, for the life of the process.
+std::mutex parked_mutex;
+std::vector<std::unique_ptr<Subscription::Gate>>& parked() {
+  static std::vector<std::unique_ptr<Subscription::Gate>> gates;
+  return gates;
+}
+}  // namespace
+
+natsStatus Subscription::subscribe(natsConnection* nc, const std::string& subject,
+                                   Handler handler) {
+  close();
+  gate_ = new Gate;
+  gate_->handler = std::move(handler);
+  return adopt(natsConnection_Subscribe(&sub_, nc, subject.c_str(), Gate::on_message, gate_));
+}
+
+natsStatus Subscription::subscribe(jsCtx* js, const std::string& filter, jsSubOptions* options,
+                                   jsErrCode* error, Handler handler) {
+  close();
+  gate_ = new Gate;
+  gate_->handler = std::move(handler);
+  return adopt(
+      js_Subscribe(&sub_, js, filter.c_str(), Gate::on_message, gate_, nullptr, options, error));
+}
+
+natsStatus Subscription::adopt(natsStatus s) {
+  if (s != NATS_OK) {
+    natsSubscription_Destroy(sub_);
+    sub_ = nullptr;
+    delete gate_;
+    gate_ = nullptr;
+    return s;
+  }
+  gate_->watched = natsSubscription_SetOnCompleteCB(sub_, Gate::on_complete, gate_) == NATS_OK;
+  return s;
+}
+
+void Subscription::close() {
+  if (!sub_) return;
+  {
+    std::lock_guard lock(gate_->running);  // waits for a handler that is running
+    gate_->handler = nullptr;
+  }
+  // Removes the interest (a JetStream consumer is left to expire on the server: libnats 3.4
+  // deletes it only on an explicit unsubscribe, whose error path reads freed memory while an
+  // ordered consumer is being reset after a reconnection).
+  natsSubscription_Destroy(sub_);
+  sub_ = nullptr;
+  bool complete = false;
+  if (gate_->watched) {
+    std::unique_lock lock(gate_->mutex);
+    complete = gate_->cv.wait_for(lock, std::chrono::seconds(5), [&] { return gate_->complete; });
+  }
+  if (complete) {
+    delete gate_;
+  } else {
+    log::warn("nats", "a subscription did not report its end in 5 s; its handler stays parked");
+    std::lock_guard lock(parked_mutex);
+    parked().emplace_back(gate_);
+  }
+  gate_ = nullptr;
 }
 
 Connection::Connection(const std::string& url, const std::string& name,

@@ -56,6 +56,37 @@ class Connection {
   jsCtx* js_ = nullptr;
 };
 
+// A subscription whose handler is known to be done once it is closed. libnats calls handlers on
+// its own threads and may still be inside one, or about to enter one, when
+// natsSubscription_Destroy returns; freeing what the handler uses then is a use after free.
+// Here the handler runs under a gate that close() shuts (waiting for a running call), and the
+// gate lives until libnats reports the subscription complete.
+class Subscription {
+ public:
+  // Owns `msg` (natsMsg_Destroy it).
+  using Handler = std::function<void(natsConnection* nc, natsMsg* msg)>;
+  Subscription() = default;
+  ~Subscription() { close(); }
+  Subscription(const Subscription&) = delete;
+  Subscription& operator=(const Subscription&) = delete;
+
+  // A core NATS subscription (closes the one held first).
+  natsStatus subscribe(natsConnection* nc, const std::string& subject, Handler handler);
+  // A JetStream one.
+  natsStatus subscribe(jsCtx* js, const std::string& filter, jsSubOptions* options,
+                       jsErrCode* error, Handler handler);
+  // Unsubscribes; when it returns the handler is not running and will not run again.
+  void close();
+  bool active() const { return sub_ != nullptr; }
+
+  struct Gate;  // nats_link.cpp
+
+ private:
+  natsStatus adopt(natsStatus s);
+  Gate* gate_ = nullptr;
+  natsSubscription* sub_ = nullptr;
+};
+
 // The Server's listeners on a TileSource that NATS feeds (set from any thread, called from the
 // thread that publishes or receives).
 class Listeners {

@@ -64,8 +64,7 @@ struct NatsOrigin::Impl {
   std::map<std::uint64_t, Gateway> gateways;
 
   std::unique_ptr<nats_link::Connection> conn;
-  natsSubscription* camera_sub = nullptr;
-  natsSubscription* edit_sub = nullptr;
+  nats_link::Subscription camera_sub, edit_sub;
   std::thread worker;
 
   // Worker thread only.
@@ -92,8 +91,8 @@ struct NatsOrigin::Impl {
     std::lock_guard lock(mutex);
     st.*field += n;
   }
-  static void on_cameras(natsConnection* nc, natsSubscription*, natsMsg* msg, void* self);
-  static void on_submit(natsConnection* nc, natsSubscription*, natsMsg* msg, void* self);
+  void on_cameras(natsConnection* nc, natsMsg* msg);
+  void on_submit(natsConnection* nc, natsMsg* msg);
 };
 
 void NatsOrigin::Impl::on_tiles(const std::vector<std::uint32_t>& tiles) {
@@ -336,8 +335,8 @@ void NatsOrigin::Impl::expire_cameras() {
 
 // A gateway's cameras: they replace the ones it sent before (viewer ids from the gateway's id
 // and the camera's position in the list).
-void NatsOrigin::Impl::on_cameras(natsConnection* nc, natsSubscription*, natsMsg* msg, void* self) {
-  Impl& im = *static_cast<Impl*>(self);
+void NatsOrigin::Impl::on_cameras(natsConnection* nc, natsMsg* msg) {
+  Impl& im = *this;
   wire::NatsCameras m;
   wire::NatsReply r;
   if (!m.ParseFromString(nats_link::data_of(msg)) || m.gateway() == 0) {
@@ -363,8 +362,8 @@ void NatsOrigin::Impl::on_cameras(natsConnection* nc, natsSubscription*, natsMsg
 }
 
 // A scene edit from a gateway: the control token, then the host's validation, as a session.
-void NatsOrigin::Impl::on_submit(natsConnection* nc, natsSubscription*, natsMsg* msg, void* self) {
-  Impl& im = *static_cast<Impl*>(self);
+void NatsOrigin::Impl::on_submit(natsConnection* nc, natsMsg* msg) {
+  Impl& im = *this;
   wire::SceneEdit m;
   wire::NatsReply r;
   if (!m.ParseFromString(nats_link::data_of(msg))) {
@@ -397,13 +396,14 @@ NatsOrigin::NatsOrigin(EngineHost& host, NatsOriginOptions options)
   im.dirty.assign(host.tiles().tile_count(), 0);  // the first round publishes every tile
   im.conn = std::make_unique<nats_link::Connection>(
       im.options.url, "irradcast-origin " + host.scene_id(), [&im] { im.cv.notify_all(); });
-  natsStatus s = natsConnection_Subscribe(&im.camera_sub, im.conn->nc(),
-                                          im.subjects.cameras.c_str(), Impl::on_cameras, &im);
+  natsStatus s =
+      im.camera_sub.subscribe(im.conn->nc(), im.subjects.cameras,
+                              [&im](natsConnection* nc, natsMsg* msg) { im.on_cameras(nc, msg); });
   if (s == NATS_OK)
-    s = natsConnection_Subscribe(&im.edit_sub, im.conn->nc(), im.subjects.submit.c_str(),
-                                 Impl::on_submit, &im);
+    s = im.edit_sub.subscribe(im.conn->nc(), im.subjects.submit,
+                              [&im](natsConnection* nc, natsMsg* msg) { im.on_submit(nc, msg); });
   if (s != NATS_OK) {
-    natsSubscription_Destroy(im.camera_sub);
+    im.camera_sub.close();
     throw Error("NATS subscriptions of the origin: " + nats_link::describe(s));
   }
   host.set_listener([&im](const std::vector<std::uint32_t>& tiles) { im.on_tiles(tiles); });
@@ -423,8 +423,8 @@ NatsOrigin::~NatsOrigin() {
   }
   im.cv.notify_all();
   im.worker.join();
-  natsSubscription_Destroy(im.camera_sub);
-  natsSubscription_Destroy(im.edit_sub);
+  im.camera_sub.close();  // no handler runs after these: the state they use can go
+  im.edit_sub.close();
   im.conn.reset();
 }
 
