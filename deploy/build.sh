@@ -12,7 +12,9 @@ if command -v ccache >/dev/null 2>&1; then
   generator+=(-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 fi
 if [ ! -f "$dir/CMakeCache.txt" ]; then
-  cmake -S . -B "$dir" "${generator[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo "$@"
+  # IRRADCAST_BUILD_TYPE picks a fresh tree's build type (CI builds its test tree as Release,
+  # so that one tree is both what the tests run and the -O3 build that is bundled).
+  cmake -S . -B "$dir" "${generator[@]}" -DCMAKE_BUILD_TYPE="${IRRADCAST_BUILD_TYPE:-RelWithDebInfo}" "$@"
 else
   cmake -S . -B "$dir" "$@" >/dev/null
 fi

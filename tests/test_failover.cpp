@@ -311,11 +311,14 @@ TEST(Failover, EditorMovesToTheNextServerBetweenEdits) {
                                                            b->address().text() + " --token " +
                                                            token + " --script " + script.string()),
                      temp_path("edit.log"));
-  // The first edit applied on A: stop A while the editor waits for the second.
+  // The first edit applied on A and the editor told so: stop A while the editor waits for the
+  // second. (Stopping A once its host has the edit but before the editor read "applied" makes
+  // the editor report the first edit as not applied, rightly.)
   const auto deadline = Clock::now() + 20s;
-  while (a->host->stats().revision < 1 && Clock::now() < deadline)
+  while (edit.output().find("revision 1 applied") == std::string::npos && Clock::now() < deadline)
     std::this_thread::sleep_for(10ms);
   ASSERT_EQ(a->host->stats().revision, 1u) << edit.output();
+  ASSERT_NE(edit.output().find("revision 1 applied"), std::string::npos) << edit.output();
   a->stop();
   const std::optional<int> status = edit.wait_for(30s);
   ASSERT_TRUE(status) << edit.output();
