@@ -173,6 +173,16 @@ int main(int argc, char** argv) {
   app.add_option("--nats-server", o.nats_server,
                  "nats-server binary (default: found in PATH dirs)");
   app.add_flag("--quick", o.quick, "1, 4 and 16 users, short windows (a smoke run)");
+  bool fresh = false;
+  FreshOptions fo;
+  app.add_flag("--fresh", fresh,
+               "issue 22 part 5: --users N (default 128) thin users join a fresh server at once "
+               "for --duration s; per --compare server, users decoding each tile or sharing "
+               "decodes; writes fanout_fresh.json and .png");
+  app.add_option("--duration", fo.duration_s, "--fresh: seconds of each run");
+  app.add_option("--repeat", fo.repeat, "--fresh: interleaved runs per variant (best p99 kept)");
+  app.add_option("--pin-load", fo.pin_load, "--fresh: CPU for the simulated users (-1: all)");
+  app.add_option("--compare", fo.compare, "--fresh: LABEL=SERVER_PATH (repeat; default: --server)");
   CLI11_PARSE(app, argc, argv);
   log::set_level(log::Level::Warn);
   try {
@@ -189,6 +199,11 @@ int main(int argc, char** argv) {
       o.window_s = 4.0;
     }
     fs::create_directories(o.out);
+    if (fresh) {
+      if (!users_list.empty()) fo.users = o.users.front();
+      run_fresh_bench(o, fo);
+      return 0;
+    }
     if (!o.gateways.empty()) {
       run_gateway_bench(o);
       return 0;

@@ -85,4 +85,14 @@ std::string ms(double v);
 // The gateway mode (bench/fanout_gateways.cpp).
 void run_gateway_bench(const Options& o);
 
+// --fresh (bench/fanout_fresh.cpp): N thin users joining a fresh server at once.
+struct FreshOptions {
+  int users = 128;
+  double duration_s = 20.0;
+  int repeat = 2;
+  int pin_load = -1;                 // CPU for the simulated users (-1: every CPU)
+  std::vector<std::string> compare;  // LABEL=SERVER_PATH (default: this build's server)
+};
+void run_fresh_bench(const Options& o, const FreshOptions& f);
+
 }  // namespace irradcast::fanout

@@ -202,6 +202,35 @@ TEST(ClientSession, AppliesNewerTilesAndSkipsStaleOnes) {
   EXPECT_EQ(s.counters().tiles_applied, 1u);
 }
 
+// Sessions that share a TileDecodeCache (irradcast-load's users) decode byte-identical tiles
+// once: the second session copies the texels; different bytes under the same tile and version,
+// or a broken payload, are decoded (or rejected) by the session itself.
+TEST(ClientSession, SessionsSharingDecodesGetTheSameTexelsFromOneDecode) {
+  const FakeServer server;
+  auto shared = std::make_shared<TileDecodeCache>();
+  ClientSessionOptions o = options();
+  o.shared_decodes = shared;
+  ClientSession a(o), b(o), c(o), d(o);
+  for (ClientSession* s : {&a, &b, &c, &d}) connect_and_download(*s, server);
+  EXPECT_EQ(a.on_frame(server.tile(0, 3)).event, Event::TileApplied);
+  EXPECT_EQ(b.on_frame(server.tile(0, 3)).event, Event::TileApplied);
+  EXPECT_EQ(shared->hits(), 1u);
+  EXPECT_EQ(b.tiles().lightmaps()[0].texels, a.tiles().lightmaps()[0].texels);
+  EXPECT_NEAR(b.tiles().lightmaps()[0].texels[0].x, 0.75f, 0.01f);
+  // Same tile and version, other bytes: decoded, not copied.
+  wire::Envelope other = server.tile(0, 2);
+  other.mutable_tile_update()->set_version(3);
+  EXPECT_EQ(c.on_frame(other).event, Event::TileApplied);
+  EXPECT_EQ(shared->hits(), 1u);
+  EXPECT_NEAR(c.tiles().lightmaps()[0].texels[0].x, 0.5f, 0.01f);
+  // A broken payload is rejected by each session and never shared.
+  wire::Envelope broken = server.tile(0, 4);
+  broken.mutable_tile_update()->set_payload("not zstd");
+  EXPECT_EQ(kind_of([&] { d.on_frame(broken); }), "bad tile");
+  EXPECT_EQ(kind_of([&] { a.on_frame(broken); }), "bad tile");
+  EXPECT_EQ(shared->hits(), 1u);
+}
+
 TEST(ClientSession, ResumesWithItsSceneAndTileVersions) {
   const FakeServer server;
   ClientSession s(options());

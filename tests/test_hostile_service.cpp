@@ -337,7 +337,10 @@ TEST(HostileService, SessionsPerAddressAreLimited) {
     Raw fourth(server.port());
     auto err = fourth.error_then_close(2000ms);
     ASSERT_TRUE(err.has_value());
-    EXPECT_NE(err->message().find("too many connections from this address"), std::string::npos)
+    EXPECT_EQ(err->code(), wire::REFUSED) << err->message();
+    EXPECT_NE(err->message().find("too many connections from this address (3; the server's "
+                                  "--max-clients-per-peer)"),
+              std::string::npos)
         << err->message();
     EXPECT_TRUE(fourth.eof);
   }

@@ -10,14 +10,14 @@
 #include <thread>
 
 #include "cli.h"
-#include "irradcast/common/builtin.h"
 #include "irradcast/client/camera_path.h"
-#include "irradcast/service/engine_host.h"
-#include "irradcast/common/error.h"
 #include "irradcast/client/load_generator.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
-#include "irradcast/service/net_server.h"
 #include "irradcast/common/progress.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/service/net_server.h"
 #include "service_fixture.h"
 
 using namespace irradcast;
@@ -171,6 +171,28 @@ TEST(Load, NoServerMeansFailedUsersAndExitThree) {
                     "--connect 127.0.0.1:" + std::to_string(port) + " --users 2 --duration 1");
   EXPECT_EQ(cli.status, 3) << cli.output;
   EXPECT_NE(cli.output.find("0 connected, 2 failed"), std::string::npos) << cli.output;
+}
+
+// More users than the server admits from one address: the users over the limit get REFUSED,
+// fail once each (no reconnect loop against the same limit), and the report says what to do.
+TEST(Load, UsersOverThePerAddressLimitAreRefusedOnceWithAHint) {
+  EngineHost host(make_cornell_box(), "cornell", small_host(1));
+  ServerOptions so = loopback();
+  so.max_clients_per_peer = 2;
+  Server server(host, so);
+  server.start();
+  host.start();
+  const test::CliResult r =
+      test::run_cli(IRRADCAST_LOAD_EXE, "--connect 127.0.0.1:" + std::to_string(server.port()) +
+                                            " --users 5 --duration 2 --threads 1 --quiet");
+  EXPECT_EQ(r.status, 3) << r.output;
+  EXPECT_NE(r.output.find("5 connected, 3 failed"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("server REFUSED: 3"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("INTERNAL"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--max-clients-per-peer 0"), std::string::npos) << r.output;
+  EXPECT_EQ(server.stats().peer_refused, 3u);
+  server.stop();
+  host.stop();
 }
 
 TEST(Load, BadArgumentsGetAClearMessage) {

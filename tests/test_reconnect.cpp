@@ -211,7 +211,8 @@ TEST(Backoff, BadPoliciesAndTheErrorsThatMeanTryAgain) {
   EXPECT_THROW(Backoff(p, 1), Error);
   EXPECT_TRUE(server_error_is_transient(wire::SERVER_SHUTDOWN));
   EXPECT_TRUE(server_error_is_transient(wire::IDLE_TIMEOUT));
-  EXPECT_TRUE(server_error_is_transient(wire::INTERNAL));  // e.g. "the server is full"
+  EXPECT_TRUE(server_error_is_transient(wire::INTERNAL));
+  EXPECT_TRUE(server_error_is_transient(wire::REFUSED));  // e.g. "the server is full"
   EXPECT_FALSE(server_error_is_transient(wire::UNSUPPORTED_VERSION));
   EXPECT_FALSE(server_error_is_transient(wire::BAD_FRAME));
   EXPECT_FALSE(server_error_is_transient(wire::UNEXPECTED_MESSAGE));

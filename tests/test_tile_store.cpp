@@ -163,6 +163,34 @@ TEST(TileStore, ChangesWithinTheEnginesNoiseWaitForTheRefreshRatio) {
   EXPECT_EQ(store.publish({back}, 5).size(), static_cast<std::size_t>(tiles_x));
 }
 
+// A fresh server's first update has no error estimate yet: its versions still record their
+// samples, so that the second update refreshes only the tiles whose refresh ratio 2x reaches
+// (or whose change is beyond the noise), not the whole image at once.
+TEST(TileStore, TheFirstVersionsRecordTheirSamplesWithoutAnErrorEstimate) {
+  TileStoreOptions o;
+  o.tile_size = 8;
+  o.refresh_ratio = 2.0f;
+  const int tiles_x = 16, w = 8 * tiles_x, h = 8;
+  TileStore store({{w, h}}, o);
+  Lightmap level(w, h);
+  for (glm::vec3& t : level.texels) t = glm::vec3(1.0f);
+  const TileStore::Noise first{1, nullptr};
+  ASSERT_EQ(store.publish({level}, 1, &first).size(), static_cast<std::size_t>(tiles_x));
+  Lightmap se(w, h);
+  for (glm::vec3& t : se.texels) t = glm::vec3(0.05f);
+  const std::vector<Lightmap> ses{se};
+  Lightmap noisy = level;
+  for (std::size_t i = 0; i < noisy.texels.size(); ++i)
+    noisy.texels[i] = glm::vec3(i % 2 ? 1.04f : 0.96f);
+  const TileStore::Noise second{2, &ses};
+  const std::size_t refreshed = store.publish({noisy}, 2, &second).size();
+  EXPECT_LT(refreshed, static_cast<std::size_t>(tiles_x) / 4) << "a burst of the whole image";
+  // Without the first update's sample count (no noise at all), every tile refreshed.
+  TileStore unaware({{w, h}}, o);
+  unaware.publish({level}, 1);
+  EXPECT_EQ(unaware.publish({noisy}, 2, &second).size(), static_cast<std::size_t>(tiles_x));
+}
+
 TEST(TileStore, RejectsARefreshRatioBelowOne) {
   TileStoreOptions o;
   o.refresh_ratio = 0.5f;

@@ -53,6 +53,7 @@ bool server_error_is_transient(wire::ErrorCode code) {
     case wire::SERVER_SHUTDOWN:
     case wire::IDLE_TIMEOUT:
     case wire::INTERNAL:
+    case wire::REFUSED:  // full, or this address has too many sessions: another server may not be
       return true;
     default:
       return false;

@@ -21,7 +21,9 @@ std::shared_ptr<ClientScene> make_client_scene(const std::string& bytes, const s
 ClientSession::ClientSession(ClientSessionOptions options, ClientSceneFactory factory)
     : options_(std::move(options)),
       factory_(factory ? std::move(factory) : ClientSceneFactory(make_client_scene)),
-      ping_interval_(options_.ping_interval) {}
+      ping_interval_(options_.ping_interval) {
+  tiles_.share_decodes(options_.shared_decodes);
+}
 
 wire::Envelope ClientSession::hello() {
   phase_ = Phase::AwaitWelcome;

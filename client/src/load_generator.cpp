@@ -26,7 +26,6 @@ namespace irradcast {
 
 using asio::ip::tcp;
 using Clock = std::chrono::steady_clock;
-
 namespace {
 
 double ms_between(Clock::time_point a, Clock::time_point b) {
@@ -73,6 +72,7 @@ struct Run {
   std::atomic<int> connected{0}, scene_loaded{0}, full_image{0}, failed{0};
   std::atomic<std::uint64_t> tiles{0}, bytes{0}, frames{0}, errors{0}, reconnects{0};
   LatencyHistogram latency;
+  std::shared_ptr<TileDecodeCache> decodes = std::make_shared<TileDecodeCache>();
   std::mutex errors_mutex;
   std::map<std::string, std::uint64_t> error_kinds;
 
@@ -114,7 +114,7 @@ class User : public std::enable_shared_from_this<User> {
         server_(static_cast<std::size_t>(index) % run.servers.size()),
         backoff_(run.options.backoff,
                  mix64(run.options.seed ^ mix64(static_cast<std::uint64_t>(index) + 1))),
-        core_(session_options(run.options, index),
+        core_(session_options(run, index),
               [&run](const std::string& bytes, const std::string& hash) {
                 return run.scenes.get(bytes, hash, run.options.render);
               }) {}
@@ -155,8 +155,10 @@ class User : public std::enable_shared_from_this<User> {
   enum class State { Idle, Connecting, Session, Waiting, Done };
   using Phase = ClientSession::Phase;
 
-  static ClientSessionOptions session_options(const LoadOptions& o, int index) {
+  static ClientSessionOptions session_options(const Run& run, int index) {
+    const LoadOptions& o = run.options;
     ClientSessionOptions s;
+    if (!o.decode_per_user) s.shared_decodes = run.decodes;
     s.name = o.name + "-" + std::to_string(index);
     s.encoding = o.encoding;
     s.ping_interval = std::chrono::milliseconds(5000);
@@ -168,8 +170,7 @@ class User : public std::enable_shared_from_this<User> {
 
   using ConnPtr = std::shared_ptr<Connection>;
 
-  // A connection attempt. Socket handling lives here and in read(), write_next() and
-  // drop_connection().
+  // A connection attempt (the socket: here, read(), write_next() and drop_connection()).
   void open_connection() {
     state_ = State::Connecting;
     conn_ = std::make_shared<Connection>(strand_, run_.tls.get());
@@ -223,8 +224,7 @@ class User : public std::enable_shared_from_this<User> {
     read();
   }
 
-  // The next connection attempt, to the next server of the list, after a back-off delay; none
-  // when the run ends first (then do_finish records the user as failed).
+  // The next attempt, on the next server, after a back-off (none if the run ends first).
   void retry_later() {
     state_ = State::Waiting;
     server_ = (server_ + 1) % run_.servers.size();
@@ -321,8 +321,10 @@ class User : public std::enable_shared_from_this<User> {
           const std::string code = wire::ErrorCode_Name(env.error().code());
           conn_->server_error = code + ": " + env.error().message();
           run_.count_error("server " + code);
-          // The server closes after these: reconnect now rather than at the EOF.
-          if (server_error_is_transient(env.error().code()) && !finishing_)
+          // The server closes after these: reconnect now, not at the EOF (refused by the only
+          // server: the user fails at the EOF, as a retry would be refused again).
+          if (server_error_is_transient(env.error().code()) && !finishing_ &&
+              (env.error().code() != wire::REFUSED || run_.servers.size() > 1))
             lost("", conn_->server_error);
           break;
         }
@@ -334,8 +336,7 @@ class User : public std::enable_shared_from_this<User> {
     }
   }
 
-  // The session is set up (after a download: with a new scene): subscribe, and start the camera
-  // updates, pings and frames.
+  // Set up (after a download: a new scene): subscribe; start camera updates, pings, frames.
   void on_ready(const ClientStep& step) {
     if (step.scene_loaded) {
       if (!result_.scene_loaded) {

@@ -130,6 +130,7 @@ std::string LoadReport::text() const {
   for (const HostPort& server : servers_or(options.servers, options.host, options.port))
     s << " " << server.text();
   if (options.render) s << " (" << options.width << "x" << options.height << ")";
+  if (options.decode_per_user) s << " (every user decodes every tile)";
   s << "\n";
   s << "  users             " << connected << " connected, " << failed << " failed, " << full_image
     << " with a full image\n";
@@ -155,6 +156,10 @@ std::string LoadReport::text() const {
     first = false;
   }
   s << "\n";
+  if (const auto refused = errors.find("server REFUSED"); refused != errors.end())
+    s << "  refused           the server did not admit " << refused->second
+      << " connections (too many from this address, or full); every user comes from this host: "
+         "start the server with --max-clients-per-peer 0 (or above --users) for a load test\n";
   return s.str();
 }
 
@@ -174,7 +179,8 @@ std::string LoadReport::json(bool per_user_details) const {
                   {"fps", options.fps},
                   {"camera_hz", options.camera_hz},
                   {"camera_path", options.camera_path},
-                  {"ramp_s", options.ramp_s}};
+                  {"ramp_s", options.ramp_s},
+                  {"decode", options.decode_per_user ? "per-user" : "shared"}};
   j["elapsed_s"] = elapsed_s;
   j["users"] = {{"total", users},           {"connected", connected},
                 {"failed", failed},         {"scene_loaded", scene_loaded},

@@ -54,10 +54,61 @@ bool TileCache::apply(const wire::TileUpdate& t) {
     throw Error("tile size does not match the layout");
   const std::uint32_t index = first_tile_[t.lightmap()] + t.tile_y() * li.tiles_x() + t.tile_x();
   if (t.version() <= versions_[index]) return false;  // stale (this server never sends one)
-  wire::decode_tile(t.payload(), t.encoding(), r, lightmaps_[t.lightmap()]);
+  decode(t, r);
   if (versions_[index] == 0) ++received_;
   versions_[index] = t.version();
   return true;
+}
+
+// Decodes into the tile's lightmap, or copies what the shared cache decoded from the same
+// bytes. A payload that does not decode throws here, and is never stored.
+void TileCache::decode(const wire::TileUpdate& t, const wire::TileRect& r) {
+  Lightmap& map = lightmaps_[t.lightmap()];
+  if (!shared_ || t.encoding() == wire::TILE_RGB9E5_DELTA_ZSTD) {
+    wire::decode_tile(t.payload(), t.encoding(), r, map);
+    return;
+  }
+  const TileDecodeCache::Key key{t.lightmap(), t.tile_x(), t.tile_y(),
+                                 static_cast<int>(t.encoding())};
+  std::vector<glm::vec3> texels;
+  if (shared_->find(key, t.version(), t.payload(), texels)) {
+    for (int y = 0; y < r.h; ++y)
+      std::copy_n(texels.begin() + static_cast<std::ptrdiff_t>(y) * r.w, r.w,
+                  map.texels.begin() + static_cast<std::ptrdiff_t>(r.y0 + y) * map.width + r.x0);
+    return;
+  }
+  wire::decode_tile(t.payload(), t.encoding(), r, map);
+  texels.resize(static_cast<std::size_t>(r.w) * static_cast<std::size_t>(r.h));
+  for (int y = 0; y < r.h; ++y)
+    std::copy_n(map.texels.begin() + static_cast<std::ptrdiff_t>(r.y0 + y) * map.width + r.x0, r.w,
+                texels.begin() + static_cast<std::ptrdiff_t>(y) * r.w);
+  shared_->store(key, t.version(), t.payload(), std::move(texels));
+}
+
+bool TileDecodeCache::find(const Key& key, std::uint64_t version, const std::string& payload,
+                           std::vector<glm::vec3>& texels) const {
+  std::lock_guard lock(mutex_);
+  const auto it = entries_.find(key);
+  if (it == entries_.end() || it->second.version != version || it->second.payload != payload)
+    return false;
+  texels = it->second.texels;
+  ++hits_;
+  return true;
+}
+
+void TileDecodeCache::store(const Key& key, std::uint64_t version, const std::string& payload,
+                            std::vector<glm::vec3> texels) {
+  std::lock_guard lock(mutex_);
+  Entry& e = entries_[key];
+  if (e.version > version) return;  // a newer one is held (the users are not in step)
+  e.version = version;
+  e.payload = payload;
+  e.texels = std::move(texels);
+}
+
+std::uint64_t TileDecodeCache::hits() const {
+  std::lock_guard lock(mutex_);
+  return hits_;
 }
 
 void TileCache::forget_versions() {

@@ -54,7 +54,7 @@ ViewClient::ViewClient(ViewClientOptions options)
                options_.backoff_seed != 0 ? options_.backoff_seed : std::random_device{}()),
       core_(ClientSessionOptions{options_.name, options_.encoding, options_.max_bytes_per_s,
                                  options_.ping_interval, std::chrono::milliseconds(0),
-                                 /*follow_edits=*/true, "view"}) {}
+                                 /*follow_edits=*/true, "view", nullptr}) {}
 
 ViewClient::~ViewClient() {
   try {

@@ -25,6 +25,7 @@ struct Options {
   int users = 8;
   double duration = 10.0;
   std::string mode = "thin";
+  bool decode_per_user = false;
   int width = 320, height = 240;
   double fps = 30.0;
   double camera_hz = 10.0;
@@ -62,6 +63,7 @@ int run(const Options& o) {
   if (o.mode != "thin" && o.mode != "render")
     throw Error("--mode must be thin or render, not '" + o.mode + "'");
   lo.render = o.mode == "render";
+  lo.decode_per_user = o.decode_per_user;
   lo.width = o.width;
   lo.height = o.height;
   lo.fps = o.fps;
@@ -121,6 +123,9 @@ int main(int argc, char** argv) {
   app.add_option("--duration", o.duration, "seconds from start to the users' Bye")
       ->check(CLI::PositiveNumber);
   app.add_option("--mode", o.mode, "thin (network + tile decoding) | render (also frames)");
+  app.add_flag("--decode-per-user", o.decode_per_user,
+               "every user decodes every tile itself (default: the users share the decode of "
+               "byte-identical tiles, as N clients' decodes run on N machines, not on this one)");
   app.add_option("--width", o.width, "frame width (render mode)")->check(CLI::Range(1, 8192));
   app.add_option("--height", o.height, "frame height (render mode)")->check(CLI::Range(1, 8192));
   app.add_option("--fps", o.fps, "render mode: frames per second per user at most (0 = no cap)")

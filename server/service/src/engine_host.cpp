@@ -339,12 +339,16 @@ void EngineHost::do_update() {
   // Updates count from the start, or from the last edit once every texel has a new estimate.
   if (full) ++updates_since_edit_;
   const bool last = options_.max_updates > 0 && updates_since_edit_ >= options_.max_updates;
+  // The first update has no error estimate yet, but its sample count is recorded with its
+  // versions all the same: else the second update would refresh every tile at once (a burst of
+  // the whole image to every client of a fresh server).
+  const bool noise_aware = !last && options_.tiles.refresh_ratio > 1.0f;
   std::vector<Lightmap> standard_error;
-  if (!last && options_.tiles.refresh_ratio > 1.0f)
-    standard_error = impl_->engine->standard_error();
-  const TileStore::Noise noise{impl_->engine->min_samples(), &standard_error};
+  if (noise_aware) standard_error = impl_->engine->standard_error();
+  const TileStore::Noise noise{impl_->engine->min_samples(),
+                               standard_error.empty() ? nullptr : &standard_error};
   std::vector<std::uint32_t> changed =
-      tiles_->publish(maps, now_us(), standard_error.empty() ? nullptr : &noise);
+      tiles_->publish(maps, now_us(), noise_aware ? &noise : nullptr);
   const double bytes_per_texel = tiles_->bytes_per_texel();
   const auto ended = std::chrono::steady_clock::now();
   PublishListener listener;

@@ -48,7 +48,8 @@ struct Server::Impl {
         session_server{
             SessionContext{host, options, counters, peers, [this] { return stats(); },
                            std::min(options.max_frame,
-                                    options.max_hello_frame + 32 * host.tiles().tile_count())},
+                                    options.max_hello_frame + 32 * host.tiles().tile_count()),
+                           &tile_frames},
             nullptr, [this](const std::shared_ptr<Session>& s) { remove(s); }} {}
 
   TileSource& host;
@@ -67,10 +68,19 @@ struct Server::Impl {
   std::optional<asio::executor_work_guard<asio::io_context::executor_type>> work;
   std::atomic<bool> stopping{false};
   std::atomic<std::uint64_t> next_session{1};
+  TileFrames tile_frames;        // the tile frames the sessions share
   SessionServer session_server;  // what the sessions use of the server
 
   mutable std::mutex sessions_mutex;
   std::set<std::shared_ptr<Session>> sessions;
+
+  // Tiles published since the last fan-out (each once): a source that publishes tile by tile (a
+  // gateway, one NATS message per tile) reaches the sessions in batches, one post per session
+  // per batch rather than per tile.
+  std::mutex publish_mutex;
+  std::vector<std::uint8_t> publish_pending;
+  std::vector<std::uint32_t> publish_list;
+  bool publish_posted = false;
 
   void listen(tcp::acceptor& a, std::uint16_t port);
   void accept(bool web);
@@ -79,6 +89,7 @@ struct Server::Impl {
   void pause_accepting(const std::error_code& ec, bool web);
   void refuse(tcp::socket& socket, const std::string& message, bool web);
   void on_publish(const std::vector<std::uint32_t>& tiles);
+  void fan_out();
   void on_edit(const AppliedEdit& applied);
   void remove(const std::shared_ptr<Session>& s) {
     std::lock_guard lock(sessions_mutex);
@@ -115,7 +126,7 @@ bool out_of_descriptors(const std::error_code& ec) {
 
 }  // namespace
 
-// Closes a connection that is not admitted: one Error frame, best effort (never blocks: the
+// Closes a connection that is not admitted: one Error REFUSED frame, best effort (never blocks: the
 // socket is non-blocking and the frame is small), then close.
 // On the web port the refusal is an HTTP 503.
 void Server::Impl::refuse(tcp::socket& socket, const std::string& message, bool web) {
@@ -127,7 +138,7 @@ void Server::Impl::refuse(tcp::socket& socket, const std::string& message, bool 
               "Content-Length: " +
                   std::to_string(message.size() + 1) + "\r\nConnection: close\r\n\r\n" + message +
                   "\n"
-            : wire::encode_frame(wire::make_error(wire::INTERNAL, message));
+            : wire::encode_frame(wire::make_error(wire::REFUSED, message));
     socket.write_some(asio::buffer(frame), ignored);
   }
   socket.close(ignored);
@@ -190,7 +201,8 @@ void Server::Impl::admit(tcp::socket socket, bool web) {
       ++counters.peer_refused;
       refuse(socket,
              "too many connections from this address (" +
-                 std::to_string(options.max_clients_per_peer) + ")",
+                 std::to_string(options.max_clients_per_peer) +
+                 "; the server's --max-clients-per-peer)",
              web);
       break;
     case PeerTable::Admission::Banned:
@@ -218,7 +230,28 @@ void Server::Impl::pause_accepting(const std::error_code& ec, bool web) {
 }
 
 void Server::Impl::on_publish(const std::vector<std::uint32_t>& tiles) {
-  auto shared = std::make_shared<const std::vector<std::uint32_t>>(tiles);
+  std::lock_guard lock(publish_mutex);
+  for (std::uint32_t t : tiles) {
+    if (t >= publish_pending.size()) publish_pending.resize(std::size_t(t) + 1, 0);
+    if (publish_pending[t]) continue;
+    publish_pending[t] = 1;
+    publish_list.push_back(t);
+  }
+  if (publish_posted || publish_list.empty()) return;
+  publish_posted = true;
+  asio::post(io, [this] { fan_out(); });
+}
+
+// An I/O thread: the tiles published since the last fan-out, to every session at once.
+void Server::Impl::fan_out() {
+  std::vector<std::uint32_t> tiles;
+  {
+    std::lock_guard lock(publish_mutex);
+    tiles.swap(publish_list);
+    for (std::uint32_t t : tiles) publish_pending[t] = 0;
+    publish_posted = false;
+  }
+  auto shared = std::make_shared<const std::vector<std::uint32_t>>(std::move(tiles));
   std::lock_guard lock(sessions_mutex);
   for (const auto& s : sessions) s->tiles_changed(shared);
 }

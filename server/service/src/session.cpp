@@ -304,8 +304,23 @@ void Session::pump() {
   }
 }
 
-// raw: bytes of the WebSocket layer; otherwise a protocol frame, which a WebSocket carries as
-// one binary message: its payload after the 4-byte length, behind the message's frame header.
+// Plain TCP or TLS: the frames the protocol has ready behind the first one (tiles, replies,
+// edits, scene chunks), up to kMaxBatchBytes, go out in the same write: a burst of tiles costs
+// one system call per batch rather than one per tile, on both ends. A Wait (the rate cap) or a
+// Close ends the batch; the protocol hands it out again once the batch is written.
+void Session::gather(std::vector<SessionWrite>& batch) {
+  std::size_t bytes = batch.front().frame->size();
+  while (bytes < kMaxBatchBytes && batch.size() < kMaxBatchFrames) {
+    SessionWrite w = protocol_.next_write(Clock::now());
+    if (!w.frame) break;  // None, Wait or Close
+    bytes += w.frame->size();
+    batch.push_back(std::move(w));
+  }
+}
+
+// raw: bytes of the WebSocket layer; otherwise protocol frames, which a WebSocket carries as
+// one binary message each: its payload after the 4-byte length, behind the message's frame
+// header (one frame per write there).
 void Session::write(SessionWrite w, bool raw) {
   writing_ = true;
   write_progress_at_ = Clock::now();
@@ -320,17 +335,22 @@ void Session::write(SessionWrite w, bool raw) {
     }
     return asio::transfer_all()(ec, n);
   };
-  const std::string& data = *w.frame;
-  std::array<asio::const_buffer, 2> buffers{asio::buffer(data), asio::const_buffer()};
+  std::vector<SessionWrite> batch;
+  batch.push_back(std::move(w));
+  std::vector<asio::const_buffer> buffers;
   if (ws_ && !raw) {
-    const std::string_view payload = std::string_view(data).substr(wire::kFrameHeaderBytes);
+    const std::string_view payload =
+        std::string_view(*batch.front().frame).substr(wire::kFrameHeaderBytes);
     ws_header_ = wire::WsServerConnection::binary_frame_header(payload.size());
     buffers = {asio::buffer(ws_header_), asio::buffer(payload.data(), payload.size())};
+  } else {
+    if (!ws_) gather(batch);
+    for (const SessionWrite& b : batch) buffers.push_back(asio::buffer(*b.frame));
   }
   asio::async_write(
       stream_, buffers, progress,
-      asio::bind_executor(strand_, [self = shared_from_this(), frame = std::move(w.frame),
-                                    kind = w.kind](std::error_code ec, std::size_t n) {
+      asio::bind_executor(strand_, [self = shared_from_this(), batch = std::move(batch)](
+                                       std::error_code ec, std::size_t n) {
         self->writing_ = false;
         if (ec) {
           self->close(CloseReason::Disconnect);
@@ -338,11 +358,15 @@ void Session::write(SessionWrite w, bool raw) {
         }
         ServerCounters& counters = self->server_.context.counters;
         counters.bytes_sent += n;
-        if (kind == SessionWrite::Kind::Tile) {
-          ++counters.tiles_sent;
-          counters.tile_bytes_sent += n;
+        for (const SessionWrite& b : batch) {
+          // A WebSocket write is one frame, with its header: n.
+          const std::size_t size = batch.size() == 1 ? n : b.frame->size();
+          if (b.kind == SessionWrite::Kind::Tile) {
+            ++counters.tiles_sent;
+            counters.tile_bytes_sent += size;
+          }
+          if (b.kind == SessionWrite::Kind::Scene) counters.scene_bytes_sent += size;
         }
-        if (kind == SessionWrite::Kind::Scene) counters.scene_bytes_sent += n;
         const bool was_paused = self->read_paused();
         self->pump();
         if (was_paused && !self->read_paused()) self->drain();  // replies written: read on

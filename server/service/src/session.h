@@ -1,11 +1,11 @@
 // One client connection: the Asio side of a session. It runs the TLS handshake, reads bytes into
-// the session's protocol (session_protocol.h), writes the frames the protocol hands out one at a
-// time, and runs the timers it asks for (hello, idle, the tile rate cap, a wrong token's delay,
-// the grace period before closing) and the write-stall watch. A connection to the web port
-// carries the same session over HTTP and a WebSocket (wire/websocket.h): the page's files for a
-// plain request, else one binary message per frame (no length prefix), with the same limits. Every
-// handler runs on the session's strand, so the session needs no locks; the engine thread reaches it
-// only through asio::post.
+// the session's protocol (session_protocol.h), writes the frames the protocol hands out (those
+// ready at once in one write, up to 64 KiB), and runs the timers it asks for (hello, idle, the tile
+// rate cap, a wrong token's delay, the grace period before closing) and the write-stall watch. A
+// connection to the web port carries the same session over HTTP and a WebSocket (wire/websocket.h):
+// the page's files for a plain request, else one binary message per frame (no length prefix), with
+// the same limits. Every handler runs on the session's strand, so the session needs no locks; the
+// engine thread reaches it only through asio::post.
 #pragma once
 
 // A standard header before asio: asio's config decides between aligned_alloc and operator new
@@ -76,6 +76,8 @@ class Session : public std::enable_shared_from_this<Session> {
   void on_websocket_input();
   bool pump_websocket();
   void write(SessionWrite w, bool raw = false);
+  static constexpr std::size_t kMaxBatchBytes = 64 << 10, kMaxBatchFrames = 64;
+  void gather(std::vector<SessionWrite>& batch);
   void close(CloseReason reason);
 
   SessionServer& server_;

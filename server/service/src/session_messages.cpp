@@ -166,4 +166,20 @@ wire::Envelope tile_update_message(const TileStore::Tile& tile, const TileStore:
   return e;
 }
 
+std::shared_ptr<const std::string> TileFrames::frame(const TileStore& store, std::uint32_t tile,
+                                                     const TileStore::Snapshot& snap,
+                                                     wire::TileEncoding encoding) {
+  std::vector<Entry>& entries = entries_[encoding == wire::TILE_HALF_ZSTD ? 1 : 0];
+  {
+    std::lock_guard lock(mutex_);
+    if (entries.size() != store.tile_count()) entries.assign(store.tile_count(), {});
+    if (tile < entries.size() && entries[tile].payload == snap.payload) return entries[tile].frame;
+  }
+  auto built = std::make_shared<const std::string>(
+      wire::encode_frame(tile_update_message(store.tile(tile), snap, encoding)));
+  std::lock_guard lock(mutex_);
+  if (tile < entries.size()) entries[tile] = {snap.payload, built};
+  return built;
+}
+
 }  // namespace irradcast

@@ -4,8 +4,11 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "irradcast/service/net_server.h"
 #include "irradcast/service/tile_source.h"
@@ -34,5 +37,23 @@ std::optional<CameraPose> camera_pose_of(const wire::CameraUpdate& c, std::strin
 // The TileUpdate that carries a snapshot of `tile`.
 wire::Envelope tile_update_message(const TileStore::Tile& tile, const TileStore::Snapshot& snap,
                                    wire::TileEncoding encoding);
+
+// The encoded TileUpdate frame of each tile's newest snapshot, per encoding, built once and
+// shared by every session that sends it (sessions hold it by pointer until it is written).
+// Keyed by the snapshot's payload (a new version, or a gateway's new lineage, has a new one).
+// One entry per tile and encoding; any thread (one mutex, frames built outside it).
+class TileFrames {
+ public:
+  std::shared_ptr<const std::string> frame(const TileStore& store, std::uint32_t tile,
+                                           const TileStore::Snapshot& snap,
+                                           wire::TileEncoding encoding);
+
+ private:
+  struct Entry {
+    std::shared_ptr<const std::string> payload, frame;
+  };
+  std::mutex mutex_;
+  std::vector<Entry> entries_[2];  // RGB9E5, HALF
+};
 
 }  // namespace irradcast

@@ -411,7 +411,9 @@ SessionWrite SessionProtocol::next_tile(Clock::time_point now) {
     }
     TileStore::Snapshot snap = store.snapshot(t, encoding_);
     if (snap.version == 0 || snap.version <= known_[t]) continue;  // nothing new
-    held_frame_ = wire::encode_frame(tile_update_message(store.tile(t), snap, encoding_));
+    held_frame_ = ctx_.frames ? ctx_.frames->frame(store, t, snap, encoding_)
+                              : std::make_shared<const std::string>(wire::encode_frame(
+                                    tile_update_message(store.tile(t), snap, encoding_)));
     held_ = true;
     known_[t] = snap.version;
   }
@@ -420,7 +422,7 @@ SessionWrite SessionProtocol::next_tile(Clock::time_point now) {
     tokens_ = std::min(tokens_ + rate_ * std::chrono::duration<double>(now - last_refill_).count(),
                        std::max(rate_ * 0.25, 65536.0));
     last_refill_ = now;
-    const double need = static_cast<double>(held_frame_.size());
+    const double need = static_cast<double>(held_frame_->size());
     if (tokens_ < need) {
       const double wait_s = (need - tokens_) / rate_;
       return {SessionWrite::Kind::Wait, nullptr,
@@ -429,7 +431,7 @@ SessionWrite SessionProtocol::next_tile(Clock::time_point now) {
     tokens_ -= need;
   }
   held_ = false;
-  return {SessionWrite::Kind::Tile, std::make_shared<const std::string>(std::move(held_frame_))};
+  return {SessionWrite::Kind::Tile, std::move(held_frame_)};
 }
 
 void SessionProtocol::close(CloseReason reason) {

@@ -50,6 +50,7 @@ struct SessionContext {
   PeerTable& peers;
   std::function<ServerStats()> server_stats;  // for a StatsRequest
   std::size_t hello_frame_cap = 0;            // the decoder's cap before Hello
+  TileFrames* frames = nullptr;               // shared tile frames (null: each session builds)
 };
 
 // What the connection must do after a call into the protocol (SessionProtocol::take_events()).
@@ -173,7 +174,7 @@ class SessionProtocol {
   std::atomic<std::size_t> queue_depth_{0};
   wire::TileEncoding encoding_ = wire::TILE_RGB9E5_ZSTD;
   bool held_ = false;  // a tile frame waiting for the rate cap
-  std::string held_frame_;
+  std::shared_ptr<const std::string> held_frame_;
   double rate_ = 0.0, tokens_ = 0.0;
   Clock::time_point last_refill_ = Clock::now();
 };

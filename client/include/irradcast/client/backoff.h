@@ -53,10 +53,10 @@ class Backoff {
 };
 
 // True for the server Error codes that end a connection for reasons of the server's, not the
-// client's (SERVER_SHUTDOWN, IDLE_TIMEOUT, INTERNAL such as "the server is full"): a client
-// reconnects after them. The others (BAD_FRAME, FRAME_TOO_LARGE, UNSUPPORTED_VERSION,
-// UNEXPECTED_MESSAGE, BAD_REQUEST, PERMISSION_DENIED) say the client is wrong, and reconnecting
-// would only repeat them.
+// client's (SERVER_SHUTDOWN, IDLE_TIMEOUT, INTERNAL, REFUSED such as "the server is full"): a
+// client reconnects after them (or moves on to the next server of its --connect list). The others
+// (BAD_FRAME, FRAME_TOO_LARGE, UNSUPPORTED_VERSION, UNEXPECTED_MESSAGE, BAD_REQUEST,
+// PERMISSION_DENIED) say the client is wrong, and reconnecting would only repeat them.
 bool server_error_is_transient(wire::ErrorCode code);
 
 }  // namespace irradcast

@@ -68,6 +68,8 @@ struct ClientSessionOptions {
   // and the scene stays as the package made it (the load test's users share one scene).
   bool follow_edits = true;
   std::string log_tag = "client";  // for the log lines about edits
+  // Decode byte-identical tiles once for many sessions of this process (irradcast-load).
+  std::shared_ptr<TileDecodeCache> shared_decodes;
 };
 
 struct ClientSessionCounters {

@@ -40,6 +40,10 @@ struct LoadOptions {
   int users = 1;
   double duration_s = 10.0;  // from the start of the run; users then say Bye
   bool render = false;       // compose frames too (else "thin": network + tile decoding)
+  // Every user decodes every tile itself. Default: the users share the decode of byte-identical
+  // tiles (a real client decodes on its own CPU; N decodes on one load machine would measure
+  // the load machine).
+  bool decode_per_user = false;
   int width = 320, height = 240;
   double fps = 30.0;        // render mode: frames per second per user at most (0 = no cap)
   double camera_hz = 10.0;  // CameraUpdates per second per user

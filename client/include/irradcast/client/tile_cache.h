@@ -2,19 +2,64 @@
 // checked against the scene package's atlas, one decoded Lightmap per object, and the version
 // of every tile it holds. Shared by the viewer (ViewClient) and the simulated users of
 // irradcast-load, so both apply TileUpdates, and reject bad ones, the same way.
+// TileDecodeCache: the decoded texels of byte-identical payloads, shared by many TileCaches of
+// one process (irradcast-load's users: one decode per tile version, not one per user).
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "irradcast.pb.h"
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/lightmap.h"
+#include "irradcast/wire/tile_codec.h"
 
 namespace irradcast {
 
+// The newest decoded version of each tile (RGB9E5 and half; a delta depends on the client's
+// base and is never shared), keyed by tile and checked against the whole payload: a TileCache
+// that finds the same bytes copies the texels instead of decoding them. Bounded by one entry
+// per tile and encoding of the scene. Any thread (one mutex).
+class TileDecodeCache {
+ public:
+  struct Key {
+    std::uint32_t lightmap = 0, tx = 0, ty = 0;
+    int encoding = 0;
+    bool operator==(const Key&) const = default;
+  };
+  // The texels of `payload` (w x h, row by row), if these bytes were decoded before.
+  bool find(const Key& key, std::uint64_t version, const std::string& payload,
+            std::vector<glm::vec3>& texels) const;
+  void store(const Key& key, std::uint64_t version, const std::string& payload,
+             std::vector<glm::vec3> texels);
+  std::uint64_t hits() const;
+
+ private:
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      return ((static_cast<std::size_t>(k.lightmap) * 1000003u + k.tx) * 1000003u + k.ty) * 4u +
+             static_cast<std::size_t>(k.encoding);
+    }
+  };
+  struct Entry {
+    std::uint64_t version = 0;
+    std::string payload;
+    std::vector<glm::vec3> texels;
+  };
+  mutable std::mutex mutex_;
+  std::unordered_map<Key, Entry, KeyHash> entries_;
+  mutable std::uint64_t hits_ = 0;
+};
+
 class TileCache {
  public:
+  // Decode through `shared` (null: every tile decoded here).
+  void share_decodes(std::shared_ptr<TileDecodeCache> shared) { shared_ = std::move(shared); }
+
   // Takes the layout of `welcome`; throws irradcast::Error when it does not match the atlas.
   // Versions start at 0 (nothing held) and the lightmaps black.
   void configure(const wire::Welcome& welcome, const Atlas& atlas);
@@ -44,6 +89,8 @@ class TileCache {
   std::vector<Lightmap> lightmaps_;
   std::vector<std::uint64_t> versions_;
   std::size_t received_ = 0;  // tiles with a version > 0
+  std::shared_ptr<TileDecodeCache> shared_;
+  void decode(const wire::TileUpdate& t, const wire::TileRect& r);
 };
 
 }  // namespace irradcast

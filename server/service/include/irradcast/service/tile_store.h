@@ -45,7 +45,8 @@ class TileStore {
   TileStore(const std::vector<std::pair<int, int>>& sizes, TileStoreOptions options = {});
 
   // What the engine knows of its own noise: the samples per texel so far and the standard error
-  // of each texel's mean (Engine::standard_error()).
+  // of each texel's mean (Engine::standard_error(); null before the engine has one, e.g. after
+  // its first update: the versions then record their samples, and any change counts).
   struct Noise {
     std::uint64_t samples = 0;
     const std::vector<Lightmap>* standard_error = nullptr;
