@@ -13,6 +13,7 @@
 #include "irradcast/common/camera.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/world.h"
+#include "irradcast/service/engine_host.h"
 #include "plot.h"
 
 namespace irradcast::bench {
@@ -22,6 +23,10 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 struct Options {
   int width = 160, height = 120, views = 8, ref_spp = 1024, updates = 32, pt_max_spp = 1024;
   std::string cache, out;
+  // The server's options, as irradcast-server parses them (server/tools/engine_options.h: every
+  // parameter of engine_params.inc, the atlas and the backend); the path tracer takes its
+  // bounce count from them.
+  EngineHostOptions engine;
   bool corrected = true;
   std::vector<double> targets;  // empty: automatic
   int levels = 5;
@@ -103,9 +108,6 @@ struct Row {
   int updates = -1;  // -1: never (below the engine's floor)
   double server_s = kInf, client_s = kInf, kstar = kInf;
   double client_compose_s = kInf;  // the compose part of client_s
-  // Estimate for 1280x720 frames: the path tracer's and the compose's time scaled by the pixel
-  // count (same samples per pixel for the same per-pixel error), server and decode unchanged.
-  double kstar_720p = kInf;
   // Every-view criterion: the first update at which every view's error is <= target.
   int updates_all = -1;
   double server_all_s = kInf, client_all_s = kInf, kstar_all = kInf;
@@ -145,6 +147,16 @@ std::string file_key(const std::string& spec);
 // Measures one scene: references, engine updates, per-user path tracers, cross-over rows
 // (scene_run.cpp).
 SceneResult run_scene(const std::string& spec, const Options& o);
+// The reference of views[v] in `world` (run_scene's, from the same cache; scene_run.cpp).
+Reference view_reference(const std::string& spec, const Options& o, const World& world,
+                         const std::vector<View>& views, std::size_t v);
+
+// ---------------------------------------------------------------------------------------------
+// --join (join.cpp): a new viewer's first converged image, on a converged and on a fresh server.
+
+// Runs both cases for each scene, prints them, writes crossover_join_<scene>.png and returns
+// their JSON.
+nlohmann::json run_join(const std::vector<std::string>& scenes, const Options& o);
 
 // ---------------------------------------------------------------------------------------------
 // The report (report.cpp).
