@@ -49,12 +49,18 @@ nlohmann::json pose_json(const CameraPose& p);
 // The reference and the error metric.
 
 struct Reference {
-  ImageRGB image;          // (A + B) / 2
-  double noise_mse = 0.0;  // mean over pixels and channels of ((A - B) / 2)^2
-  double mean = 0.0;       // mean over pixels and channels of the image
-  double cpu_s = 0.0;      // 0 when read from the cache
+  ImageRGB image;             // (A + B) / 2
+  double noise_mse = 0.0;     // mean over pixels and channels of ((A - B) / 2)^2
+  double noise_mse_se = 0.0;  // noise_mse's standard error (its spread over 16 bands of rows)
+  double mean = 0.0;          // mean over pixels and channels of the image
+  double cpu_s = 0.0;         // 0 when read from the cache
   bool cached = false;
   double rel_noise() const { return mean > 0 ? std::sqrt(noise_mse) / mean : 0.0; }
+  // The standard error that noise_mse's own uncertainty gives a corrected error e (relative):
+  // d(sqrt(mse - N) / mean) = dN / (2 e mean^2).
+  double corrected_se(double e) const {
+    return e > 0 && mean > 0 ? noise_mse_se / (2.0 * e * mean * mean) : 0.0;
+  }
 };
 
 // Relative RMSE of linear radiance: sqrt(mean over pixels and channels of (img - ref)^2) /

@@ -81,6 +81,9 @@ json scene_json(const SceneResult& r, double noise) {
     jv["name"] = r.views[v].name;
     jv["reference_mean_radiance"] = r.refs[v].mean;
     jv["reference_rel_noise"] = r.refs[v].rel_noise();
+    jv["reference_noise_mse"] = r.refs[v].noise_mse;
+    jv["reference_noise_mse_se"] = r.refs[v].noise_mse_se;
+    jv["engine_last_err_corrected_se"] = r.refs[v].corrected_se(r.engine.back().err[v].corrected);
     jv["reference_cpu_s"] = r.refs[v].cpu_s;
     jv["reference_cached"] = r.refs[v].cached;
     json pts = json::array();
@@ -346,12 +349,16 @@ json report_scenes(const std::vector<SceneResult>& results, const Options& o) {
   json scenes = json::array();
   for (const SceneResult& r : results) {
     print_rows(r);
-    double noise = 0;
-    for (const Reference& ref : r.refs) noise += ref.rel_noise() / r.refs.size();
+    double noise = 0, floor_se = 0;
+    for (std::size_t v = 0; v < r.refs.size(); ++v) {
+      noise += r.refs[v].rel_noise() / r.refs.size();
+      floor_se += r.refs[v].corrected_se(r.engine.back().err[v].corrected) / r.refs.size();
+    }
     std::printf(
         "%-8s engine floor (lowest error over %d updates): mean %.4f, every view %.4f; the "
-        "reference's own noise: %.4f (relative RMS, mean over views)\n",
-        r.spec.c_str(), o.updates, r.floor_mean, r.floor_all, noise);
+        "reference's own noise: %.4f (relative RMS, mean over views); the corrected error at "
+        "the last update is uncertain by +-%.4f (1 sigma, from the noise estimate)\n",
+        r.spec.c_str(), o.updates, r.floor_mean, r.floor_all, noise, floor_se);
     scenes.push_back(scene_json(r, noise));
   }
   std::printf(
