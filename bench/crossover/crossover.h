@@ -51,7 +51,7 @@ nlohmann::json pose_json(const CameraPose& p);
 struct Reference {
   ImageRGB image;             // (A + B) / 2
   double noise_mse = 0.0;     // mean over pixels and channels of ((A - B) / 2)^2
-  double noise_mse_se = 0.0;  // noise_mse's standard error (its spread over 16 bands of rows)
+  double noise_mse_se = 0.0;  // noise_mse's standard error (pixels independent)
   double mean = 0.0;          // mean over pixels and channels of the image
   double cpu_s = 0.0;         // 0 when read from the cache
   bool cached = false;

@@ -25,9 +25,9 @@ json num(double v) {
   return v < kInf ? json(v) : json(nullptr);
 }
 
-// The panel drawn of each image: all of it up to 480 x 360 pixels, else its centre at 1:1 (a
+// The panel drawn of each image: all of it up to 320 x 180 pixels, else its centre at 1:1 (a
 // 1280x720 picture of three columns would be megabytes; scaling down would hide the noise).
-constexpr int kPanelW = 480, kPanelH = 360;
+constexpr int kPanelW = 320, kPanelH = 180;
 
 void image_to_canvas(plot::Canvas& c, const ImageRGB& img, int x0, int y0, float exposure_ev) {
   ToneMapOptions tm;

@@ -237,31 +237,20 @@ Reference make_reference(const SceneContext& c, const SceneResult& r, std::size_
     write_exr(file.string(), half[h]);
   }
   ref.image = weighted_mean({{&half[0], 0.5}, {&half[1], 0.5}});
-  // The noise MSE per band of rows as well: their spread gives the estimate's standard error.
-  constexpr int kBands = 16;
-  double se = 0, sum = 0, band_se[kBands] = {}, band_n[kBands] = {};
-  for (std::size_t i = 0; i < ref.image.pixels.size(); ++i) {
-    const int b = static_cast<int>(i / static_cast<std::size_t>(o.width)) * kBands / o.height;
+  // The noise MSE's standard error: the spread of the per-sample terms over their count (the
+  // pixels' noise is independent).
+  double se = 0, se2 = 0, sum = 0;
+  for (std::size_t i = 0; i < ref.image.pixels.size(); ++i)
     for (int ch = 0; ch < 3; ++ch) {
       double d = 0.5 * (static_cast<double>(half[0].pixels[i][ch]) - half[1].pixels[i][ch]);
       se += d * d;
-      band_se[b] += d * d;
-      band_n[b] += 1;
+      se2 += d * d * d * d;
       sum += ref.image.pixels[i][ch];
     }
-  }
   const double n = 3.0 * static_cast<double>(ref.image.pixels.size());
   ref.noise_mse = se / n;
   ref.mean = sum / n;
-  double var = 0;
-  int bands = 0;
-  for (int b = 0; b < kBands; ++b)
-    if (band_n[b] > 0) {
-      const double dv = band_se[b] / band_n[b] - ref.noise_mse;
-      var += dv * dv;
-      ++bands;
-    }
-  if (bands > 1) ref.noise_mse_se = std::sqrt(var / (bands - 1) / bands);
+  ref.noise_mse_se = std::sqrt(std::max(se2 / n - ref.noise_mse * ref.noise_mse, 0.0) / n);
   return ref;
 }
 
