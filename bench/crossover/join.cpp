@@ -67,7 +67,7 @@ struct JoinResult {
   double level = 0, ref_noise = 0;
   // (a)
   double connect_s = 0, tiles_s = 0, compose_s = 0, written_s = 0;
-  std::uint64_t bytes = 0;
+  std::uint64_t bytes = 0;  // what the viewer received: scene package and tiles
   // (b)
   double fresh_setup_s = 0, within10_s = kInf, level_s = kInf;
   std::vector<JoinPoint> curve;
@@ -191,7 +191,7 @@ json join_json(const JoinResult& j) {
             {"all_tiles_s", j.tiles_s},
             {"composed_s", j.compose_s},
             {"image_written_s", j.written_s},
-            {"tile_bytes", j.bytes}}},
+            {"bytes_received", j.bytes}}},
           {"fresh_server",
            {{"server_setup_s", j.fresh_setup_s},
             {"within_10pct_of_level_s", num(j.within10_s)},
