@@ -7,14 +7,16 @@
 //    bounce count as the engine. The halves also measure the reference's own noise, which is
 //    subtracted from every measured MSE (see error_of()).
 //  - Shared engine: the real server's code path, EngineHost::step() (Engine::update, lightmaps,
-//    TileStore::publish with RGB9E5 + zstd encoding), default parameters; a client decodes the
+//    TileStore::publish with RGB9E5 + zstd encoding), the server's options; a client decodes the
 //    tiles that changed (wire::decode_tile) and composes its view (irradcast::compose) after
 //    every update, on one thread. Process CPU time for the server, thread CPU time for the
 //    client.
 //  - Per-user path tracer: progressive PathTracer::render passes with seeds of their own,
 //    process CPU time and error at checkpoints.
 // The cross-over for a target error e is K* = server(e) / (pt(e) - client(e)). Prints a table,
-// writes JSON and PNG plots (see docs/BENCHMARKS.md, "Cross-over at equal error").
+// writes JSON and PNG plots (see docs/BENCHMARKS.md, "Cross-over at equal error"). The engine
+// takes every option irradcast-server takes (server/tools/engine_options.h). With --join, the
+// time a new viewer takes to get a converged first image instead (join.cpp).
 // This file: the options and main; scene_run.cpp measures, report.cpp prints and plots
 // (crossover.h).
 #include <CLI/CLI.hpp>
