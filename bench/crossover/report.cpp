@@ -285,7 +285,7 @@ void plot_users(const SceneResult& r, const Options& o) {
       x.x = {row.kstar};
       x.y = {row.kstar * row.pt_s};
       x.labels = {"K* = " + kstar_text(row.kstar)};
-      x.labels_above_left = true;
+      x.labels_above_left = row.kstar > 0.2 * kmax;  // else right of it, off the axis
       b.series.push_back(x);
     }
   }
