@@ -13,6 +13,7 @@
 #include "irradcast/common/camera.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/world.h"
+#include "irradcast/service/engine_host.h"
 #include "plot.h"
 
 namespace irradcast::bench {
@@ -22,6 +23,10 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 struct Options {
   int width = 160, height = 120, views = 8, ref_spp = 1024, updates = 32, pt_max_spp = 1024;
   std::string cache, out;
+  // The server's options, as irradcast-server parses them (server/tools/engine_options.h: every
+  // parameter of engine_params.inc, the atlas and the backend); the path tracer takes its
+  // bounce count from them.
+  EngineHostOptions engine;
   bool corrected = true;
   std::vector<double> targets;  // empty: automatic
   int levels = 5;
@@ -44,12 +49,18 @@ nlohmann::json pose_json(const CameraPose& p);
 // The reference and the error metric.
 
 struct Reference {
-  ImageRGB image;          // (A + B) / 2
-  double noise_mse = 0.0;  // mean over pixels and channels of ((A - B) / 2)^2
-  double mean = 0.0;       // mean over pixels and channels of the image
-  double cpu_s = 0.0;      // 0 when read from the cache
+  ImageRGB image;             // (A + B) / 2
+  double noise_mse = 0.0;     // mean over pixels and channels of ((A - B) / 2)^2
+  double noise_mse_se = 0.0;  // noise_mse's standard error (pixels independent)
+  double mean = 0.0;          // mean over pixels and channels of the image
+  double cpu_s = 0.0;         // 0 when read from the cache
   bool cached = false;
   double rel_noise() const { return mean > 0 ? std::sqrt(noise_mse) / mean : 0.0; }
+  // The standard error that noise_mse's own uncertainty gives a corrected error e (relative):
+  // d(sqrt(mse - N) / mean) = dN / (2 e mean^2).
+  double corrected_se(double e) const {
+    return e > 0 && mean > 0 ? noise_mse_se / (2.0 * e * mean * mean) : 0.0;
+  }
 };
 
 // Relative RMSE of linear radiance: sqrt(mean over pixels and channels of (img - ref)^2) /
@@ -103,9 +114,6 @@ struct Row {
   int updates = -1;  // -1: never (below the engine's floor)
   double server_s = kInf, client_s = kInf, kstar = kInf;
   double client_compose_s = kInf;  // the compose part of client_s
-  // Estimate for 1280x720 frames: the path tracer's and the compose's time scaled by the pixel
-  // count (same samples per pixel for the same per-pixel error), server and decode unchanged.
-  double kstar_720p = kInf;
   // Every-view criterion: the first update at which every view's error is <= target.
   int updates_all = -1;
   double server_all_s = kInf, client_all_s = kInf, kstar_all = kInf;
@@ -145,6 +153,16 @@ std::string file_key(const std::string& spec);
 // Measures one scene: references, engine updates, per-user path tracers, cross-over rows
 // (scene_run.cpp).
 SceneResult run_scene(const std::string& spec, const Options& o);
+// The reference of views[v] in `world` (run_scene's, from the same cache; scene_run.cpp).
+Reference view_reference(const std::string& spec, const Options& o, const World& world,
+                         const std::vector<View>& views, std::size_t v);
+
+// ---------------------------------------------------------------------------------------------
+// --join (join.cpp): a new viewer's first converged image, on a converged and on a fresh server.
+
+// Runs both cases for each scene, prints them, writes crossover_join_<scene>.png and returns
+// their JSON.
+nlohmann::json run_join(const std::vector<std::string>& scenes, const Options& o);
 
 // ---------------------------------------------------------------------------------------------
 // The report (report.cpp).

@@ -25,14 +25,20 @@ json num(double v) {
   return v < kInf ? json(v) : json(nullptr);
 }
 
+// The panel drawn of each image: all of it up to 320 x 180 pixels, else its centre at 1:1 (a
+// 1280x720 picture of three columns would be megabytes; scaling down would hide the noise).
+constexpr int kPanelW = 320, kPanelH = 180;
+
 void image_to_canvas(plot::Canvas& c, const ImageRGB& img, int x0, int y0, float exposure_ev) {
   ToneMapOptions tm;
   tm.auto_exposure = false;
   tm.exposure_ev = exposure_ev;
   std::vector<std::uint8_t> rgb = tonemap_srgb8(img, tm);
-  for (int y = 0; y < img.height; ++y)
-    for (int x = 0; x < img.width; ++x) {
-      std::size_t k = (static_cast<std::size_t>(y) * img.width + x) * 3;
+  const int w = std::min(img.width, kPanelW), h = std::min(img.height, kPanelH);
+  const int sx = (img.width - w) / 2, sy = (img.height - h) / 2;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      std::size_t k = (static_cast<std::size_t>(sy + y) * img.width + sx + x) * 3;
       c.blend(x0 + x, y0 + y, {rgb[k], rgb[k + 1], rgb[k + 2]}, 1.0);
     }
 }
@@ -42,7 +48,7 @@ void print_rows(const SceneResult& r) {
   for (const Row& row : r.rows) {
     const bool reach = row.updates > 0;
     std::printf(
-        "%-8s %8.4f | %4s %9s %9s | %9.2f %5.0f %4d/%zu | %8s %8s | %4s %8s | %8s\n",
+        "%-8s %8.4f | %4s %9s %9s | %9.2f %5.0f %4d/%zu | %8s %8s | %4s %8s | %10s\n",
         r.spec.c_str(), row.target, reach ? std::to_string(row.updates).c_str() : "-",
         reach ? fmt("%.2f", row.server_s).c_str() : "-",
         reach ? fmt("%.3f", row.client_s).c_str() : "-", row.pt_s, row.mean_spp,
@@ -51,7 +57,8 @@ void print_rows(const SceneResult& r) {
             ? std::to_string(static_cast<long long>(std::max(1.0, std::ceil(row.kstar)))).c_str()
             : "never",
         row.updates_all > 0 ? std::to_string(row.updates_all).c_str() : "-",
-        kstar_text(row.kstar_all).c_str(), kstar_text(row.kstar_720p).c_str());
+        kstar_text(row.kstar_all).c_str(),
+        reach ? fmt("%.1f", 1e3 * row.client_compose_s / row.updates).c_str() : "-");
   }
 }
 
@@ -74,6 +81,9 @@ json scene_json(const SceneResult& r, double noise) {
     jv["name"] = r.views[v].name;
     jv["reference_mean_radiance"] = r.refs[v].mean;
     jv["reference_rel_noise"] = r.refs[v].rel_noise();
+    jv["reference_noise_mse"] = r.refs[v].noise_mse;
+    jv["reference_noise_mse_se"] = r.refs[v].noise_mse_se;
+    jv["engine_last_err_corrected_se"] = r.refs[v].corrected_se(r.engine.back().err[v].corrected);
     jv["reference_cpu_s"] = r.refs[v].cpu_s;
     jv["reference_cached"] = r.refs[v].cached;
     json pts = json::array();
@@ -119,8 +129,7 @@ json scene_json(const SceneResult& r, double noise) {
                     {"server_cpu_s_every_view", num(row.server_all_s)},
                     {"client_cpu_s_every_view", num(row.client_all_s)},
                     {"kstar_every_view", num(row.kstar_all)},
-                    {"client_compose_cpu_s", num(row.client_compose_s)},
-                    {"kstar_1280x720_estimate", num(row.kstar_720p)}});
+                    {"client_compose_cpu_s", num(row.client_compose_s)}});
   js["crossover"] = rows;
   return js;
 }
@@ -276,7 +285,7 @@ void plot_users(const SceneResult& r, const Options& o) {
       x.x = {row.kstar};
       x.y = {row.kstar * row.pt_s};
       x.labels = {"K* = " + kstar_text(row.kstar)};
-      x.labels_above_left = true;
+      x.labels_above_left = row.kstar > 0.2 * kmax;  // else right of it, off the axis
       b.series.push_back(x);
     }
   }
@@ -289,7 +298,9 @@ void plot_users(const SceneResult& r, const Options& o) {
 void plot_views(const SceneResult& r, const Options& o) {
   if (r.engine_at_mid.empty()) return;
   const std::string key = file_key(r.spec);
-  const int w = o.width, h = o.height, gap = 6, head = 60, label = 18;
+  const int w = std::min(o.width, kPanelW), h = std::min(o.height, kPanelH);
+  const int gap = 6, head = 60, label = 18;
+  const bool cropped = w < o.width || h < o.height;
   const int nv = static_cast<int>(r.views.size());
   const int cols = nv > 4 ? 2 : 1, rows = (nv + cols - 1) / cols;
   const int cw = 3 * w + 2 * gap + 3 * gap;
@@ -300,7 +311,9 @@ void plot_views(const SceneResult& r, const Options& o) {
   cv.text(cv.width() / 2.0, 32,
           "engine after " + std::to_string(r.mid_update) +
               " updates, path tracer at the first checkpoint with error <= " + fmt("%.3f", target) +
-              " per view; same exposure per view",
+              " per view; same exposure per view" +
+              (cropped ? "; centre " + std::to_string(w) + "x" + std::to_string(h) + " at 1:1"
+                       : std::string()),
           1.2, plot::kDarkGrey, plot::Align::Center);
   for (int v = 0; v < nv; ++v) {
     const int x0 = gap + (v / rows) * cw, y0 = head + (v % rows) * (h + label + gap);
@@ -330,26 +343,30 @@ json report_scenes(const std::vector<SceneResult>& results, const Options& o) {
       "\nCross-over at equal error (CPU seconds; server = update + publish with RGB9E5 "
       "encoding, all threads;\nclient = per client: decode of the changed tiles + one compose "
       "per update, one thread; PT = per user, mean over the views)\n");
-  std::printf("%-8s %8s | %4s %9s %9s | %9s %5s %7s | %8s %8s | %4s %8s | %8s\n", "scene", "target",
-              "upd", "server s", "client s", "PT s/user", "spp", "extrap", "K*", "users", "upd*",
-              "K*(all)", "K*@720p");
+  std::printf("%-8s %8s | %4s %9s %9s | %9s %5s %7s | %8s %8s | %4s %8s | %10s\n", "scene",
+              "target", "upd", "server s", "client s", "PT s/user", "spp", "extrap", "K*", "users",
+              "upd*", "K*(all)", "compose ms");
   json scenes = json::array();
   for (const SceneResult& r : results) {
     print_rows(r);
-    double noise = 0;
-    for (const Reference& ref : r.refs) noise += ref.rel_noise() / r.refs.size();
+    double noise = 0, floor_se = 0;
+    for (std::size_t v = 0; v < r.refs.size(); ++v) {
+      noise += r.refs[v].rel_noise() / r.refs.size();
+      floor_se += r.refs[v].corrected_se(r.engine.back().err[v].corrected) / r.refs.size();
+    }
     std::printf(
         "%-8s engine floor (lowest error over %d updates): mean %.4f, every view %.4f; the "
-        "reference's own noise: %.4f (relative RMS, mean over views)\n",
-        r.spec.c_str(), o.updates, r.floor_mean, r.floor_all, noise);
+        "reference's own noise: %.4f (relative RMS, mean over views); the corrected error at "
+        "the last update is uncertain by +-%.4f (1 sigma, from the noise estimate)\n",
+        r.spec.c_str(), o.updates, r.floor_mean, r.floor_all, noise, floor_se);
     scenes.push_back(scene_json(r, noise));
   }
   std::printf(
       "upd: engine updates until the error averaged over the views is <= target ('-': never, "
       "below the engine's floor); K* = server / (PT - client), users = the smallest whole "
       "K;\nupd*, K*(all): the same when every view must be <= target. extrap: views whose "
-      "PT time is extrapolated (t ~ e^-2) past the last checkpoint.\nK*@720p: an estimate "
-      "for 1280x720 frames, the PT and compose times scaled by the pixel count.\n");
+      "PT time is extrapolated (t ~ e^-2) past the last checkpoint.\ncompose ms: one client "
+      "frame at this size (CPU ms, one thread, mean over the updates and views).\n");
   return scenes;
 }
 

@@ -81,6 +81,13 @@ std::vector<View> make_views(const std::string& spec, const Scene& scene, const 
     v.push_back({"unlit (0,0), floor", look({3.5f, 2.2f, 3.5f}, {0.5f, 0.3f, 0.5f}, 60)});
     v.push_back({"lit (1,0) from the doorway", look({4.3f, 1.6f, 2.0f}, {7.5f, 0.3f, 3.0f}, 60)});
     v.push_back({"from (0,1) into unlit (0,0)", look({2.0f, 1.6f, 7.5f}, {2.0f, 1.0f, 3.0f}, 55)});
+  } else if (spec == "sponza") {
+    // The atrium runs along x (about -15 to 15 m), the courtyard floor at y = 0, the arcades
+    // on both sides in z; sun and sky through the open roof.
+    v.push_back(
+        {"east end, back down the hall", look({12.0f, 1.6f, 0.5f}, {-6.0f, 4.0f, -1.0f}, 70)});
+    v.push_back({"under the south arcade", look({-6.0f, 1.5f, -4.6f}, {6.0f, 2.0f, -3.5f}, 70)});
+    v.push_back({"up at the north gallery", look({0.0f, 1.0f, -2.0f}, {4.0f, 9.0f, 5.0f}, 65)});
   } else {
     const glm::vec3 c = world.bounds.center();
     const glm::vec3 e = world.bounds.extent();
@@ -230,16 +237,20 @@ Reference make_reference(const SceneContext& c, const SceneResult& r, std::size_
     write_exr(file.string(), half[h]);
   }
   ref.image = weighted_mean({{&half[0], 0.5}, {&half[1], 0.5}});
-  double se = 0, sum = 0;
+  // The noise MSE's standard error: the spread of the per-sample terms over their count (the
+  // pixels' noise is independent).
+  double se = 0, se2 = 0, sum = 0;
   for (std::size_t i = 0; i < ref.image.pixels.size(); ++i)
     for (int ch = 0; ch < 3; ++ch) {
       double d = 0.5 * (static_cast<double>(half[0].pixels[i][ch]) - half[1].pixels[i][ch]);
       se += d * d;
+      se2 += d * d * d * d;
       sum += ref.image.pixels[i][ch];
     }
   const double n = 3.0 * static_cast<double>(ref.image.pixels.size());
   ref.noise_mse = se / n;
   ref.mean = sum / n;
+  ref.noise_mse_se = std::sqrt(std::max(se2 / n - ref.noise_mse * ref.noise_mse, 0.0) / n);
   return ref;
 }
 
@@ -417,11 +428,6 @@ Row crossover_row(const Options& o, const SceneResult& r, double e) {
   row.mean_spp = spp_sum / static_cast<double>(nv);
   row.kstar = kstar_of(row.server_s, row.client_s, row.pt_s);
   row.kstar_all = kstar_of(row.server_all_s, row.client_all_s, row.pt_s);
-  if (row.updates > 0) {
-    const double q = 1280.0 * 720.0 / (static_cast<double>(o.width) * o.height);
-    row.kstar_720p =
-        kstar_of(row.server_s, row.client_s + (q - 1) * row.client_compose_s, q * row.pt_s);
-  }
   return row;
 }
 
@@ -451,14 +457,26 @@ void pick_picture(const Options& o, const std::vector<std::vector<ImageRGB>>& en
 
 }  // namespace
 
+Reference view_reference(const std::string& spec, const Options& o, const World& world,
+                         const std::vector<View>& views, std::size_t v) {
+  RayScene rays(world);
+  LightSampler lights(world);
+  SceneContext c{spec, o, world, rays, lights, PathTracerOptions{}};
+  c.pto.indirect_bounces = o.engine.engine.indirect_bounces;
+  SceneResult r;
+  r.views = views;
+  for (const auto& obj : world.objects) r.triangles += obj.triangles().size();
+  fs::create_directories(o.cache);
+  return make_reference(c, r, v);
+}
+
 SceneResult run_scene(const std::string& spec, const Options& o) {
   SceneResult r;
   r.spec = spec;
   std::fprintf(stderr, "[%s] setting up the server (EngineHost, default parameters) ...\n",
                spec.c_str());
   double c0 = process_cpu_seconds();
-  EngineHostOptions ho;  // EngineParams, AtlasOptions and TileStoreOptions: the server's defaults
-  EngineHost host(load_scene(spec), spec, ho);
+  EngineHost host(load_scene(spec), spec, o.engine);
   r.setup_cpu_s = process_cpu_seconds() - c0;
   const World& world = host.world();
   // The client's own ray scene (a real client builds it from the scene package); the path
@@ -475,7 +493,7 @@ SceneResult run_scene(const std::string& spec, const Options& o) {
   const std::size_t nv = r.views.size();
 
   SceneContext c{spec, o, world, rays, lights, PathTracerOptions{}};
-  c.pto.indirect_bounces = EngineParams{}.indirect_bounces;
+  c.pto.indirect_bounces = o.engine.engine.indirect_bounces;
   fs::create_directories(o.cache);
   for (std::size_t v = 0; v < nv; ++v) r.refs.push_back(make_reference(c, r, v));
   const std::vector<std::vector<ImageRGB>> engine_images = run_engine(c, host, r);
