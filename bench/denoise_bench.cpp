@@ -43,7 +43,7 @@ namespace {
 
 struct Options {
   std::string scene = "sponza", out = "docs/images", json, cache = "out/denoise-cache";
-  float texels = 96.0f;
+  float texels = 64.0f;
   std::string tracing_range;  // the engine's --tracing-range ("" = its default)
   int ref_spp = 1024, few = 4, many = 16, converged = 64, width = 320, height = 240, threads = 0;
 };
@@ -106,6 +106,46 @@ void paste_crop(std::vector<std::uint8_t>& canvas, int canvas_w, const ImageRGB&
       const std::size_t dst = 3 * (static_cast<std::size_t>(y) * canvas_w + slot * 2 * w + x);
       for (int c = 0; c < 3; ++c) canvas[dst + c] = rgb[src + c];
     }
+}
+
+// OUT/denoise_error.png: e = plain, denoised, and both with the reference's noise taken out.
+void write_error_plot(const Options& o, const std::vector<double>& xs,
+                      const std::vector<std::vector<double>>& e, double ref_noise) {
+  plot::XYPlot xy;
+  xy.title = "Denoiser on " + o.scene + ": per-pixel error vs updates";
+  xy.note = "relative RMSE vs a " + std::to_string(o.ref_spp) +
+            " spp per-texel reference (grey: its own noise)";
+  xy.x_label = "updates";
+  xy.y_label = "relative RMSE";
+  xy.x_log = xy.y_log = true;
+  xy.legend = plot::XYPlot::Legend::TopRight;
+  const auto series = [&](const char* label, std::vector<double> x, std::vector<double> y,
+                          plot::Color c, bool points) {
+    plot::Series se;
+    se.label = label;
+    se.x = std::move(x);
+    se.y = std::move(y);
+    se.color = c;
+    se.points = points;
+    se.lines = true;
+    xy.series.push_back(std::move(se));
+  };
+  series("plain", xs, e[0], plot::kBlue, true);
+  series("denoised", xs, e[1], plot::kOrange, true);
+  series("plain, reference noise taken out", xs, e[2], plot::kGreen, false);
+  series("denoised, reference noise taken out", xs, e[3], plot::kRed, false);
+  series("reference noise", {1.0, xs.back()}, {ref_noise, ref_noise}, plot::kDarkGrey, false);
+  write_xy_plot((fs::path(o.out) / "denoise_error.png").string(), xy);
+}
+
+// OUT/denoise_crops.png: the centre crops of `images` side by side, at the last one's exposure.
+void write_crops(const Options& o, const std::vector<const ImageRGB*>& images) {
+  const float scale = exposure_scale(*images.back(), ToneMapOptions{});
+  const int cw = static_cast<int>(images.size()) * (o.width / 2) * 2, ch = (o.height / 2) * 2;
+  std::vector<std::uint8_t> crops(static_cast<std::size_t>(cw) * ch * 3, 255);
+  int slot = 0;
+  for (const ImageRGB* img : images) paste_crop(crops, cw, *img, scale, slot++);
+  write_png((fs::path(o.out) / "denoise_crops.png").string(), cw, ch, crops);
 }
 
 int run(Options o) {
@@ -178,38 +218,8 @@ int run(Options o) {
   std::vector<double> plain_c, denoised_c;
   for (double e : plain_err) plain_c.push_back(corrected(e));
   for (double e : denoised_err) denoised_c.push_back(corrected(e));
-  plot::XYPlot xy;
-  xy.title = "Denoiser on " + o.scene + ": per-pixel error vs updates";
-  xy.note = "relative RMSE vs a " + std::to_string(o.ref_spp) +
-            " spp per-texel reference (grey: its own noise)";
-  xy.x_label = "updates";
-  xy.y_label = "relative RMSE";
-  xy.x_log = xy.y_log = true;
-  xy.legend = plot::XYPlot::Legend::TopRight;
-  const auto series = [&](const char* label, std::vector<double> x, std::vector<double> y,
-                          plot::Color c, bool points) {
-    plot::Series se;
-    se.label = label;
-    se.x = std::move(x);
-    se.y = std::move(y);
-    se.color = c;
-    se.points = points;
-    se.lines = true;
-    xy.series.push_back(std::move(se));
-  };
-  series("plain", xs, plain_err, plot::kBlue, true);
-  series("denoised", xs, denoised_err, plot::kOrange, true);
-  series("plain, reference noise taken out", xs, plain_c, plot::kGreen, false);
-  series("denoised, reference noise taken out", xs, denoised_c, plot::kRed, false);
-  series("reference noise", {1.0, xs.back()}, {ref_noise, ref_noise}, plot::kDarkGrey, false);
-  write_xy_plot((fs::path(o.out) / "denoise_error.png").string(), xy);
-  const float scale = exposure_scale(ref, ToneMapOptions{});
-  const int cw = 4 * (o.width / 2) * 2, ch = (o.height / 2) * 2;
-  std::vector<std::uint8_t> crops(static_cast<std::size_t>(cw) * ch * 3, 255);
-  int slot = 0;
-  for (const ImageRGB* img : {&few_plain, &few_denoised, &many_plain, &ref})
-    paste_crop(crops, cw, *img, scale, slot++);
-  write_png((fs::path(o.out) / "denoise_crops.png").string(), cw, ch, crops);
+  write_error_plot(o, xs, {plain_err, denoised_err, plain_c, denoised_c}, ref_noise);
+  write_crops(o, {&few_plain, &few_denoised, &many_plain, &ref});
 
   nlohmann::json j = {{"bench", "irradcast-bench-denoise"},
                       {"scene", o.scene},
