@@ -118,7 +118,7 @@ void write_error_plot(const Options& o, const std::vector<double>& xs,
   xy.x_label = "updates";
   xy.y_label = "relative RMSE";
   xy.x_log = xy.y_log = true;
-  xy.legend = plot::XYPlot::Legend::TopRight;
+  xy.legend = plot::XYPlot::Legend::BottomLeft;
   const auto series = [&](const char* label, std::vector<double> x, std::vector<double> y,
                           plot::Color c, bool points) {
     plot::Series se;
