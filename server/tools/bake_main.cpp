@@ -28,6 +28,7 @@
 #include "irradcast/common/tonemap.h"
 #include "irradcast/common/world.h"
 #include "irradcast/engine/backend_select.h"
+#include "irradcast/engine/denoise.h"
 #include "irradcast/engine/engine.h"
 #include "irradcast/engine/path_tracer.h"
 #include "irradcast/engine/prepared_scene.h"
@@ -273,7 +274,12 @@ Lightmaps engine_method(Bake& b, const PreparedScene& p) {
   progress.finish();
   if (!engine.method_summary().empty())
     log::info("bake", method_name(ep.method) + ": " + engine.method_summary());
-  out.maps = engine.lightmaps();
+  DenoiseStats ds;
+  out.maps = engine.published_lightmaps(&ds);
+  if (ep.denoise)
+    log::info("bake", "denoised: " + std::to_string(ds.filtered) + " texels filtered, " +
+                          std::to_string(ds.kept) + " kept (outside their confidence), " +
+                          std::to_string(ds.seams) + " across chart seams");
   b.timings["lightmaps"] = b.sw.lap();
   b.report["engine"] = engine_report(b, engine, passes);
   return out;

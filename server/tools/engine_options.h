@@ -77,7 +77,7 @@ struct EngineOptions {
   void add_param(CLI::App& app, const ParamSpec& s, T& v) {
     if constexpr (std::is_same_v<T, bool>) {
       app.add_flag_callback(
-          s.flags, [&v] { v = false; }, s.help);  // ParamKind::Off
+          s.flags, [&v, on = s.kind == ParamKind::On] { v = on; }, s.help);  // Off / On
     } else if constexpr (std::is_enum_v<T>) {
       app.add_option(s.flags, text[s.name], s.help);  // ParamKind::Choice
     } else if (s.kind == ParamKind::Distance) {

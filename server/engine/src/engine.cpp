@@ -10,6 +10,7 @@
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/sampling.h"
+#include "irradcast/engine/denoise.h"
 
 namespace irradcast {
 namespace {
@@ -270,16 +271,28 @@ std::vector<Lightmap> Engine::component(int bounce) const {
   return to_lightmaps(mean_[bounce]);
 }
 
-std::vector<Lightmap> Engine::standard_error() const {
-  if (updates_ < 2) return {};
-  // Texels with fewer than 2 samples since a restart have no noise estimate: 0, so that any
-  // change of theirs counts as real.
-  std::vector<glm::vec3> se(texels_.size());
+std::vector<Lightmap> Engine::published_lightmaps(DenoiseStats* stats) const {
+  if (stats) *stats = {};
+  if (!params_.denoise || updates_ < 2) return lightmaps();
+  return to_lightmaps(denoise(texels_, denoise_guide(texels_, *atlas_, *gbuffers_), shown(),
+                              texel_standard_error(), {}, stats));
+}
+
+std::vector<float> Engine::texel_standard_error() const {
+  // Texels with fewer than 2 samples since a restart have no noise estimate: 0.
+  std::vector<float> se(texels_.size());
   for (std::size_t i = 0; i < se.size(); ++i) {
     const double n = bounce_samples_[i];
-    se[i] = glm::vec3(n < 2 ? 0.0f : static_cast<float>(std::sqrt(total_m2_[i] / (n - 1) / n)));
+    se[i] = n < 2 ? 0.0f : static_cast<float>(std::sqrt(total_m2_[i] / (n - 1) / n));
   }
-  return to_lightmaps(se);
+  return se;
+}
+
+std::vector<Lightmap> Engine::standard_error() const {
+  if (updates_ < 2) return {};
+  // A texel without a noise estimate gets 0, so that any change of its counts as real.
+  const std::vector<float> se = texel_standard_error();
+  return to_lightmaps(std::vector<glm::vec3>(se.begin(), se.end()));
 }
 
 double Engine::mean_relative_error() const {

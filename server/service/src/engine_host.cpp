@@ -332,7 +332,9 @@ void EngineHost::do_update() {
   // A full update (not a catch-up batch after an edit) counts towards max_updates.
   const bool full = impl_->engine->stale_texels() == 0;
   UpdateStats u = impl_->engine->update();
-  std::vector<Lightmap> maps = impl_->engine->lightmaps();
+  // Denoised with --denoise (a copy: the engine's means stay unfiltered). The tile store's
+  // noise test below uses the means' standard error, which bounds the denoised values' noise.
+  std::vector<Lightmap> maps = impl_->engine->published_lightmaps();
   // With the engine's own noise estimate, tiles that only changed by Monte Carlo noise wait
   // until their refresh is worth the bytes (TileStoreOptions::refresh_ratio). The last update
   // (max_updates) publishes every change beyond the threshold: final tiles are the final means.

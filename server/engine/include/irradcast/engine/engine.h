@@ -23,6 +23,8 @@
 
 namespace irradcast {
 
+struct DenoiseStats;  // denoise.h
+
 // One pass's cost as the backend reported it.
 using PassTiming = PassResult;
 
@@ -78,6 +80,10 @@ class Engine {
 
   // Total irradiance E = E_direct + sum of the bounces, per object, dilated into the gutters.
   std::vector<Lightmap> lightmaps() const;
+  // What is published (the server's tiles, the bake's lightmaps): lightmaps(), or with
+  // EngineParams::denoise a denoised copy of them (denoise.h); the running means stay as they
+  // are. `stats` gets the filter's counts (zero without the denoiser).
+  std::vector<Lightmap> published_lightmaps(DenoiseStats* stats = nullptr) const;
   // Irradiance of one component: 0 = direct, k = k-th indirect bounce.
   std::vector<Lightmap> component(int bounce) const;
   // Per texel: samples (updates) so far, and the relative standard error of its total estimate.
@@ -93,6 +99,8 @@ class Engine {
   void build_texels(const std::vector<TexelGBuffer>& gbuffers);
   void build_dispatch();
   std::vector<Lightmap> to_lightmaps(const std::vector<glm::vec3>& values) const;
+  // Per texel: the standard error of its total's mean (luminance; 0 below two samples).
+  std::vector<float> texel_standard_error() const;
   // Per texel: the total it shows (the blend of the new estimate and its value before an edit).
   std::vector<glm::vec3> shown() const;
   // update()'s steps: the next batch of texels waiting since an edit (grouped into units), and

@@ -25,6 +25,7 @@ enum class ParamKind {
   Distance,  // float >= lo, or inf; on the command line a number or "inf"
   Choice,    // an enum, on the command line one of choice_names()
   Off,       // a bool, true by default; its command-line flag turns it off
+  On,        // a bool, false by default; its command-line flag turns it on
   Seed,      // any 64-bit value
 };
 
