@@ -242,42 +242,4 @@ void RayScene::intersect8(const Ray* rays, int count, Hit* hits) const {
   }
 }
 
-void RayScene::intersect16(glm::vec3 origin, const glm::vec3* directions, const bool* active,
-                           Hit* hits) const {
-  alignas(64) int valid[16];
-  alignas(64) RTCRayHit16 rh;
-  const float tmax = Ray{}.tmax;
-  for (int i = 0; i < 16; ++i) {
-    valid[i] = active[i] ? -1 : 0;
-    rh.ray.org_x[i] = origin.x;
-    rh.ray.org_y[i] = origin.y;
-    rh.ray.org_z[i] = origin.z;
-    rh.ray.dir_x[i] = directions[i].x;
-    rh.ray.dir_y[i] = directions[i].y;
-    rh.ray.dir_z[i] = directions[i].z;
-    rh.ray.tnear[i] = 0.0f;
-    rh.ray.tfar[i] = tmax;
-    rh.ray.time[i] = 0.0f;
-    rh.ray.mask[i] = 0xFFFFFFFFu;
-    rh.ray.id[i] = static_cast<unsigned>(i);
-    rh.ray.flags[i] = 0;
-    rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
-  }
-  RTCIntersectContext ctx;
-  rtcInitIntersectContext(&ctx);
-  ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-  rtcIntersect16(valid, impl_->scene, &ctx, &rh);
-  for (int i = 0; i < 16; ++i) {
-    Hit& h = hits[i];
-    h = Hit{};
-    if (!active[i] || rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
-    h.object = static_cast<int>(rh.hit.geomID[i]);
-    h.triangle = rh.hit.primID[i];
-    h.u = rh.hit.u[i];
-    h.v = rh.hit.v[i];
-    h.t = rh.ray.tfar[i];
-  }
-}
-
 }  // namespace irradcast

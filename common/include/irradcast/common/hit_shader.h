@@ -33,7 +33,7 @@ class HitShader {
   HitShader(const World& world, const Atlas& atlas, const std::vector<Lightmap>& lightmaps);
 
   // The shade at hit h of a ray along `direction`.
-  [[gnu::always_inline]] HitShade shade(glm::vec3 direction, const Hit& h) const {
+  [[gnu::always_inline, gnu::flatten]] HitShade shade(glm::vec3 direction, const Hit& h) const {
     const Object& o = objects_[static_cast<std::size_t>(h.object)];
     const std::uint32_t t = h.triangle;
     const glm::vec2 uv = o.atlas->uv(t, h.u, h.v);

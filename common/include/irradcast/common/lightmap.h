@@ -19,7 +19,7 @@ struct Lightmap {
   Lightmap(int w, int h, glm::vec3 fill = glm::vec3(0.0f))
       : width(w), height(h), texels(static_cast<std::size_t>(w) * h, fill) {}
 
-  [[gnu::always_inline]] glm::vec3 bilinear(glm::vec2 uv) const {
+  glm::vec3 bilinear(glm::vec2 uv) const {
     float x = uv.x - 0.5f, y = uv.y - 0.5f;
     float fx = std::floor(x), fy = std::floor(y);
     float ax = x - fx, ay = y - fy;

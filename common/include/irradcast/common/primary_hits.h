@@ -1,7 +1,8 @@
 // A pinhole camera's primary rays, one through each pixel centre (camera_ray()'s rays, bit for
-// bit, from PinholeRays), traced in coherent 4 x 4 pixel Embree packets over tiles of packets in
-// parallel. Used by compose() and by the client passes' frame G-buffer, so both see exactly the
-// same pixels; the shading they share is HitShader (hit_shader.h).
+// bit, from PinholeRays), traced in coherent 4 x 4 pixel Embree packets (rtcIntersect16 on
+// RayScene::embree_scene()) over tiles of packets in parallel. Used by compose() and by the client
+// passes' frame G-buffer, so both see exactly the same pixels; the shading they share is HitShader
+// (hit_shader.h).
 #pragma once
 
 #include <functional>

@@ -1,5 +1,5 @@
 // Embree acceleration structure over a World: one triangle geometry per object (geomID equals
-// the object index). Single rays for the estimators, 8- and 16-wide packets for primary rays.
+// the object index). Single rays for the estimators, 8-wide packets for primary rays.
 //
 // An editable scene (scene edits, docs/EDITS.md) is Embree's two-level structure: every object
 // has its own BVH and a top-level BVH sits over them. update() after an object moves refits that
@@ -46,10 +46,6 @@ class RayScene {
   bool occluded(const Ray& ray) const;
   // Up to 8 rays at once (count <= 8), one Embree packet.
   void intersect8(const Ray* rays, int count, Hit* hits) const;
-  // 16 rays from one origin (a camera's 4 x 4 pixel block), one coherent Embree packet;
-  // lanes with active[k] false are skipped and get a miss. tmin 0, tmax Ray's default.
-  void intersect16(glm::vec3 origin, const glm::vec3* directions, const bool* active,
-                   Hit* hits) const;
 
   // Offset used to leave a surface: scales with the scene so that it works in millimetres and
   // in kilometres alike.
