@@ -1,21 +1,27 @@
 // irradcast-bench-client: the cost of the client passes of seed 002 along a camera path, side
 // by side in one run. Lightmaps from the engine (default parameters, --updates updates); then,
-// frame by frame along the path, the same camera through three compositors, interleaved so
-// that load from other processes hits them alike:
+// frame by frame along the path, the same camera through up to four configurations (--configs),
+// interleaved so that load from other processes hits them alike:
 //   plain       irradcast::compose (no passes; irradcast-view without flags)
 //   ssao        SSAO on every pixel every frame (--ssao)
-//   ssao+reproj SSAO through the reverse-reprojection cache (--ssao --reproject)
-// Prints per-configuration frame times (trace, SSAO, reprojection, resolve), the ratios, the
+//   ssao+reproject SSAO through the reverse-reprojection cache (--ssao --reproject)
+//   raw         the same primary rays through raw Embree rtcIntersect16, no shading
+//               (client_raw_rays.h): plain / raw is the compositor's overhead
+// Several scenes (--scene a,b,c) are measured interleaved too, repeat by repeat. Prints per
+// scene and configuration the frame times (trace, SSAO, reprojection, resolve), the ratios, the
 // fraction of pixels whose SSAO was reused, and the RMS relative difference between the
-// reprojected and the from-scratch SSAO frames; writes JSON, a PNG plot of frame time along the
-// path and (--images) the image pair with and without SSAO (docs/CLIENT_PASSES.md).
+// reprojected and the from-scratch SSAO frames; writes JSON, a PNG plot (one scene: frame time
+// along the path; several: ms per frame per scene, 1.5 x raw marked) and (--images) the image
+// pair with and without SSAO (docs/CLIENT_PASSES.md).
 #include <tbb/global_control.h>
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -27,6 +33,7 @@
 #include "bench_scene.h"
 #include "bench_util.h"
 #include "client_pass_scenes.h"
+#include "client_raw_rays.h"
 #include "irradcast/client/camera_path.h"
 #include "irradcast/client/client_passes.h"
 #include "irradcast/common/builtin.h"
@@ -54,8 +61,10 @@ using irradcast::test::rms_relative;
 namespace {
 
 struct Options {
-  std::string scene = "cornell";
+  std::string scene = "cornell";  // one or more, comma-separated
   std::string scene_root;
+  std::string configs = "plain,ssao,ssao+reproject,raw";
+  std::string keep = "median";
   int width = 512, height = 512;
   int frames = 120;
   int repeat = 3;
@@ -72,99 +81,200 @@ struct Options {
   float reproject_refresh = ReprojectionParams{}.refresh;
 };
 
-constexpr int kConfigs = 3;
-const char* const kNames[kConfigs] = {"plain", "ssao", "ssao+reproject"};
+constexpr int kConfigs = 4;
+enum Config { kPlain, kSsao, kReproject, kRaw };
+const char* const kNames[kConfigs] = {"plain", "ssao", "ssao+reproject", "raw"};
 
 struct Totals {
   double total = 0, trace = 0, ssao = 0, reproject = 0, resolve = 0;
   double reused = 0, ssao_pixels = 0, disoccluded = 0;
+  double hit_pixels = 0;  // raw: the fraction of the rays that hit, summed over frames
   std::vector<double> per_frame_ms;
+  std::uint64_t image_hash = 14695981039346656037ull;  // FNV-1a of every image's floats
 };
 
-// The scene and the lightmaps the client passes read: o.updates engine updates.
+// Folds the image's linear floats, bit for bit, into an FNV-1a hash: equal hashes across two
+// builds mean bit-identical frames.
+void hash_image(const ImageRGB& image, std::uint64_t& h) {
+  const auto* p = reinterpret_cast<const unsigned char*>(image.pixels.data());
+  const std::size_t n = image.pixels.size() * sizeof(glm::vec3);
+  for (std::size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
+}
+
+std::vector<std::string> split_list(const std::string& list) {
+  std::vector<std::string> out;
+  std::size_t start = 0;
+  while (start <= list.size()) {
+    const std::size_t end = std::min(list.find(',', start), list.size());
+    if (end > start) out.push_back(list.substr(start, end - start));
+    start = end + 1;
+  }
+  if (out.empty()) throw Error("empty list '" + list + "'");
+  return out;
+}
+
+// The scene, the lightmaps the client passes read (o.updates engine updates) and its path.
 struct ClientScene {
+  std::string name;
   PreparedScene prepared;
   std::vector<Lightmap> lightmaps;
+  CameraPath path;
+  std::vector<double> rms_per_frame;  // reprojected vs from-scratch SSAO, first repeat
 
-  explicit ClientScene(const Options& o)
-      : prepared(irradcast::bench::prepare(load_scene(o.scene, 1.0f, o.scene_root))) {
-    std::fprintf(stderr, "[client] %s: %d engine updates for the lightmaps ...\n", o.scene.c_str(),
+  ClientScene(const Options& o, const std::string& spec)
+      : name(spec),
+        prepared(irradcast::bench::prepare(load_scene(spec, 1.0f, o.scene_root))),
+        path(make_path(o, prepared.world())) {
+    std::fprintf(stderr, "[client] %s: %d engine updates for the lightmaps ...\n", spec.c_str(),
                  o.updates);
     const RayScene& rays = prepared.rays();
     Engine engine(prepared.world(), prepared.atlas(), prepared.gbuffers(), rays,
                   std::make_unique<EmbreeBackend>(rays, prepared.lights()), EngineParams{});
     for (int u = 0; u < o.updates; ++u) engine.update();
     lightmaps = engine.lightmaps();
+    rms_per_frame.assign(static_cast<std::size_t>(o.frames), 0.0);
+  }
+
+  static CameraPath make_path(const Options& o, const World& world) {
+    return o.path == "orbit"         ? CameraPath::orbit(world.bounds, o.path_period, 0.0)
+           : o.path == "random-walk" ? CameraPath::random_walk(world.bounds, 1)
+                                     : CameraPath::keyframes(load_camera_keyframes(o.path), 0.0);
   }
 };
 
-using Runs = std::vector<std::vector<Totals>>;  // per repeat, per configuration
+using Runs = std::vector<std::vector<std::vector<Totals>>>;  // [repeat][scene][config]
 
-// Every repeat along the path, every configuration per frame; rms_per_frame: the reprojected
-// vs the from-scratch SSAO frame of the first repeat.
-Runs measure(const Options& o, const ClientScene& cs, const CameraPath& path,
-             const ClientPassOptions (&opts)[kConfigs], std::vector<double>& rms_per_frame) {
-  const World& world = cs.prepared.world();
-  const RayScene& rays = cs.prepared.rays();
-  const Atlas& atlas = cs.prepared.atlas();
-  const std::vector<Lightmap>& lightmaps = cs.lightmaps;
-  Runs runs(static_cast<std::size_t>(o.repeat), std::vector<Totals>(kConfigs));
-  rms_per_frame.assign(static_cast<std::size_t>(o.frames), 0.0);
-  for (int r = 0; r < o.repeat; ++r) {
-    std::vector<std::unique_ptr<ClientPasses>> passes;
-    for (const ClientPassOptions& c : opts) passes.push_back(std::make_unique<ClientPasses>(c));
-    for (int f = 0; f < o.frames; ++f) {
-      const CameraPose cam = path.at(static_cast<double>(f) * o.path_dt);
-      ImageRGB images[kConfigs];
-      for (int c = 0; c < kConfigs; ++c) {
-        ClientFrameStats st;
-        images[c] = passes[static_cast<std::size_t>(c)]->compose(world, rays, atlas, lightmaps, cam,
-                                                                 o.width, o.height, &st);
-        Totals& t = runs[static_cast<std::size_t>(r)][static_cast<std::size_t>(c)];
-        t.total += st.total_s;
-        t.trace += st.trace_s;
-        t.ssao += st.ssao_s;
-        t.reproject += st.reproject_s;
-        t.resolve += st.resolve_s;
-        t.per_frame_ms.push_back(st.total_s * 1e3);
-        t.ssao_pixels += static_cast<double>(st.ssao_pixels) / (o.width * o.height);
-        if (c == 2) {
-          t.reused += st.reprojection.reused_fraction();
-          t.disoccluded += st.reprojection.pixels
-                               ? static_cast<double>(st.reprojection.disoccluded) /
-                                     static_cast<double>(st.reprojection.pixels)
-                               : 0.0;
-        }
-      }
-      if (r == 0) rms_per_frame[static_cast<std::size_t>(f)] = rms_relative(images[2], images[1]);
-    }
+// One frame of configuration c: its time into t, its image (none for raw).
+ImageRGB run_config(const Options& o, const ClientScene& cs, int c, ClientPasses* passes,
+                    const CameraPose& cam, Totals& t) {
+  ClientFrameStats st;
+  ImageRGB image;
+  if (c == kRaw) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::uint64_t hits = irradcast::bench::trace_raw_primary(
+        cs.prepared.rays().embree_scene(), cam, o.width, o.height);
+    st.total_s = st.trace_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    t.hit_pixels += static_cast<double>(hits) / (o.width * o.height);
+  } else {
+    image = passes->compose(cs.prepared.world(), cs.prepared.rays(), cs.prepared.atlas(),
+                            cs.lightmaps, cam, o.width, o.height, &st);
   }
+  t.total += st.total_s;
+  t.trace += st.trace_s;
+  t.ssao += st.ssao_s;
+  t.reproject += st.reproject_s;
+  t.resolve += st.resolve_s;
+  t.per_frame_ms.push_back(st.total_s * 1e3);
+  t.ssao_pixels += static_cast<double>(st.ssao_pixels) / (o.width * o.height);
+  if (c == kReproject) {
+    t.reused += st.reprojection.reused_fraction();
+    t.disoccluded += st.reprojection.pixels ? static_cast<double>(st.reprojection.disoccluded) /
+                                                  static_cast<double>(st.reprojection.pixels)
+                                            : 0.0;
+  }
+  return image;
+}
+
+// Every repeat, every scene along its path, every enabled configuration per frame,
+// interleaved so that load from other processes hits them alike.
+Runs measure(const Options& o, std::deque<ClientScene>& scenes, const std::vector<int>& enabled,
+             const ClientPassOptions (&opts)[kConfigs]) {
+  Runs runs(static_cast<std::size_t>(o.repeat),
+            std::vector<std::vector<Totals>>(scenes.size(), std::vector<Totals>(kConfigs)));
+  for (int r = 0; r < o.repeat; ++r)
+    for (std::size_t s = 0; s < scenes.size(); ++s) {
+      ClientScene& cs = scenes[s];
+      std::vector<std::unique_ptr<ClientPasses>> passes;
+      for (const ClientPassOptions& c : opts) passes.push_back(std::make_unique<ClientPasses>(c));
+      for (int f = 0; f < o.frames; ++f) {
+        const CameraPose cam = cs.path.at(static_cast<double>(f) * o.path_dt);
+        ImageRGB images[kConfigs];
+        for (int c : enabled)
+          images[c] = run_config(o, cs, c, passes[static_cast<std::size_t>(c)].get(), cam,
+                                 runs[static_cast<std::size_t>(r)][s][static_cast<std::size_t>(c)]);
+        if (r == 0)
+          for (int c : enabled)
+            if (!images[c].pixels.empty())
+              hash_image(images[c], runs[0][s][static_cast<std::size_t>(c)].image_hash);
+        if (r == 0 && !images[kSsao].pixels.empty() && !images[kReproject].pixels.empty())
+          cs.rms_per_frame[static_cast<std::size_t>(f)] =
+              rms_relative(images[kReproject], images[kSsao]);
+      }
+    }
   return runs;
 }
 
-// Prints the table and ratios; returns the JSON report.
-json report(const Options& o, const Totals (&best)[kConfigs],
-            const std::vector<double>& rms_per_frame, int threads) {
+// Per scene and configuration, the repeat kept: the median or the fastest total.
+std::vector<std::vector<Totals>> keep_runs(const Options& o, const Runs& runs,
+                                           std::size_t n_scenes) {
+  std::vector<std::vector<Totals>> best(n_scenes, std::vector<Totals>(kConfigs));
+  for (std::size_t s = 0; s < n_scenes; ++s)
+    for (std::size_t c = 0; c < kConfigs; ++c) {
+      std::vector<double> totals;
+      for (const auto& rr : runs) totals.push_back(rr[s][c].total);
+      const double m = o.keep == "fastest" ? *std::min_element(totals.begin(), totals.end())
+                                           : upper_median(totals);
+      for (const auto& rr : runs)
+        if (rr[s][c].total == m) best[s][c] = rr[s][c];
+      best[s][c].image_hash = runs[0][s][c].image_hash;
+    }
+  return best;
+}
+
+bool has(const std::vector<int>& enabled, int c) {
+  return std::find(enabled.begin(), enabled.end(), c) != enabled.end();
+}
+
+// The SSAO configurations' ratios and the reprojection's difference (all three enabled).
+void report_ssao(const Options& o, const ClientScene& cs, const std::vector<Totals>& best,
+                 json& j) {
   const double nf = o.frames;
-  auto ms = [&](double s) { return 1e3 * s / nf; };
   double rms_mean = 0.0, rms_max = 0.0;
-  for (double e : rms_per_frame) {
+  for (double e : cs.rms_per_frame) {
     rms_mean += e * e;
     rms_max = std::max(rms_max, e);
   }
   rms_mean = std::sqrt(rms_mean / nf);
+  const double a = best[kPlain].total, b = best[kSsao].total, c = best[kReproject].total;
+  const double ssao_ratio = best[kReproject].ssao / std::max(best[kSsao].ssao, 1e-12);
+  std::printf(
+      "ratios: ssao / plain %.2f, ssao+reproject / plain %.2f, ssao+reproject / ssao "
+      "%.2f (speed-up %.2fx); SSAO pass alone: %.2f (speed-up %.2fx)\n",
+      b / a, c / a, c / b, b / c, ssao_ratio, 1.0 / ssao_ratio);
+  std::printf(
+      "SSAO reused on %.1f%% of the pixels per frame, disoccluded %.2f%%; reprojected vs "
+      "from-scratch SSAO frames: RMS relative %.4f (worst frame %.4f)\n",
+      100.0 * best[kReproject].reused / nf, 100.0 * best[kReproject].disoccluded / nf, rms_mean,
+      rms_max);
+  j["ratio_ssao_over_plain"] = b / a;
+  j["ratio_reproject_over_plain"] = c / a;
+  j["ratio_reproject_over_ssao"] = c / b;
+  j["ratio_ssao_pass_reproject_over_full"] = ssao_ratio;
+  j["rms_relative_reproject_vs_scratch"] = rms_mean;
+  j["rms_relative_worst_frame"] = rms_max;
+}
+
+// Prints the table and ratios of one scene; returns its JSON report.
+json report(const Options& o, const ClientScene& cs, const std::vector<Totals>& best,
+            const std::vector<int>& enabled, int threads) {
+  const double nf = o.frames;
+  auto ms = [&](double s) { return 1e3 * s / nf; };
   std::printf(
       "irradcast-bench-client: %s, %dx%d, %d frames along '%s' (dt %.4f s), %d thread(s), "
-      "median of %d runs\n",
-      o.scene.c_str(), o.width, o.height, o.frames, o.path.c_str(), o.path_dt, threads, o.repeat);
-  std::printf("%-16s %9s %9s %9s %9s %9s %10s %9s\n", "config", "ms/frame", "trace", "ssao",
-              "reproj", "resolve", "ssao px", "reused");
+      "%s of %d runs\n",
+      cs.name.c_str(), o.width, o.height, o.frames, o.path.c_str(), o.path_dt, threads,
+      o.keep.c_str(), o.repeat);
+  std::printf("%-16s %9s %9s %9s %9s %9s %10s %9s  %s\n", "config", "ms/frame", "trace", "ssao",
+              "reproj", "resolve", "ssao px", "reused", "image hash");
   json jc = json::array();
-  for (int c = 0; c < kConfigs; ++c) {
-    const Totals& t = best[c];
-    std::printf("%-16s %9.2f %9.2f %9.2f %9.2f %9.2f %9.1f%% %8.1f%%\n", kNames[c], ms(t.total),
+  for (int c : enabled) {
+    const Totals& t = best[static_cast<std::size_t>(c)];
+    char hash[20] = "-";
+    if (c != kRaw) std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)t.image_hash);
+    std::printf("%-16s %9.2f %9.2f %9.2f %9.2f %9.2f %9.1f%% %8.1f%%  %s\n", kNames[c], ms(t.total),
                 ms(t.trace), ms(t.ssao), ms(t.reproject), ms(t.resolve), 100.0 * t.ssao_pixels / nf,
-                100.0 * t.reused / nf);
+                100.0 * t.reused / nf, hash);
     jc.push_back({{"config", kNames[c]},
                   {"ms_per_frame", ms(t.total)},
                   {"trace_ms", ms(t.trace)},
@@ -173,47 +283,41 @@ json report(const Options& o, const Totals (&best)[kConfigs],
                   {"resolve_ms", ms(t.resolve)},
                   {"ssao_pixel_fraction", t.ssao_pixels / nf},
                   {"reused_fraction", t.reused / nf},
-                  {"disoccluded_fraction", t.disoccluded / nf}});
+                  {"disoccluded_fraction", t.disoccluded / nf},
+                  {"image_hash", c == kRaw ? std::string() : std::string(hash)}});
   }
-  const double a = best[0].total, b = best[1].total, c = best[2].total;
-  const double ssao_ratio = best[2].ssao / std::max(best[1].ssao, 1e-12);
-  std::printf(
-      "ratios: ssao / plain %.2f, ssao+reproject / plain %.2f, ssao+reproject / ssao "
-      "%.2f (speed-up %.2fx); SSAO pass alone: %.2f (speed-up %.2fx)\n",
-      b / a, c / a, c / b, b / c, ssao_ratio, 1.0 / ssao_ratio);
-  std::printf(
-      "SSAO reused on %.1f%% of the pixels per frame, disoccluded %.2f%%; reprojected vs "
-      "from-scratch SSAO frames: RMS relative %.4f (worst frame %.4f)\n",
-      100.0 * best[2].reused / nf, 100.0 * best[2].disoccluded / nf, rms_mean, rms_max);
-  json j = {{"scene", o.scene},
-            {"width", o.width},
-            {"height", o.height},
-            {"frames", o.frames},
-            {"path", o.path},
-            {"path_dt", o.path_dt},
-            {"threads", threads},
-            {"repeat", o.repeat},
-            {"engine_updates", o.updates},
-            {"configs", jc},
-            {"ratio_ssao_over_plain", b / a},
-            {"ratio_reproject_over_plain", c / a},
-            {"ratio_reproject_over_ssao", c / b},
-            {"ratio_ssao_pass_reproject_over_full", ssao_ratio},
-            {"rms_relative_reproject_vs_scratch", rms_mean},
-            {"rms_relative_worst_frame", rms_max}};
+  json j = {{"scene", cs.name},   {"width", o.width},
+            {"height", o.height}, {"frames", o.frames},
+            {"path", o.path},     {"path_dt", o.path_dt},
+            {"threads", threads}, {"repeat", o.repeat},
+            {"kept", o.keep},     {"engine_updates", o.updates},
+            {"configs", jc}};
+  if (has(enabled, kPlain) && has(enabled, kRaw)) {
+    const double ratio = best[kPlain].total / std::max(best[kRaw].total, 1e-12);
+    std::printf(
+        "plain / raw %.2f (raw Embree rtcIntersect16, 4x4 packets, no shading; %.1f%% of the "
+        "rays hit)\n",
+        ratio, 100.0 * best[kRaw].hit_pixels / nf);
+    j["ratio_plain_over_raw"] = ratio;
+    j["hit_fraction"] = best[kRaw].hit_pixels / nf;
+  }
+  if (has(enabled, kPlain) && has(enabled, kSsao) && has(enabled, kReproject))
+    report_ssao(o, cs, best, j);
   return j;
 }
 
-// The frame time along the path per configuration (o.plot_out).
-void plot_frames(const Options& o, const Totals (&best)[kConfigs], int threads) {
+// One scene: the frame time along the path per configuration (o.plot_out).
+void plot_frames(const Options& o, const ClientScene& cs, const std::vector<Totals>& best,
+                 const std::vector<int>& enabled, int threads) {
   plot::XYPlot p;
-  p.title = "Client frame time, " + o.path + " path (" + o.scene + ", " + std::to_string(o.width) +
+  p.title = "Client frame time, " + o.path + " path (" + cs.name + ", " + std::to_string(o.width) +
             "x" + std::to_string(o.height) + ")";
   p.x_label = "frame";
   p.y_label = "ms per frame";
-  p.note = std::to_string(threads) + " thread(s); median run of " + std::to_string(o.repeat);
-  const plot::Color colors[kConfigs] = {plot::kBlue, plot::kOrange, plot::kGreen};
-  for (int k = 0; k < kConfigs; ++k) {
+  p.note =
+      std::to_string(threads) + " thread(s); " + o.keep + " run of " + std::to_string(o.repeat);
+  const plot::Color colors[kConfigs] = {plot::kBlue, plot::kOrange, plot::kGreen, plot::kDarkGrey};
+  for (int k : enabled) {
     plot::Series s;
     s.label = kNames[k];
     s.color = colors[k];
@@ -221,13 +325,41 @@ void plot_frames(const Options& o, const Totals (&best)[kConfigs], int threads) 
     s.lines = true;
     for (int f = 0; f < o.frames; ++f) {
       s.x.push_back(f);
-      s.y.push_back(best[k].per_frame_ms[static_cast<std::size_t>(f)]);
+      s.y.push_back(best[static_cast<std::size_t>(k)].per_frame_ms[static_cast<std::size_t>(f)]);
     }
     p.series.push_back(s);
   }
   p.legend = plot::XYPlot::Legend::TopRight;
   p.y_headroom = 0.3;
   plot::write_xy_plot(o.plot_out, p);
+}
+
+// Several scenes: ms per frame per scene and configuration, with 1.5 x raw marked (the
+// issue's goal for plain) where raw ran (o.plot_out).
+void plot_scenes(const Options& o, const std::deque<ClientScene>& scenes,
+                 const std::vector<std::vector<Totals>>& best, const std::vector<int>& enabled,
+                 int threads) {
+  plot::BarChart chart;
+  chart.title = "Client frame time, " + std::to_string(o.width) + "x" + std::to_string(o.height) +
+                ", " + o.path + " path";
+  chart.y_label = "ms per frame";
+  chart.note = std::to_string(threads) + " thread(s); " + std::to_string(o.frames) + " frames; " +
+               o.keep + " run of " + std::to_string(o.repeat);
+  const plot::Color colors[kConfigs] = {plot::kBlue, plot::kOrange, plot::kGreen, plot::kDarkGrey};
+  for (const ClientScene& cs : scenes) chart.categories.push_back(cs.name);
+  for (int c : enabled) {
+    chart.series_labels.push_back(kNames[c]);
+    chart.colors.push_back(colors[c]);
+    std::vector<double> v;
+    for (const auto& b : best) v.push_back(1e3 * b[static_cast<std::size_t>(c)].total / o.frames);
+    chart.values.push_back(v);
+  }
+  if (has(enabled, kRaw)) {
+    for (const auto& b : best) chart.marks.push_back(1.5e3 * b[kRaw].total / o.frames);
+    chart.mark_label = "1.5 x raw";
+  }
+  chart.value_decimals = 2;
+  plot::write_bar_chart(o.plot_out, chart);
 }
 
 // The pair at the scene's own camera, one exposure for both (the plain frame's), and the SSAO
@@ -246,7 +378,8 @@ void write_images(const Options& o, const ClientScene& cs, const ClientPassOptio
   ToneMapOptions tm;
   tm.auto_exposure = false;
   tm.exposure_ev = std::log2(exposure_scale(plain, ToneMapOptions{}));
-  const std::string stem = o.images + "/client_" + fs::path(o.scene).stem().string();
+  const std::string stem =
+      o.images + "/client_" + fs::path(cs.name.substr(0, cs.name.find(':'))).stem().string();
   write_png(stem + "_plain.png", plain.width, plain.height, tonemap_srgb8(plain, tm));
   write_png(stem + "_ssao.png", with.width, with.height, tonemap_srgb8(with, tm));
   // The visibility itself, white = unoccluded.
@@ -260,46 +393,59 @@ void write_images(const Options& o, const ClientScene& cs, const ClientPassOptio
   std::printf("images: %s_{plain,ssao,ssao_visibility}.png\n", stem.c_str());
 }
 
+std::vector<int> parse_configs(const std::string& list) {
+  std::vector<int> enabled;
+  for (const std::string& name : split_list(list)) {
+    const auto* it = std::find_if(std::begin(kNames), std::end(kNames),
+                                  [&](const char* n) { return name == n; });
+    if (it == std::end(kNames))
+      throw Error("--configs: unknown configuration '" + name +
+                  "' (expected plain, ssao, ssao+reproject, raw)");
+    const int c = static_cast<int>(it - std::begin(kNames));
+    if (!has(enabled, c)) enabled.push_back(c);
+  }
+  return enabled;
+}
+
+void write_json(const std::string& path, const json& j) {
+  std::ofstream f(path);
+  f << j.dump(2) << "\n";
+  if (!f) throw Error(path + ": cannot write");
+}
+
 int run(const Options& o) {
   Progress::set_enabled(false);
   std::optional<tbb::global_control> limit;
   if (o.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, o.threads);
   const int threads =
       o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency());
-  const ClientScene cs(o);
-  const World& world = cs.prepared.world();
-  CameraPath path = o.path == "orbit" ? CameraPath::orbit(world.bounds, o.path_period, 0.0)
-                    : o.path == "random-walk"
-                        ? CameraPath::random_walk(world.bounds, 1)
-                        : CameraPath::keyframes(load_camera_keyframes(o.path), 0.0);
+  const std::vector<int> enabled = parse_configs(o.configs);
+  std::deque<ClientScene> scenes;
+  for (const std::string& spec : split_list(o.scene)) scenes.emplace_back(o, spec);
   ClientPassOptions opts[kConfigs];
-  opts[1].ssao = opts[2].ssao = true;
-  opts[2].reproject = true;
+  opts[kSsao].ssao = opts[kReproject].ssao = true;
+  opts[kReproject].reproject = true;
   for (ClientPassOptions& c : opts) {
     c.ssao_params.radius = o.ssao_radius;
     c.reprojection.converge_frames = o.reproject_frames;
     c.reprojection.refresh = o.reproject_refresh;
     c.validate();
   }
-  std::vector<double> rms_per_frame;
-  const Runs runs = measure(o, cs, path, opts, rms_per_frame);
-  // The repeat with the median total time of each configuration.
-  Totals best[kConfigs];
-  for (int c = 0; c < kConfigs; ++c) {
-    std::vector<double> totals;
-    for (const auto& rr : runs) totals.push_back(rr[static_cast<std::size_t>(c)].total);
-    const double m = upper_median(totals);
-    for (const auto& rr : runs)
-      if (rr[static_cast<std::size_t>(c)].total == m) best[c] = rr[static_cast<std::size_t>(c)];
+  const Runs runs = measure(o, scenes, enabled, opts);
+  const auto best = keep_runs(o, runs, scenes.size());
+  json reports = json::array();
+  for (std::size_t s = 0; s < scenes.size(); ++s)
+    reports.push_back(report(o, scenes[s], best[s], enabled, threads));
+  if (!o.json_out.empty())
+    write_json(o.json_out, scenes.size() == 1 ? reports[0] : json{{"scenes", reports}});
+  if (!o.plot_out.empty()) {
+    if (scenes.size() == 1)
+      plot_frames(o, scenes[0], best[0], enabled, threads);
+    else
+      plot_scenes(o, scenes, best, enabled, threads);
   }
-  const json j = report(o, best, rms_per_frame, threads);
-  if (!o.json_out.empty()) {
-    std::ofstream f(o.json_out);
-    f << j.dump(2) << "\n";
-    if (!f) throw Error(o.json_out + ": cannot write");
-  }
-  if (!o.plot_out.empty()) plot_frames(o, best, threads);
-  if (!o.images.empty()) write_images(o, cs, opts[1]);
+  if (!o.images.empty())
+    for (const ClientScene& cs : scenes) write_images(o, cs, opts[kSsao]);
   return 0;
 }
 
@@ -312,14 +458,21 @@ int main(int argc, char** argv) {
       "--reproject) along a camera path, side by side in one run",
       "irradcast-bench-client"};
   app.option_defaults()->always_capture_default();
-  app.add_option("--scene", o.scene, "cornell | rooms:N | FILE.gltf");
+  app.add_option("--scene", o.scene,
+                 "cornell | rooms:N | sponza | FILE.gltf, or several, comma-separated (measured "
+                 "interleaved, one report each)");
+  app.add_option("--configs", o.configs,
+                 "comma-separated subset of plain, ssao, ssao+reproject, raw");
+  app.add_option("--keep", o.keep, "which run of --repeat to report: median | fastest")
+      ->check(CLI::IsMember({"median", "fastest"}));
   app.add_option(
       "--scene-root", o.scene_root,
       "folder a glTF scene may read buffers and images from (default: the scene file's folder)");
   app.add_option("--width", o.width)->check(CLI::Range(8, 8192));
   app.add_option("--height", o.height)->check(CLI::Range(8, 8192));
   app.add_option("--frames", o.frames, "frames along the path")->check(CLI::Range(2, 100000));
-  app.add_option("--repeat", o.repeat, "runs; the median is reported")->check(CLI::Range(1, 100));
+  app.add_option("--repeat", o.repeat, "runs; --keep says which is reported")
+      ->check(CLI::Range(1, 100));
   app.add_option("--path", o.path, "orbit | random-walk | FILE (camera_path.h)");
   app.add_option("--path-dt", o.path_dt, "seconds along the path per frame")
       ->check(CLI::PositiveNumber);
@@ -332,7 +485,8 @@ int main(int argc, char** argv) {
   app.add_option("--reproject-refresh", o.reproject_refresh, "as irradcast-view");
   app.add_option("--json", o.json_out, "JSON report ('' = none)");
   app.add_option("--plot", o.plot_out, "PNG plot of frame time along the path ('' = none)");
-  app.add_option("--images", o.images, "also write the with/without SSAO pair into this folder");
+  app.add_option("--images", o.images,
+                 "also write the with/without SSAO pair of each scene into this folder");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -8,6 +8,7 @@
 #include "irradcast/common/camera.h"
 #include "irradcast/common/compositor.h"
 #include "irradcast/common/error.h"
+#include "irradcast/common/hit_shader.h"
 #include "irradcast/common/primary_hits.h"
 #include "irradcast/common/sampling.h"
 
@@ -38,8 +39,7 @@ FrameGBuffer trace_frame(const World& world, const RayScene& rays, const Atlas& 
                          const std::vector<Lightmap>& lightmaps, const CameraPose& camera,
                          int width, int height) {
   if (width <= 0 || height <= 0) throw Error("image size must be positive");
-  if (atlas.objects.size() != world.objects.size() || lightmaps.size() != world.objects.size())
-    throw Error("compositor: lightmaps do not match the scene's objects");
+  const HitShader shader(world, atlas, lightmaps);
   FrameGBuffer g;
   g.width = width;
   g.height = height;
@@ -50,13 +50,14 @@ FrameGBuffer trace_frame(const World& world, const RayScene& rays, const Atlas& 
   g.normal.assign(n, glm::vec3(0.0f));
   g.depth.assign(n, 0.0f);
   g.diffuse.assign(n, glm::vec3(0.0f));
-  // Misses keep the sky's radiance here (black without a sky): not diffuse, so SSAO never
-  // darkens it, and no depth, so SSAO and reprojection skip it as they skip any miss.
-  g.emission = world.scene ? sky_background(world.scene->sky, camera, width, height).pixels
-                           : std::vector<glm::vec3>(n, glm::vec3(0.0f));
-  // The pixels and the shading of compose().
-  for_each_primary_hit(
-      rays, camera, width, height, [&](int x, int y, const Ray& ray, const Hit& h) {
+  g.emission.assign(n, glm::vec3(0.0f));
+  const Sky* sky = world.scene && world.scene->sky.enabled() ? &world.scene->sky : nullptr;
+  // The pixels and the shading of compose(). Misses keep the sky's radiance in `emission`
+  // (black without a sky): not diffuse, so SSAO never darkens it, and no depth, so SSAO and
+  // reprojection skip it as they skip any miss.
+  for_each_primary_ray(
+      rays, camera, width, height,
+      [&](int x, int y, const Ray& ray, const Hit& h) {
         const std::size_t idx = g.index(x, y);
         const glm::vec3 p = ray.origin + h.t * ray.direction;
         glm::vec3 ns = world.objects[h.object].shading_normal(h.triangle, h.u, h.v);
@@ -64,9 +65,12 @@ FrameGBuffer trace_frame(const World& world, const RayScene& rays, const Atlas& 
         g.position[idx] = p;
         g.normal[idx] = ns;
         g.depth[idx] = std::max(glm::dot(p - camera.eye, camera.forward), 1e-30f);
-        const HitShade s = shade_hit(world, atlas, lightmaps, ray, h);
+        const HitShade s = shader.shade(ray.direction, h);
         g.diffuse[idx] = s.diffuse;
         g.emission[idx] = s.emission;
+      },
+      [&](int x, int y, glm::vec3 direction) {
+        if (sky) g.emission[g.index(x, y)] = sky->radiance(direction);
       });
   return g;
 }

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "irradcast/common/error.h"
+#include "irradcast/common/pinhole.h"
 
 namespace irradcast {
 namespace {
@@ -89,15 +90,10 @@ CameraPose default_camera(const Scene& scene, const World& world) {
 }
 
 Ray camera_ray(const CameraPose& pose, int width, int height, float px, float py) {
-  float aspect = static_cast<float>(width) / static_cast<float>(height);
-  float th = std::tan(0.5f * pose.yfov);
-  glm::vec3 right = glm::normalize(glm::cross(pose.forward, pose.up));
-  glm::vec3 up = glm::cross(right, pose.forward);
-  float sx = (2.0f * px / static_cast<float>(width) - 1.0f) * th * aspect;
-  float sy = (1.0f - 2.0f * py / static_cast<float>(height)) * th;
+  const PinholeRays pin(pose, width, height);
   Ray r;
   r.origin = pose.eye;
-  r.direction = glm::normalize(pose.forward + sx * right + sy * up);
+  r.direction = pin.direction(pin.sx(px), pin.sy(py));
   return r;
 }
 

@@ -59,15 +59,16 @@ glm::vec4 Texture::sample_srgb(glm::vec2 uv) const {
   float y = uv.y * static_cast<float>(height) - 0.5f;
   float fx = std::floor(x), fy = std::floor(y);
   float ax = x - fx, ay = y - fy;
+  // Wrapped once per axis; the next texel wraps to 0 past the edge (two divisions, not eight).
   auto wrap = [](long i, int n) { return static_cast<int>(((i % n) + n) % n); };
-  auto fetch = [&](long i, long j) {
-    const std::uint8_t* p =
-        &rgba8[4 * (static_cast<std::size_t>(wrap(j, height)) * width + wrap(i, width))];
+  const int x0 = wrap(static_cast<long>(fx), width), y0 = wrap(static_cast<long>(fy), height);
+  const int x1 = x0 + 1 == width ? 0 : x0 + 1, y1 = y0 + 1 == height ? 0 : y0 + 1;
+  auto fetch = [&](int i, int j) {
+    const std::uint8_t* p = &rgba8[4 * (static_cast<std::size_t>(j) * width + i)];
     return glm::vec4(lut[p[0]], lut[p[1]], lut[p[2]], static_cast<float>(p[3]) / 255.0f);
   };
-  long ix = static_cast<long>(fx), iy = static_cast<long>(fy);
-  glm::vec4 a = glm::mix(fetch(ix, iy), fetch(ix + 1, iy), ax);
-  glm::vec4 b = glm::mix(fetch(ix, iy + 1), fetch(ix + 1, iy + 1), ax);
+  glm::vec4 a = glm::mix(fetch(x0, y0), fetch(x1, y0), ax);
+  glm::vec4 b = glm::mix(fetch(x0, y1), fetch(x1, y1), ax);
   return glm::mix(a, b, ay);
 }
 

@@ -45,7 +45,7 @@ struct FrameGBuffer {
   std::vector<glm::vec3> normal;    // unit shading normal, turned towards the eye
   std::vector<float> depth;         // view-axis depth; 0 on misses
   std::vector<glm::vec3> diffuse;   // albedo / pi * E (the term SSAO attenuates)
-  std::vector<glm::vec3> emission;  // added after SSAO; on misses the sky (sky_background)
+  std::vector<glm::vec3> emission;  // added after SSAO; on misses the sky
 
   std::size_t size() const { return depth.size(); }
   bool hit(std::size_t i) const { return depth[i] > 0.0f; }

@@ -1,7 +1,8 @@
 // The compositor: a viewer's own frame from the shared irradiance. One primary ray per pixel
-// (Embree 8-wide packets), at the hit a bilinear lightmap lookup gives E, and the outgoing
-// radiance is albedo / pi * E + emission; a ray that misses shows the sky (Scene::sky, black
-// without one). Used by irradcast-bake and by every client.
+// (coherent 16-wide Embree packets, primary_hits.h), at the hit a bilinear lightmap lookup gives
+// E, and the outgoing radiance is albedo / pi * E + emission (hit_shader.h); a ray that misses
+// shows the sky (Scene::sky, black without one) in its direction. Used by irradcast-bake and by
+// every client.
 #pragma once
 
 #include <cstdint>
@@ -21,12 +22,8 @@ struct ComposeStats {
   double seconds = 0.0;
 };
 
-// The background of a frame: per pixel the sky's radiance in the direction of its primary ray
-// (the rays of compose(): pixel centres). All black when the sky is not enabled.
-ImageRGB sky_background(const Sky& sky, const CameraPose& camera, int width, int height);
-
 // Linear radiance, no exposure, no tone map. `lightmaps` and `atlas.objects` are indexed like
-// world.objects. Misses show world.scene's sky (sky_background).
+// world.objects. Misses show world.scene's sky.
 ImageRGB compose(const World& world, const RayScene& rays, const Atlas& atlas,
                  const std::vector<Lightmap>& lightmaps, const CameraPose& camera, int width,
                  int height, ComposeStats* stats = nullptr);

@@ -1,0 +1,76 @@
+// What a viewer sees at a primary hit, with the per-frame look-ups done once: HitShader keeps
+// per object its lightmap, atlas corners and triangle materials, and per material what the
+// shading needs (colour, texture, emission), so a hit costs one lightmap bilinear lookup, an
+// albedo (a texture sample where the material has one) and nothing else. The numbers are those of
+// World::albedo / World::emission, bit for bit. Used by compose() and the client passes' frame
+// G-buffer.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "irradcast/common/atlas.h"
+#include "irradcast/common/lightmap.h"
+#include "irradcast/common/ray_scene.h"
+#include "irradcast/common/sampling.h"
+#include "irradcast/common/world.h"
+
+namespace irradcast {
+
+// The lightmap term albedo / pi * E (E read bilinearly) and the emission (one-sided unless the
+// material is double-sided).
+struct HitShade {
+  glm::vec3 diffuse{0.0f};
+  glm::vec3 emission{0.0f};
+};
+
+class HitShader {
+ public:
+  // `lightmaps` and `atlas.objects` indexed like world.objects (checked); all three must
+  // outlive the shader.
+  HitShader(const World& world, const Atlas& atlas, const std::vector<Lightmap>& lightmaps);
+
+  // The shade at hit h of a ray along `direction`.
+  [[gnu::always_inline, gnu::flatten]] HitShade shade(glm::vec3 direction, const Hit& h) const {
+    const Object& o = objects_[static_cast<std::size_t>(h.object)];
+    const std::uint32_t t = h.triangle;
+    const glm::vec2 uv = o.atlas->uv(t, h.u, h.v);
+    const glm::vec3 e = o.lightmap->bilinear(uv);
+    const std::uint32_t mi = t < o.triangle_count ? o.triangle_material[t] : kFallback;
+    const Shading& m = materials_[mi < materials_.size() - 1 ? mi : materials_.size() - 1];
+    glm::vec3 albedo = m.base_color;
+    if (m.texture)
+      albedo *= glm::vec3(m.texture->sample_srgb(o.world->uv(m.texture_uv, t, h.u, h.v)));
+    HitShade s;
+    if (m.emissive) emission(h, direction, m, s);
+    s.diffuse = albedo * kInvPi * e;
+    return s;
+  }
+
+ private:
+  static constexpr std::uint32_t kFallback = ~0u;
+  struct Object {
+    const WorldObject* world = nullptr;
+    const ObjectLightmap* atlas = nullptr;
+    const Lightmap* lightmap = nullptr;
+    const std::uint32_t* triangle_material = nullptr;
+    std::size_t triangle_count = 0;
+  };
+  struct Shading {
+    glm::vec3 base_color{0.8f};
+    const Texture* texture = nullptr;  // the base colour texture, if any
+    int texture_uv = 0;
+    bool emissive = false;
+    bool double_sided = false;
+  };
+  // The emission of an emissive material (rare: kept out of line).
+  void emission(const Hit& h, glm::vec3 direction, const Shading& m, HitShade& s) const;
+
+  const World* world_;
+  std::vector<Object> objects_;
+  std::vector<Shading> materials_;  // the scene's, then the fallback Material{}
+};
+
+}  // namespace irradcast
