@@ -6,6 +6,21 @@
 #include "irradcast/common/sampling.h"
 
 namespace irradcast {
+namespace {
+
+// True when no point of triangle e can pass triangle_sample's cosine tests at p (normal n): the
+// whole triangle lies behind p's tangent plane, or p lies behind a one-sided light's plane, each
+// by a margin far above the rounding of those tests (so that it rejects exactly the samples the
+// tests would, without drawing the point, its distance and its direction).
+bool surely_rejected(const EmissiveTriangle& e, glm::vec3 p, glm::vec3 n) {
+  const glm::vec3 ap = glm::abs(p);
+  const float margin = 1e-5f * std::max({ap.x, ap.y, ap.z, e.reach});
+  if (!e.double_sided && glm::dot(e.normal, p - e.p0) < -margin) return true;
+  const float h0 = glm::dot(n, e.p0 - p);
+  return h0 < -margin && h0 + glm::dot(n, e.e1) < -margin && h0 + glm::dot(n, e.e2) < -margin;
+}
+
+}  // namespace
 
 LightSampler::LightSampler(const World& world) : world_(&world) {
   std::vector<float> power;
@@ -25,6 +40,12 @@ LightSampler::LightSampler(const World& world) : world_(&world) {
       if (!(e.area > 0.0f)) continue;
       e.normal = o.geometric_normal(t);
       e.double_sided = m.double_sided;
+      e.uniform_emission = m.emissive_texture < 0 && !m.cut_out();
+      e.emission = m.emission();
+      for (std::uint32_t k = 0; k < 3; ++k) {
+        const glm::vec3 c = glm::abs(o.positions[tris[t][k]]);
+        e.reach = std::max({e.reach, c.x, c.y, c.z});
+      }
       // Power ~ radiance x area (x2 for two-sided); textures are evaluated per sample.
       float p = luminance(m.emission()) * e.area * (e.double_sided ? 2.0f : 1.0f);
       if (!(p > 0.0f)) continue;
@@ -82,6 +103,7 @@ glm::vec3 LightSampler::sky_irradiance(const RayScene& rays, glm::vec3 p, glm::v
 bool LightSampler::triangle_sample(const RayScene& rays, std::size_t index, glm::vec3 p,
                                    glm::vec3 n, glm::vec3 ng, glm::vec2 u, ShadowSample& s) const {
   const EmissiveTriangle& e = triangles_[index];
+  if (surely_rejected(e, p, n)) return false;
   glm::vec2 b = uniform_triangle(u);
   glm::vec3 y = e.p0 + b.x * e.e1 + b.y * e.e2;
   glm::vec3 d = y - p;
@@ -110,6 +132,7 @@ bool LightSampler::triangle_sample(const RayScene& rays, std::size_t index, glm:
 
 glm::vec3 LightSampler::triangle_emitted(const ShadowSample& s) const {
   const EmissiveTriangle& e = triangles_[s.triangle];
+  if (e.uniform_emission) return e.emission * s.factor;
   // barycentrics of y for the emission lookup: y = (1-u-v) v0 + u v1 + v v2 with u = b.x, v = b.y
   glm::vec3 le = world_->emission(e.object, e.triangle, s.b.x, s.b.y);
   return le * s.factor;
@@ -124,8 +147,17 @@ glm::vec3 LightSampler::triangle_irradiance(const RayScene& rays, std::size_t in
 }
 
 std::size_t LightSampler::pick_triangle(float u) const {
-  auto it = std::upper_bound(cdf_.begin(), cdf_.end(), u);
-  return std::min<std::size_t>(static_cast<std::size_t>(it - cdf_.begin()), triangles_.size() - 1);
+  // std::upper_bound (the first cumulative probability above u), without branches that the
+  // random u would mispredict half the time.
+  const float* first = cdf_.data();
+  std::size_t len = cdf_.size();
+  while (len > 1) {
+    const std::size_t half = len / 2;
+    first += first[half - 1] <= u ? half : 0;
+    len -= half;
+  }
+  const std::size_t index = static_cast<std::size_t>(first - cdf_.data()) + (*first <= u ? 1 : 0);
+  return std::min<std::size_t>(index, triangles_.size() - 1);
 }
 
 glm::vec3 LightSampler::area_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n,

@@ -3,6 +3,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -37,8 +38,11 @@ float exit_distance(const Bounds& b, glm::vec3 p, glm::vec3 d) {
   glm::vec3 pad = 1e-3f * glm::max(b.extent(), glm::vec3(1e-6f));
   float t = 3.4e38f;
   for (int a = 0; a < 3; ++a) {
-    if (d[a] > 0.0f) t = std::min(t, (b.hi[a] + pad[a] - p[a]) / d[a]);
-    if (d[a] < 0.0f) t = std::min(t, (b.lo[a] - pad[a] - p[a]) / d[a]);
+    // The face the ray runs toward on this axis (none where d[a] == 0), chosen without a branch:
+    // the direction's signs are random.
+    const float face = d[a] > 0.0f ? b.hi[a] + pad[a] : b.lo[a] - pad[a];
+    const float ta = (face - p[a]) / d[a];
+    t = d[a] != 0.0f ? std::min(t, ta) : t;
   }
   return std::max(t, 0.0f);
 }
@@ -96,6 +100,25 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using namespace embree_sampling;
 
+// radiance_at with the hit's lightmap coordinates already known.
+glm::vec3 radiance_at(const RadianceField& f, const Hit& h, glm::vec2 uv) {
+  glm::vec3 e = (*f.irradiance)[h.object].bilinear(uv);
+  return f.world->albedo(h.object, h.triangle, h.u, h.v) * kInvPi * e;
+}
+
+// The hit's lightmap coordinates, with the two lightmap rows its bilinear lookup reads requested
+// from memory (a hint: it changes no result).
+glm::vec2 prefetch_radiance(const RadianceField& f, const Hit& h) {
+  const glm::vec2 uv = f.atlas->objects[h.object].uv(h.triangle, h.u, h.v);
+  const Lightmap& m = (*f.irradiance)[h.object];
+  const int x = std::clamp(static_cast<int>(uv.x - 0.5f), 0, m.width - 1);
+  const int y = std::clamp(static_cast<int>(uv.y - 0.5f), 0, m.height - 1);
+  const glm::vec3* row = m.texels.data() + static_cast<std::size_t>(y) * m.width + x;
+  __builtin_prefetch(row);
+  if (y + 1 < m.height) __builtin_prefetch(row + m.width);
+  return uv;
+}
+
 // Runs body(texel) over every work unit (cell or object) in dispatch order, units in parallel
 // and large units split further; each worker adds its ray count.
 template <typename Body>
@@ -121,9 +144,7 @@ std::uint64_t for_each_texel(const PassInput& in, Body&& body) {
 }  // namespace
 
 glm::vec3 radiance_at(const RadianceField& f, const Hit& h) {
-  glm::vec2 uv = f.atlas->objects[h.object].uv(h.triangle, h.u, h.v);
-  glm::vec3 e = (*f.irradiance)[h.object].bilinear(uv);
-  return f.world->albedo(h.object, h.triangle, h.u, h.v) * kInvPi * e;
+  return radiance_at(f, h, f.atlas->objects[h.object].uv(h.triangle, h.u, h.v));
 }
 
 glm::vec3 EmbreeBackend::sky_direct(const PassInput& in, std::uint32_t i,
@@ -148,6 +169,36 @@ glm::vec3 EmbreeBackend::sky_direct(const PassInput& in, std::uint32_t i,
   return sum * inv;
 }
 
+glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i) const {
+  // LightSampler::area_irradiance for each of the samples, taken apart: every sample drawn
+  // first, then the shadow rays of those that can contribute traced, then summed in order (the
+  // same result; the samples' arithmetic overlaps instead of waiting on each ray).
+  const int n = in.params.direct_samples;
+  const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
+                  ng = in.texels.geo_normal[i];
+  Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
+  constexpr int kBatch = 16;
+  LightSampler::ShadowSample sample[kBatch];
+  glm::vec3 weight[kBatch];
+  bool lit[kBatch];
+  glm::vec3 sum(0.0f);
+  for (int s0 = 0; s0 < n; s0 += kBatch) {
+    const int m = std::min(kBatch, n - s0);
+    for (int s = 0; s < m; ++s) {
+      float pick = (static_cast<float>(s0 + s) + rng.next_float()) / static_cast<float>(n);
+      glm::vec2 pos = rng.next_2d();
+      const std::size_t li = lights_->pick_triangle(pick);
+      lit[s] = lights_->triangle_sample(*rays_, li, p, nrm, ng, pos, sample[s]);
+      if (lit[s]) weight[s] = lights_->triangle_emitted(sample[s]) / lights_->pick_pdf()[li];
+    }
+    for (int s = 0; s < m; ++s)
+      if (lit[s] && sample[s].shadow.tmax > 0.0f) lit[s] = !rays_->occluded(sample[s].shadow);
+    for (int s = 0; s < m; ++s)
+      if (lit[s]) sum += weight[s];
+  }
+  return sum / static_cast<float>(n);
+}
+
 PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& out) {
   auto start = Clock::now();
   out.assign(in.texels.size(), glm::vec3(0.0f));
@@ -160,16 +211,7 @@ PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& ou
     const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
                     ng = in.texels.geo_normal[i];
     glm::vec3 e = lights_->punctual_irradiance(*rays_, p, nrm, ng);
-    if (area) {
-      Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
-      glm::vec3 sum(0.0f);
-      for (int s = 0; s < n; ++s) {
-        float pick = (static_cast<float>(s) + rng.next_float()) / static_cast<float>(n);
-        glm::vec2 pos = rng.next_2d();
-        sum += lights_->area_irradiance(*rays_, p, nrm, ng, glm::vec3(pick, pos));
-      }
-      e += sum / static_cast<float>(n);
-    }
+    if (area) e += area_direct(in, i);
     std::uint64_t traced = punctual + (area ? static_cast<std::uint64_t>(n) : 0u);
     if (sky) e += sky_direct(in, i, &traced);
     out[i] = e;
@@ -227,14 +269,25 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
     const float range = scatter_range(in, i);
     Frame frame(nrm);
     glm::vec3 sum(0.0f);
-    for (int s = 0; s < n; ++s) {
-      Ray ray;
-      ray.direction = frame.to_world(cosine_hemisphere(rng.next_2d()));
-      ray.origin = rays_->offset(p, ng, ray.direction);
-      ray.tmax = range;
-      Hit h = rays_->intersect(ray);
-      sum += h.valid() ? radiance_at(prev, h)
-                       : scatter_miss(in, probe_radiance, i, p, ray.direction, pick);
+    // The texel's rays in batches: all drawn first, then traced, then the hits' lightmap texels
+    // fetched together (their cache misses overlap), then shaded in the order of the rays.
+    constexpr int kBatch = 32;
+    Ray ray[kBatch];
+    Hit hit[kBatch];
+    glm::vec2 uv[kBatch];
+    for (int s0 = 0; s0 < n; s0 += kBatch) {
+      const int m = std::min(kBatch, n - s0);
+      for (int s = 0; s < m; ++s) {
+        ray[s].direction = frame.to_world(cosine_hemisphere(rng.next_2d()));
+        ray[s].origin = rays_->offset(p, ng, ray[s].direction);
+        ray[s].tmax = range;
+      }
+      for (int s = 0; s < m; ++s) hit[s] = rays_->intersect(ray[s]);
+      for (int s = 0; s < m; ++s)
+        if (hit[s].valid()) uv[s] = prefetch_radiance(prev, hit[s]);
+      for (int s = 0; s < m; ++s)
+        sum += hit[s].valid() ? radiance_at(prev, hit[s], uv[s])
+                              : scatter_miss(in, probe_radiance, i, p, ray[s].direction, pick);
     }
     // Cosine-weighted sampling: E = pi / N * sum L.
     out[i] = sum * (kPi / static_cast<float>(n));

@@ -21,6 +21,11 @@ struct EmissiveTriangle {
   glm::vec3 normal{0.0f, 0.0f, 1.0f};      // unit geometric normal (front side emits)
   float area = 0.0f;
   bool double_sided = false;
+  // The material's emission where it is the same at every point of the triangle (no emissive
+  // texture, no cut-outs): World::emission's value, looked up once.
+  bool uniform_emission = false;
+  glm::vec3 emission{0.0f};
+  float reach = 0.0f;  // the largest |coordinate| of its corners (the scale of rounding errors)
 };
 
 class LightSampler {

@@ -59,6 +59,9 @@ class EmbreeBackend final : public TraceBackend {
   // Texel i's direct irradiance from the sky (the mean of direct_samples sky_irradiance
   // estimates); adds the rays it traced to *traced.
   glm::vec3 sky_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced) const;
+  // Texel i's direct irradiance from the area lights: the mean of direct_samples
+  // area_irradiance estimates, stratified in the light pick.
+  glm::vec3 area_direct(const PassInput& in, std::uint32_t i) const;
 
   const RayScene* rays_;
   const LightSampler* lights_;
