@@ -180,7 +180,7 @@ int main(int argc, char** argv) {
                "for --duration s; per --compare server, users decoding each tile or sharing "
                "decodes; writes fanout_fresh.json and .png");
   app.add_option("--duration", fo.duration_s, "--fresh: seconds of each run");
-  app.add_option("--repeat", fo.repeat, "--fresh: interleaved runs per variant (best p99 kept)");
+  app.add_option("--repeat", fo.repeat, "--fresh: interleaved runs per variant (the median p99 is kept)");
   app.add_option("--pin-load", fo.pin_load, "--fresh: CPU for the simulated users (-1: all)");
   app.add_option("--compare", fo.compare, "--fresh: LABEL=SERVER_PATH (repeat; default: --server)");
   CLI11_PARSE(app, argc, argv);

@@ -1,11 +1,13 @@
 // irradcast-bench-fanout --gateways 0,1,2,4: users spread over irradcast-gateways fed through
 // NATS (docs/DISTRIBUTION.md) against users of the origin itself.
 //
-// Starts nats-server (JetStream, storage in a temporary folder) on a loopback port, one
-// irradcast-server --nats (the origin) and lets its engine refine (warm-up); then for each
-// gateway count G (0: the users connect to the origin, the direct row) runs G irradcast-gateway
-// processes and, for each user count N, N thin users spread over them (user i on gateway
-// i mod G, irradcast-load's --connect list). Per row it records the steady tile latency
+// Per row (a gateway count G, 0 being the direct row where the users connect to the origin,
+// and a user count N) starts nats-server (JetStream, storage in a temporary folder) on a
+// loopback port, one irradcast-server --nats (the origin), lets its engine refine (warm-up),
+// starts G irradcast-gateway processes and N thin users spread over them (user i on gateway
+// i mod G, irradcast-load's --connect list). Every row gets an origin of the same age: the
+// number of tile versions falls as the engine converges, so one origin shared by the rows
+// gave the later rows less to carry. Per row it records the steady tile latency
 // p50/p99 (origin's version time stamp -> user's apply, so through a gateway it includes the
 // NATS hop), the origin's network CPU (its "irradcast-io" and "irradcast-nats" threads), its
 // engine CPU (the rest), the gateways' CPU (all their threads, summed), nats-server's CPU and
@@ -172,33 +174,39 @@ void run_gateway_bench(const Options& o) {
   const std::uint16_t nats_port = free_port();
   const std::string url = "nats://127.0.0.1:" + std::to_string(nats_port);
   std::vector<Row> rows;
-  {
-    Child nats({nats_server_exe(o), "-js", "-sd", store.string(), "-p", std::to_string(nats_port),
-                "-a", "127.0.0.1"},
-               fs::path(o.out) / "fanout_gateways_nats.log");
-    wait_listening(nats_port, 20, "nats-server");
-    const std::uint16_t port = free_port();
-    std::vector<std::string> args = server_command(o, port);
-    args.insert(args.end(), {"--nats", url});
-    Child origin(args, fs::path(o.out) / "fanout_gateways_origin.log");
-    std::printf("irradcast-bench-fanout --gateways: %s, origin on port %u (pid %d), %s, %u cores\n",
-                o.scene.c_str(), port, origin.pid(), url.c_str(),
-                std::thread::hardware_concurrency());
-    warm_up(o, port, origin);
-    std::vector<Gateway> gws;
-    for (int g : o.gateways) {
-      if (g < 0 || g > static_cast<int>(kMaxServerAddresses))
-        throw Error("--gateways: " + std::to_string(g) + " is not in 0.." +
-                    std::to_string(kMaxServerAddresses));
-      resize_gateways(o, url, gws, g);
-      for (int n : o.users) {
+  for (int g : o.gateways) {
+    if (g < 0 || g > static_cast<int>(kMaxServerAddresses))
+      throw Error("--gateways: " + std::to_string(g) + " is not in 0.." +
+                  std::to_string(kMaxServerAddresses));
+    for (int n : o.users) {
+      const fs::path store =
+          fs::temp_directory_path() / ("irradcast_fanout_nats_" + std::to_string(::getpid()));
+      fs::create_directories(store);
+      const std::uint16_t nats_port = free_port();
+      const std::string url = "nats://127.0.0.1:" + std::to_string(nats_port);
+      {
+        Child nats({nats_server_exe(o), "-js", "-sd", store.string(), "-p",
+                    std::to_string(nats_port), "-a", "127.0.0.1"},
+                   fs::path(o.out) / "fanout_gateways_nats.log");
+        wait_listening(nats_port, 20, "nats-server");
+        const std::uint16_t port = free_port();
+        std::vector<std::string> args = server_command(o, port);
+        args.insert(args.end(), {"--nats", url});
+        Child origin(args, fs::path(o.out) / "fanout_gateways_origin.log");
+        std::printf(
+            "irradcast-bench-fanout --gateways: %d gateways, %d users: %s, origin on port %u "
+            "(pid %d), %s, %u cores\n",
+            g, n, o.scene.c_str(), port, origin.pid(), url.c_str(),
+            std::thread::hardware_concurrency());
+        warm_up(o, port, origin);
+        std::vector<Gateway> gws;
+        resize_gateways(o, url, gws, g);
         rows.push_back(run_row(o, origin, port, nats, gws, n));
-        std::this_thread::sleep_for(std::chrono::seconds(2));  // let the sessions close
       }
+      std::error_code ec;
+      fs::remove_all(store, ec);
     }
   }
-  std::error_code ec;
-  fs::remove_all(store, ec);
   write_json(o, rows);
   write_charts(o, rows);
   std::printf(

@@ -231,6 +231,41 @@ TEST(ClientSession, SessionsSharingDecodesGetTheSameTexelsFromOneDecode) {
   EXPECT_EQ(shared->hits(), 1u);
 }
 
+// irradcast-load's thin users keep a reference to the shared decode instead of copying it:
+// the same texels as a session that decodes itself, no lightmaps, and bad tiles still rejected.
+TEST(ClientSession, ThinSessionsHoldReferencesToTheSharedDecode) {
+  const FakeServer server;
+  auto shared = std::make_shared<TileDecodeCache>();
+  ClientSessionOptions by_ref = options();
+  by_ref.shared_decodes = shared;
+  by_ref.shared_texels = SharedTexels::Reference;
+  ClientSession own(options()), a(by_ref), b(by_ref);
+  for (ClientSession* s : {&own, &a, &b}) connect_and_download(*s, server);
+  for (ClientSession* s : {&own, &a, &b})
+    EXPECT_EQ(s->on_frame(server.tile(0, 3)).event, Event::TileApplied);
+  EXPECT_EQ(shared->hits(), 1u);  // a decoded, b found a's decode
+  const std::vector<glm::vec3> expect = own.tiles().tile_texels(0, 0, 0);
+  ASSERT_FALSE(expect.empty());
+  EXPECT_EQ(a.tiles().tile_texels(0, 0, 0), expect);
+  EXPECT_EQ(b.tiles().tile_texels(0, 0, 0), expect);
+  EXPECT_TRUE(a.tiles().tile_texels(0, 1, 0).empty());  // never received
+  EXPECT_THROW((void)a.tiles().lightmaps(), Error);
+  // A newer version replaces the reference; an older one changes nothing.
+  EXPECT_EQ(a.on_frame(server.tile(0, 4)).event, Event::TileApplied);
+  EXPECT_EQ(a.on_frame(server.tile(0, 2)).event, Event::None);
+  EXPECT_EQ(a.tiles().version(0, 0, 0), 4u);
+  EXPECT_EQ(own.on_frame(server.tile(0, 4)).event, Event::TileApplied);
+  EXPECT_EQ(a.tiles().tile_texels(0, 0, 0), own.tiles().tile_texels(0, 0, 0));
+  // Broken bytes and deltas (which need the client's own texels) are rejected.
+  wire::Envelope broken = server.tile(0, 5);
+  broken.mutable_tile_update()->set_payload("not zstd");
+  EXPECT_EQ(kind_of([&] { b.on_frame(broken); }), "bad tile");
+  wire::Envelope delta = server.tile(0, 6);
+  delta.mutable_tile_update()->set_encoding(wire::TILE_RGB9E5_DELTA_ZSTD);
+  EXPECT_EQ(kind_of([&] { a.on_frame(delta); }), "bad tile");
+  EXPECT_EQ(a.tiles().version(0, 0, 0), 4u);
+}
+
 TEST(ClientSession, ResumesWithItsSceneAndTileVersions) {
   const FakeServer server;
   ClientSession s(options());

@@ -22,7 +22,7 @@ ClientSession::ClientSession(ClientSessionOptions options, ClientSceneFactory fa
     : options_(std::move(options)),
       factory_(factory ? std::move(factory) : ClientSceneFactory(make_client_scene)),
       ping_interval_(options_.ping_interval) {
-  tiles_.share_decodes(options_.shared_decodes);
+  tiles_.share_decodes(options_.shared_decodes, options_.shared_texels);
 }
 
 wire::Envelope ClientSession::hello() {

@@ -158,7 +158,11 @@ class User : public std::enable_shared_from_this<User> {
   static ClientSessionOptions session_options(const Run& run, int index) {
     const LoadOptions& o = run.options;
     ClientSessionOptions s;
-    if (!o.decode_per_user) s.shared_decodes = run.decodes;
+    if (!o.decode_per_user) {
+      s.shared_decodes = run.decodes;
+      // Thin users never compose: they keep references to the shared decodes.
+      if (!o.render && !o.copy_shared_texels) s.shared_texels = SharedTexels::Reference;
+    }
     s.name = o.name + "-" + std::to_string(index);
     s.encoding = o.encoding;
     s.ping_interval = std::chrono::milliseconds(5000);

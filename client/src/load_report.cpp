@@ -168,19 +168,22 @@ std::string LoadReport::json(bool per_user_details) const {
   const std::vector<HostPort> servers = servers_or(options.servers, options.host, options.port);
   std::vector<std::string> addresses;
   for (const HostPort& server : servers) addresses.push_back(server.text());
-  j["options"] = {{"host", servers[0].host},
-                  {"port", servers[0].port},
-                  {"servers", addresses},
-                  {"users", options.users},
-                  {"duration_s", options.duration_s},
-                  {"mode", options.render ? "render" : "thin"},
-                  {"width", options.width},
-                  {"height", options.height},
-                  {"fps", options.fps},
-                  {"camera_hz", options.camera_hz},
-                  {"camera_path", options.camera_path},
-                  {"ramp_s", options.ramp_s},
-                  {"decode", options.decode_per_user ? "per-user" : "shared"}};
+  j["options"] = {
+      {"host", servers[0].host},
+      {"port", servers[0].port},
+      {"servers", addresses},
+      {"users", options.users},
+      {"duration_s", options.duration_s},
+      {"mode", options.render ? "render" : "thin"},
+      {"width", options.width},
+      {"height", options.height},
+      {"fps", options.fps},
+      {"camera_hz", options.camera_hz},
+      {"camera_path", options.camera_path},
+      {"ramp_s", options.ramp_s},
+      {"decode", options.decode_per_user                        ? "per-user"
+                 : options.render || options.copy_shared_texels ? "shared, copied"
+                                                                : "shared, referenced"}};
   j["elapsed_s"] = elapsed_s;
   j["users"] = {{"total", users},           {"connected", connected},
                 {"failed", failed},         {"scene_loaded", scene_loaded},

@@ -28,7 +28,7 @@ void TileCache::configure(const wire::Welcome& w, const Atlas& atlas) {
                   ": the server's layout does not match the scene");
     first.push_back(total);
     total += li.tiles_x() * li.tiles_y();
-    maps.emplace_back(o.width, o.height);
+    if (shared_texels_ == SharedTexels::Copy) maps.emplace_back(o.width, o.height);
   }
   first.push_back(total);
   tile_size_ = w.tile_size();
@@ -36,7 +36,44 @@ void TileCache::configure(const wire::Welcome& w, const Atlas& atlas) {
   first_tile_ = std::move(first);
   lightmaps_ = std::move(maps);
   versions_.assign(total, 0);
+  held_.assign(shared_texels_ == SharedTexels::Reference ? total : 0, nullptr);
   received_ = 0;
+}
+
+void TileCache::share_decodes(std::shared_ptr<TileDecodeCache> shared, SharedTexels texels) {
+  if (configured()) throw Error("share_decodes() after configure()");
+  if (texels == SharedTexels::Reference && !shared)
+    throw Error("a tile cache that holds references needs a shared decode cache");
+  shared_ = std::move(shared);
+  shared_texels_ = texels;
+}
+
+const std::vector<Lightmap>& TileCache::lightmaps() const {
+  if (shared_texels_ == SharedTexels::Reference)
+    throw Error("this tile cache holds references to shared decodes, not lightmaps");
+  return lightmaps_;
+}
+
+std::uint32_t TileCache::tile_index(std::uint32_t lightmap, std::uint32_t tx,
+                                    std::uint32_t ty) const {
+  return first_tile_[lightmap] + ty * infos_[lightmap].tiles_x() + tx;
+}
+
+std::vector<glm::vec3> TileCache::tile_texels(std::uint32_t lightmap, std::uint32_t tx,
+                                              std::uint32_t ty) const {
+  if (version(lightmap, tx, ty) == 0) return {};
+  const std::uint32_t index = tile_index(lightmap, tx, ty);
+  if (shared_texels_ == SharedTexels::Reference) return held_[index]->texels;
+  const wire::LightmapInfo& li = infos_[lightmap];
+  const wire::TileRect r =
+      wire::tile_rect(static_cast<int>(li.width()), static_cast<int>(li.height()),
+                      static_cast<int>(tile_size_), static_cast<int>(tx), static_cast<int>(ty));
+  const Lightmap& map = lightmaps_[lightmap];
+  std::vector<glm::vec3> out(static_cast<std::size_t>(r.w) * static_cast<std::size_t>(r.h));
+  for (int y = 0; y < r.h; ++y)
+    std::copy_n(map.texels.begin() + static_cast<std::ptrdiff_t>(r.y0 + y) * map.width + r.x0, r.w,
+                out.begin() + static_cast<std::ptrdiff_t>(y) * r.w);
+  return out;
 }
 
 bool TileCache::apply(const wire::TileUpdate& t) {
@@ -52,58 +89,70 @@ bool TileCache::apply(const wire::TileUpdate& t) {
       static_cast<int>(t.tile_x()), static_cast<int>(t.tile_y()));
   if (static_cast<int>(t.width()) != r.w || static_cast<int>(t.height()) != r.h)
     throw Error("tile size does not match the layout");
-  const std::uint32_t index = first_tile_[t.lightmap()] + t.tile_y() * li.tiles_x() + t.tile_x();
+  const std::uint32_t index = tile_index(t.lightmap(), t.tile_x(), t.tile_y());
   if (t.version() <= versions_[index]) return false;  // stale (this server never sends one)
-  decode(t, r);
+  decode(t, r, index);
   if (versions_[index] == 0) ++received_;
   versions_[index] = t.version();
   return true;
 }
 
-// Decodes into the tile's lightmap, or copies what the shared cache decoded from the same
-// bytes. A payload that does not decode throws here, and is never stored.
-void TileCache::decode(const wire::TileUpdate& t, const wire::TileRect& r) {
-  Lightmap& map = lightmaps_[t.lightmap()];
+// Decodes into the tile's lightmap, or takes what the shared cache decoded from the same
+// bytes (a copy, or a reference). A payload that does not decode throws here, and is never
+// stored.
+void TileCache::decode(const wire::TileUpdate& t, const wire::TileRect& r, std::uint32_t index) {
   if (!shared_ || t.encoding() == wire::TILE_RGB9E5_DELTA_ZSTD) {
-    wire::decode_tile(t.payload(), t.encoding(), r, map);
+    if (shared_texels_ == SharedTexels::Reference)
+      throw Error("a delta tile needs the client's own texels (this cache holds references)");
+    wire::decode_tile(t.payload(), t.encoding(), r, lightmaps_[t.lightmap()]);
     return;
   }
   const TileDecodeCache::Key key{t.lightmap(), t.tile_x(), t.tile_y(),
                                  static_cast<int>(t.encoding())};
-  std::vector<glm::vec3> texels;
-  if (shared_->find(key, t.version(), t.payload(), texels)) {
-    for (int y = 0; y < r.h; ++y)
-      std::copy_n(texels.begin() + static_cast<std::ptrdiff_t>(y) * r.w, r.w,
-                  map.texels.begin() + static_cast<std::ptrdiff_t>(r.y0 + y) * map.width + r.x0);
+  std::shared_ptr<const TileDecodeCache::Decoded> found =
+      shared_->find(key, t.version(), t.payload());
+  if (!found) {
+    // Decode into a map of the tile's own size, then share it.
+    Lightmap own(r.w, r.h);
+    wire::decode_tile(t.payload(), t.encoding(), wire::TileRect{0, 0, r.w, r.h}, own);
+    auto decoded = std::make_shared<TileDecodeCache::Decoded>();
+    decoded->version = t.version();
+    decoded->payload = t.payload();
+    decoded->texels = std::move(own.texels);
+    found = decoded;
+    shared_->store(key, std::move(decoded));
+  }
+  if (shared_texels_ == SharedTexels::Reference) {
+    held_[index] = std::move(found);
     return;
   }
-  wire::decode_tile(t.payload(), t.encoding(), r, map);
-  texels.resize(static_cast<std::size_t>(r.w) * static_cast<std::size_t>(r.h));
+  Lightmap& map = lightmaps_[t.lightmap()];
   for (int y = 0; y < r.h; ++y)
-    std::copy_n(map.texels.begin() + static_cast<std::ptrdiff_t>(r.y0 + y) * map.width + r.x0, r.w,
-                texels.begin() + static_cast<std::ptrdiff_t>(y) * r.w);
-  shared_->store(key, t.version(), t.payload(), std::move(texels));
+    std::copy_n(found->texels.begin() + static_cast<std::ptrdiff_t>(y) * r.w, r.w,
+                map.texels.begin() + static_cast<std::ptrdiff_t>(r.y0 + y) * map.width + r.x0);
 }
 
-bool TileDecodeCache::find(const Key& key, std::uint64_t version, const std::string& payload,
-                           std::vector<glm::vec3>& texels) const {
+std::shared_ptr<const TileDecodeCache::Decoded> TileDecodeCache::find(
+    const Key& key, std::uint64_t version, const std::string& payload) const {
+  std::shared_ptr<const Decoded> e;
+  {
+    std::lock_guard lock(mutex_);
+    const auto it = entries_.find(key);
+    if (it == entries_.end()) return nullptr;
+    e = it->second;
+  }
+  // Immutable once stored: compared outside the lock.
+  if (e->version != version || e->payload != payload) return nullptr;
   std::lock_guard lock(mutex_);
-  const auto it = entries_.find(key);
-  if (it == entries_.end() || it->second.version != version || it->second.payload != payload)
-    return false;
-  texels = it->second.texels;
   ++hits_;
-  return true;
+  return e;
 }
 
-void TileDecodeCache::store(const Key& key, std::uint64_t version, const std::string& payload,
-                            std::vector<glm::vec3> texels) {
+void TileDecodeCache::store(const Key& key, std::shared_ptr<const Decoded> decoded) {
   std::lock_guard lock(mutex_);
-  Entry& e = entries_[key];
-  if (e.version > version) return;  // a newer one is held (the users are not in step)
-  e.version = version;
-  e.payload = payload;
-  e.texels = std::move(texels);
+  std::shared_ptr<const Decoded>& e = entries_[key];
+  if (e && e->version > decoded->version) return;  // a newer one is held (users not in step)
+  e = std::move(decoded);
 }
 
 std::uint64_t TileDecodeCache::hits() const {
@@ -134,7 +183,7 @@ std::uint64_t TileCache::version(std::uint32_t lightmap, std::uint32_t tx, std::
   if (lightmap >= infos_.size() || tx >= infos_[lightmap].tiles_x() ||
       ty >= infos_[lightmap].tiles_y())
     return 0;
-  return versions_[first_tile_[lightmap] + ty * infos_[lightmap].tiles_x() + tx];
+  return versions_[tile_index(lightmap, tx, ty)];
 }
 
 }  // namespace irradcast

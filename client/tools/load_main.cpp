@@ -124,8 +124,9 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   app.add_option("--mode", o.mode, "thin (network + tile decoding) | render (also frames)");
   app.add_flag("--decode-per-user", o.decode_per_user,
-               "every user decodes every tile itself (default: the users share the decode of "
-               "byte-identical tiles, as N clients' decodes run on N machines, not on this one)");
+               "every user decodes every tile into its own lightmaps (default: the users share "
+               "the decode of byte-identical tiles, as N clients' decodes run on N machines, not "
+               "on this one; thin users keep a reference to it, render users copy it)");
   app.add_option("--width", o.width, "frame width (render mode)")->check(CLI::Range(1, 8192));
   app.add_option("--height", o.height, "frame height (render mode)")->check(CLI::Range(1, 8192));
   app.add_option("--fps", o.fps, "render mode: frames per second per user at most (0 = no cap)")

@@ -70,6 +70,8 @@ struct ClientSessionOptions {
   std::string log_tag = "client";  // for the log lines about edits
   // Decode byte-identical tiles once for many sessions of this process (irradcast-load).
   std::shared_ptr<TileDecodeCache> shared_decodes;
+  // How the tiles found there are held (Reference: no lightmaps, for users that never compose).
+  SharedTexels shared_texels = SharedTexels::Copy;
 };
 
 struct ClientSessionCounters {

@@ -1,8 +1,9 @@
 // Simulated users for load tests (irradcast-load): many protocol clients in one process, one
 // TCP connection each, all on one Asio io_context. Each user connects, says Hello, downloads
 // and checks the scene package, subscribes to every tile, sends CameraUpdates along its camera
-// path, and decodes every TileUpdate into its own lightmaps; in render mode it also composes
-// frames of its view. A user whose connection drops (reset, EOF, a server Error SERVER_SHUTDOWN,
+// path, and parses, checks and applies every TileUpdate (thin users share the decode of
+// byte-identical tiles and keep a reference to it; with decode_per_user each decodes into its
+// own lightmaps); in render mode it also composes frames of its view into its own lightmaps. A user whose connection drops (reset, EOF, a server Error SERVER_SHUTDOWN,
 // a timed-out handshake or download) reconnects with the viewer's back-off policy (backoff.h)
 // until the end of the run and resumes as the viewer does (Hello with its scene hash and tile
 // versions); with several servers (--connect A,B,...) the users spread their first connection
@@ -40,10 +41,14 @@ struct LoadOptions {
   int users = 1;
   double duration_s = 10.0;  // from the start of the run; users then say Bye
   bool render = false;       // compose frames too (else "thin": network + tile decoding)
-  // Every user decodes every tile itself. Default: the users share the decode of byte-identical
-  // tiles (a real client decodes on its own CPU; N decodes on one load machine would measure
-  // the load machine).
+  // Every user decodes every tile into its own lightmaps. Default: the users share the decode
+  // of byte-identical tiles (a real client decodes on its own CPU; N decodes on one load
+  // machine would measure the load machine); render users copy the texels into their
+  // lightmaps, thin users keep a reference to the shared decode (SharedTexels::Reference).
   bool decode_per_user = false;
+  // Thin users copy the shared decode into lightmaps of their own, as render users do (what
+  // they did before SharedTexels::Reference; for irradcast-bench-fanout --fresh).
+  bool copy_shared_texels = false;
   int width = 320, height = 240;
   double fps = 30.0;        // render mode: frames per second per user at most (0 = no cap)
   double camera_hz = 10.0;  // CameraUpdates per second per user

@@ -22,8 +22,9 @@ namespace irradcast {
 
 // The newest decoded version of each tile (RGB9E5 and half; a delta depends on the client's
 // base and is never shared), keyed by tile and checked against the whole payload: a TileCache
-// that finds the same bytes copies the texels instead of decoding them. Bounded by one entry
-// per tile and encoding of the scene. Any thread (one mutex).
+// that finds the same bytes takes the texels instead of decoding them. Bounded by one entry
+// per tile and encoding of the scene. Any thread (one mutex around the map; an entry is
+// immutable once stored, so a TileCache may keep a reference to it).
 class TileDecodeCache {
  public:
   struct Key {
@@ -31,11 +32,15 @@ class TileDecodeCache {
     int encoding = 0;
     bool operator==(const Key&) const = default;
   };
-  // The texels of `payload` (w x h, row by row), if these bytes were decoded before.
-  bool find(const Key& key, std::uint64_t version, const std::string& payload,
-            std::vector<glm::vec3>& texels) const;
-  void store(const Key& key, std::uint64_t version, const std::string& payload,
-             std::vector<glm::vec3> texels);
+  struct Decoded {
+    std::uint64_t version = 0;
+    std::string payload;
+    std::vector<glm::vec3> texels;  // w x h, row by row
+  };
+  // The decode of `payload` if these bytes were decoded before (null otherwise).
+  std::shared_ptr<const Decoded> find(const Key& key, std::uint64_t version,
+                                      const std::string& payload) const;
+  void store(const Key& key, std::shared_ptr<const Decoded> decoded);
   std::uint64_t hits() const;
 
  private:
@@ -45,20 +50,24 @@ class TileDecodeCache {
              static_cast<std::size_t>(k.encoding);
     }
   };
-  struct Entry {
-    std::uint64_t version = 0;
-    std::string payload;
-    std::vector<glm::vec3> texels;
-  };
   mutable std::mutex mutex_;
-  std::unordered_map<Key, Entry, KeyHash> entries_;
+  std::unordered_map<Key, std::shared_ptr<const Decoded>, KeyHash> entries_;
   mutable std::uint64_t hits_ = 0;
+};
+
+// How a TileCache that shares decodes holds the texels it applies.
+enum class SharedTexels {
+  Copy,       // copied into its own lightmaps (a viewer, a user that composes frames)
+  Reference,  // a reference to the shared decode, no lightmaps (irradcast-load's thin users:
+              // N users' copies of the same texels would measure this machine's memory
+              // bandwidth, not the server; every tile is still parsed, checked and compared)
 };
 
 class TileCache {
  public:
-  // Decode through `shared` (null: every tile decoded here).
-  void share_decodes(std::shared_ptr<TileDecodeCache> shared) { shared_ = std::move(shared); }
+  // Decode through `shared` (null: every tile decoded here). Before configure().
+  void share_decodes(std::shared_ptr<TileDecodeCache> shared,
+                     SharedTexels texels = SharedTexels::Copy);
 
   // Takes the layout of `welcome`; throws irradcast::Error when it does not match the atlas.
   // Versions start at 0 (nothing held) and the lightmaps black.
@@ -80,7 +89,13 @@ class TileCache {
   bool all_received() const { return received_ == versions_.size() && !versions_.empty(); }
   std::size_t tiles_received() const { return received_; }
   std::size_t tile_count() const { return versions_.size(); }
-  const std::vector<Lightmap>& lightmaps() const { return lightmaps_; }
+  // The decoded lightmaps; throws irradcast::Error for a cache that holds references only
+  // (SharedTexels::Reference).
+  const std::vector<Lightmap>& lightmaps() const;
+  // The texels of one tile held (w x h of its rectangle, row by row), whichever way they are
+  // held; empty for a tile never received.
+  std::vector<glm::vec3> tile_texels(std::uint32_t lightmap, std::uint32_t tx,
+                                     std::uint32_t ty) const;
 
  private:
   std::uint32_t tile_size_ = 0;
@@ -90,7 +105,10 @@ class TileCache {
   std::vector<std::uint64_t> versions_;
   std::size_t received_ = 0;  // tiles with a version > 0
   std::shared_ptr<TileDecodeCache> shared_;
-  void decode(const wire::TileUpdate& t, const wire::TileRect& r);
+  SharedTexels shared_texels_ = SharedTexels::Copy;
+  std::vector<std::shared_ptr<const TileDecodeCache::Decoded>> held_;  // Reference: per tile
+  std::uint32_t tile_index(std::uint32_t lightmap, std::uint32_t tx, std::uint32_t ty) const;
+  void decode(const wire::TileUpdate& t, const wire::TileRect& r, std::uint32_t index);
 };
 
 }  // namespace irradcast
