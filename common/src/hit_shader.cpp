@@ -3,6 +3,7 @@
 #include <emmintrin.h>
 
 #include <algorithm>
+#include <array>
 
 #include "irradcast/common/error.h"
 
@@ -46,14 +47,53 @@ inline void bilinear_taps(const Lightmap& m, float fx, float fy, __m128 (&tap)[4
   tap[3] = load3(row1[x1]);
 }
 
+// [tap][channel] over 4 lanes from [lane][tap] (r, g, b, 0), then the bilinear mix of each
+// channel: mix(mix(t0, t1, ax), mix(t2, t3, ax), ay), as glm::mix in Lightmap::bilinear and
+// Texture::sample_srgb.
+inline void mix_taps(__m128 (&tap)[4][4], __m128 ax, __m128 ay, __m128 (&out)[3]) {
+  __m128 ch[4][4];
+  for (int t = 0; t < 4; ++t) {
+    ch[t][0] = tap[0][t];
+    ch[t][1] = tap[1][t];
+    ch[t][2] = tap[2][t];
+    ch[t][3] = tap[3][t];
+    _MM_TRANSPOSE4_PS(ch[t][0], ch[t][1], ch[t][2], ch[t][3]);
+  }
+  for (int c = 0; c < 3; ++c)
+    out[c] = mix4(mix4(ch[0][c], ch[1][c], ax), mix4(ch[2][c], ch[3][c], ax), ay);
+}
+
+// Texture::sample_srgb's wrap of texel i into 0 .. n-1, the same integer without the divisions
+// where i is inside already.
+inline int wrap(long i, int n) {
+  if (i >= 0 && i < n) return static_cast<int>(i);
+  return static_cast<int>(((i % n) + n) % n);
+}
+
+// Texture::sample_srgb's four texels of one lane at the floored texel coordinates (fx, fy),
+// decoded to linear (r, g, b, 0) each (alpha is not needed for the albedo).
+inline void texture_taps(const Texture& tex, const std::array<float, 256>& lut, float fx, float fy,
+                         __m128 (&tap)[4]) {
+  const int x0 = wrap(static_cast<long>(fx), tex.width),
+            y0 = wrap(static_cast<long>(fy), tex.height);
+  const int x1 = x0 + 1 == tex.width ? 0 : x0 + 1, y1 = y0 + 1 == tex.height ? 0 : y0 + 1;
+  const std::uint8_t* row0 = tex.rgba8.data() + 4 * static_cast<std::size_t>(y0) * tex.width;
+  const std::uint8_t* row1 = tex.rgba8.data() + 4 * static_cast<std::size_t>(y1) * tex.width;
+  const std::uint8_t* p[4] = {row0 + 4 * x0, row0 + 4 * x1, row1 + 4 * x0, row1 + 4 * x1};
+  for (int t = 0; t < 4; ++t) tap[t] = _mm_setr_ps(lut[p[t][0]], lut[p[t][1]], lut[p[t][2]], 0.0f);
+}
+
 }  // namespace
 
 // What shade_block needs of 4 lanes, SoA; lanes that miss read zeros.
 struct HitShader::Lanes {
-  alignas(16) float corner[6][4];  // the atlas corners: c0.x, c0.y, c1.x, c1.y, c2.x, c2.y
-  alignas(16) float albedo[3][4];  // base colour x texture sample
-  const Lightmap* lightmap[4];     // nullptr: a miss
+  alignas(16) float corner[6][4];      // the atlas corners: c0.x, c0.y, c1.x, c1.y, c2.x, c2.y
+  alignas(16) float base[3][4];        // the material's base colour
+  alignas(16) float tex_corner[6][4];  // the base colour texture's uv at the corners
+  alignas(16) float tex_size[2][4];    // its width and height
+  const Lightmap* lightmap[4];         // nullptr: a miss
   const Shading* material[4];
+  const Texture* texture[4];  // nullptr: none (or an empty one)
 };
 
 HitShader::HitShader(const World& world, const Atlas& atlas, const std::vector<Lightmap>& lightmaps)
@@ -92,9 +132,10 @@ void HitShader::gather_lanes(const PrimaryBlock& b, int k0, Lanes& l) const {
     const int k = k0 + i;
     if (!b.active[k] || !b.hit(k)) {
       for (auto& c : l.corner) c[i] = 0.0f;
-      for (auto& c : l.albedo) c[i] = 0.0f;
+      for (auto& c : l.base) c[i] = 0.0f;
       l.lightmap[i] = nullptr;
       l.material[i] = nullptr;
+      l.texture[i] = nullptr;
       continue;
     }
     const Object& o = objects_[static_cast<std::size_t>(b.object[k])];
@@ -108,52 +149,105 @@ void HitShader::gather_lanes(const PrimaryBlock& b, int k0, Lanes& l) const {
     const std::uint32_t mi = t < o.triangle_count ? o.triangle_material[t] : kFallback;
     const Shading& m = materials_[mi < materials_.size() - 1 ? mi : materials_.size() - 1];
     l.material[i] = &m;
-    glm::vec3 albedo = m.base_color;
-    if (m.texture)
-      albedo *= glm::vec3(m.texture->sample_srgb(o.world->uv(m.texture_uv, t, b.u[k], b.v[k])));
-    for (int j = 0; j < 3; ++j) l.albedo[j][i] = albedo[j];
+    for (int j = 0; j < 3; ++j) l.base[j][i] = m.base_color[j];
+    l.texture[i] = m.texture && m.texture->width > 0 && m.texture->height > 0 ? m.texture : nullptr;
+    if (!l.texture[i]) continue;
+    l.tex_size[0][i] = static_cast<float>(m.texture->width);
+    l.tex_size[1][i] = static_cast<float>(m.texture->height);
+    // WorldObject::uv's corners; (0, 0) without the set.
+    const Mesh& mesh = *o.world->source;
+    const std::vector<glm::vec2>& uvs = m.texture_uv == 1 ? mesh.uv1 : mesh.uv0;
+    const glm::uvec3 tri = uvs.empty() ? glm::uvec3(0) : mesh.triangles[t];
+    for (int j = 0; j < 3; ++j) {
+      const glm::vec2 cj = uvs.empty() ? glm::vec2(0.0f) : uvs[tri[j]];
+      l.tex_corner[2 * j][i] = cj.x;
+      l.tex_corner[2 * j + 1][i] = cj.y;
+    }
   }
 }
 
+namespace {
+
+// (1 - u - v) * c0 + u * c1 + v * c2 per lane (w = 1 - u - v), from SoA corners [c0x, c0y, c1x,
+// c1y, c2x, c2y][lane]: ObjectLightmap::uv and WorldObject::uv.
+inline void interpolate(const float (&corner)[6][4], __m128 u, __m128 v, __m128 w,
+                        __m128 (&uv)[2]) {
+  for (int a = 0; a < 2; ++a)
+    uv[a] = _mm_add_ps(_mm_add_ps(_mm_mul_ps(w, _mm_load_ps(corner[a])),
+                                  _mm_mul_ps(u, _mm_load_ps(corner[2 + a]))),
+                       _mm_mul_ps(v, _mm_load_ps(corner[4 + a])));
+}
+
+// Lightmap::bilinear at the atlas uv (corners `corner`) of 4 lanes; 0 where `lightmap` is null.
+void lightmap_lanes(const float (&corner)[6][4], const Lightmap* const (&lightmap)[4], __m128 u,
+                    __m128 v, __m128 w, __m128 (&e)[3]) {
+  __m128 uv[2];
+  interpolate(corner, u, v, w, uv);
+  const __m128 half = _mm_set1_ps(0.5f);
+  const __m128 x = _mm_sub_ps(uv[0], half), y = _mm_sub_ps(uv[1], half);
+  const __m128 fx = floor4(x), fy = floor4(y);
+  alignas(16) float fxs[4], fys[4];
+  _mm_store_ps(fxs, fx);
+  _mm_store_ps(fys, fy);
+  __m128 tap[4][4];  // [lane][tap]: (r, g, b, 0)
+  for (int i = 0; i < 4; ++i) {
+    if (lightmap[i])
+      bilinear_taps(*lightmap[i], fxs[i], fys[i], tap[i]);
+    else
+      for (__m128& t : tap[i]) t = _mm_setzero_ps();
+  }
+  mix_taps(tap, _mm_sub_ps(x, fx), _mm_sub_ps(y, fy), e);
+}
+
+// Texture::sample_srgb's rgb at WorldObject::uv (corners `corner`, texture sizes `size`) of 4
+// lanes; 1 where `texture` is null.
+void texture_lanes(const float (&corner)[6][4], const float (&size)[2][4],
+                   const Texture* const (&texture)[4], __m128 u, __m128 v, __m128 w,
+                   __m128 (&tex)[3]) {
+  const __m128 one = _mm_set1_ps(1.0f);
+  for (__m128& c : tex) c = one;
+  if (!texture[0] && !texture[1] && !texture[2] && !texture[3]) return;
+  __m128 uv[2];
+  interpolate(corner, u, v, w, uv);
+  const __m128 half = _mm_set1_ps(0.5f);
+  const __m128 x = _mm_sub_ps(_mm_mul_ps(uv[0], _mm_load_ps(size[0])), half);
+  const __m128 y = _mm_sub_ps(_mm_mul_ps(uv[1], _mm_load_ps(size[1])), half);
+  const __m128 fx = floor4(x), fy = floor4(y);
+  alignas(16) float fxs[4], fys[4];
+  _mm_store_ps(fxs, fx);
+  _mm_store_ps(fys, fy);
+  const std::array<float, 256>& lut = srgb_to_linear_table();
+  __m128 tap[4][4];
+  alignas(16) std::int32_t textured[4];
+  for (int i = 0; i < 4; ++i) {
+    textured[i] = texture[i] ? -1 : 0;
+    if (texture[i])
+      texture_taps(*texture[i], lut, fxs[i], fys[i], tap[i]);
+    else
+      for (__m128& t : tap[i]) t = one;
+  }
+  __m128 s[3];
+  mix_taps(tap, _mm_sub_ps(x, fx), _mm_sub_ps(y, fy), s);
+  const __m128 mask = _mm_castsi128_ps(_mm_load_si128(reinterpret_cast<const __m128i*>(textured)));
+  for (int c = 0; c < 3; ++c) tex[c] = _mm_or_ps(_mm_and_ps(mask, s[c]), _mm_andnot_ps(mask, one));
+}
+
+}  // namespace
+
 void HitShader::shade_block(const PrimaryBlock& b, BlockShade& s) const {
-  const __m128 one = _mm_set1_ps(1.0f), half = _mm_set1_ps(0.5f);
+  const __m128 one = _mm_set1_ps(1.0f), inv_pi = _mm_set1_ps(kInvPi);
   for (int k0 = 0; k0 < PrimaryBlock::kLanes; k0 += 4) {
     Lanes l;
     gather_lanes(b, k0, l);
-    // ObjectLightmap::uv: (1 - u - v) * c0 + u * c1 + v * c2, then Lightmap::bilinear.
     const __m128 u = _mm_load_ps(b.u + k0), v = _mm_load_ps(b.v + k0);
     const __m128 w = _mm_sub_ps(_mm_sub_ps(one, u), v);
-    __m128 uv[2];
-    for (int a = 0; a < 2; ++a)
-      uv[a] = _mm_add_ps(_mm_add_ps(_mm_mul_ps(w, _mm_load_ps(l.corner[a])),
-                                    _mm_mul_ps(u, _mm_load_ps(l.corner[2 + a]))),
-                         _mm_mul_ps(v, _mm_load_ps(l.corner[4 + a])));
-    const __m128 x = _mm_sub_ps(uv[0], half), y = _mm_sub_ps(uv[1], half);
-    const __m128 fx = floor4(x), fy = floor4(y);
-    const __m128 ax = _mm_sub_ps(x, fx), ay = _mm_sub_ps(y, fy);
-    alignas(16) float fxs[4], fys[4];
-    _mm_store_ps(fxs, fx);
-    _mm_store_ps(fys, fy);
-    __m128 tap[4][4];  // [lane][tap]: (r, g, b, 0)
-    for (int i = 0; i < 4; ++i) {
-      if (l.lightmap[i])
-        bilinear_taps(*l.lightmap[i], fxs[i], fys[i], tap[i]);
-      else
-        for (__m128& t : tap[i]) t = _mm_setzero_ps();
-    }
-    // [tap][channel] over the 4 lanes.
-    __m128 ch[4][4];
-    for (int t = 0; t < 4; ++t) {
-      ch[t][0] = tap[0][t];
-      ch[t][1] = tap[1][t];
-      ch[t][2] = tap[2][t];
-      ch[t][3] = tap[3][t];
-      _MM_TRANSPOSE4_PS(ch[t][0], ch[t][1], ch[t][2], ch[t][3]);
-    }
+    __m128 e[3], tex[3];
+    lightmap_lanes(l.corner, l.lightmap, u, v, w, e);
+    texture_lanes(l.tex_corner, l.tex_size, l.texture, u, v, w, tex);
+    // albedo = base colour x texture; diffuse = albedo * (1 / pi) * E.
     for (int c = 0; c < 3; ++c) {
-      const __m128 e = mix4(mix4(ch[0][c], ch[1][c], ax), mix4(ch[2][c], ch[3][c], ax), ay);
-      const __m128 albedo = _mm_mul_ps(_mm_load_ps(l.albedo[c]), _mm_set1_ps(kInvPi));
-      _mm_store_ps(s.diffuse[c] + k0, _mm_mul_ps(albedo, e));
+      const __m128 albedo = _mm_mul_ps(_mm_load_ps(l.base[c]), tex[c]);
+      _mm_store_ps(s.diffuse[c] + k0, _mm_mul_ps(_mm_mul_ps(albedo, inv_pi), e[c]));
       _mm_store_ps(s.emission[c] + k0, _mm_setzero_ps());
     }
     for (int i = 0; i < 4; ++i)
