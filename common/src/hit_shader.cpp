@@ -70,18 +70,29 @@ inline int wrap(long i, int n) {
   return static_cast<int>(((i % n) + n) % n);
 }
 
-// Texture::sample_srgb's four texels of one lane at the floored texel coordinates (fx, fy),
-// decoded to linear (r, g, b, 0) each (alpha is not needed for the albedo).
-inline void texture_taps(const Texture& tex, const std::array<float, 256>& lut, float fx, float fy,
-                         __m128 (&tap)[4]) {
+// Texture::sample_srgb's four texels of one lane at the floored texel coordinates (fx, fy)
+// (RGBA8, [tap]); their cache lines are prefetched.
+inline void texture_taps(const Texture& tex, float fx, float fy, const std::uint8_t* (&p)[4]) {
   const int x0 = wrap(static_cast<long>(fx), tex.width),
             y0 = wrap(static_cast<long>(fy), tex.height);
   const int x1 = x0 + 1 == tex.width ? 0 : x0 + 1, y1 = y0 + 1 == tex.height ? 0 : y0 + 1;
   const std::uint8_t* row0 = tex.rgba8.data() + 4 * static_cast<std::size_t>(y0) * tex.width;
   const std::uint8_t* row1 = tex.rgba8.data() + 4 * static_cast<std::size_t>(y1) * tex.width;
-  const std::uint8_t* p[4] = {row0 + 4 * x0, row0 + 4 * x1, row1 + 4 * x0, row1 + 4 * x1};
-  for (int t = 0; t < 4; ++t) tap[t] = _mm_setr_ps(lut[p[t][0]], lut[p[t][1]], lut[p[t][2]], 0.0f);
+  p[0] = row0 + 4 * x0;
+  p[1] = row0 + 4 * x1;
+  p[2] = row1 + 4 * x0;
+  p[3] = row1 + 4 * x1;
+  _mm_prefetch(reinterpret_cast<const char*>(p[0]), _MM_HINT_T0);
+  _mm_prefetch(reinterpret_cast<const char*>(p[2]), _MM_HINT_T0);
 }
+
+// A texture lookup of 4 lanes between its two halves: the texels (prefetched), the bilinear
+// weights; texel[i][0] is null where lane i has no texture.
+struct TextureLanes {
+  const std::uint8_t* texel[4][4];
+  __m128 ax, ay;
+  bool any = false;
+};
 
 }  // namespace
 
@@ -199,35 +210,49 @@ void lightmap_lanes(const float (&corner)[6][4], const Lightmap* const (&lightma
   mix_taps(tap, _mm_sub_ps(x, fx), _mm_sub_ps(y, fy), e);
 }
 
-// Texture::sample_srgb's rgb at WorldObject::uv (corners `corner`, texture sizes `size`) of 4
-// lanes; 1 where `texture` is null.
+// The first half of Texture::sample_srgb at WorldObject::uv (corners `corner`, texture sizes
+// `size`) of 4 lanes: where its texels are.
 void texture_lanes(const float (&corner)[6][4], const float (&size)[2][4],
                    const Texture* const (&texture)[4], __m128 u, __m128 v, __m128 w,
-                   __m128 (&tex)[3]) {
-  const __m128 one = _mm_set1_ps(1.0f);
-  for (__m128& c : tex) c = one;
-  if (!texture[0] && !texture[1] && !texture[2] && !texture[3]) return;
+                   TextureLanes& t) {
+  t.any = texture[0] || texture[1] || texture[2] || texture[3];
+  if (!t.any) return;
   __m128 uv[2];
   interpolate(corner, u, v, w, uv);
   const __m128 half = _mm_set1_ps(0.5f);
   const __m128 x = _mm_sub_ps(_mm_mul_ps(uv[0], _mm_load_ps(size[0])), half);
   const __m128 y = _mm_sub_ps(_mm_mul_ps(uv[1], _mm_load_ps(size[1])), half);
   const __m128 fx = floor4(x), fy = floor4(y);
+  t.ax = _mm_sub_ps(x, fx);
+  t.ay = _mm_sub_ps(y, fy);
   alignas(16) float fxs[4], fys[4];
   _mm_store_ps(fxs, fx);
   _mm_store_ps(fys, fy);
+  for (int i = 0; i < 4; ++i) {
+    if (texture[i])
+      texture_taps(*texture[i], fxs[i], fys[i], t.texel[i]);
+    else
+      t.texel[i][0] = nullptr;
+  }
+}
+
+// The second half: the texels decoded to linear and mixed, rgb; 1 where a lane has no texture.
+void texture_mix(const TextureLanes& t, __m128 (&tex)[3]) {
+  const __m128 one = _mm_set1_ps(1.0f);
+  for (__m128& c : tex) c = one;
+  if (!t.any) return;
   const std::array<float, 256>& lut = srgb_to_linear_table();
   __m128 tap[4][4];
   alignas(16) std::int32_t textured[4];
   for (int i = 0; i < 4; ++i) {
-    textured[i] = texture[i] ? -1 : 0;
-    if (texture[i])
-      texture_taps(*texture[i], lut, fxs[i], fys[i], tap[i]);
-    else
-      for (__m128& t : tap[i]) t = one;
+    textured[i] = t.texel[i][0] ? -1 : 0;
+    for (int k = 0; k < 4; ++k) {
+      const std::uint8_t* p = t.texel[i][k];
+      tap[i][k] = textured[i] ? _mm_setr_ps(lut[p[0]], lut[p[1]], lut[p[2]], 0.0f) : one;
+    }
   }
   __m128 s[3];
-  mix_taps(tap, _mm_sub_ps(x, fx), _mm_sub_ps(y, fy), s);
+  mix_taps(tap, t.ax, t.ay, s);
   const __m128 mask = _mm_castsi128_ps(_mm_load_si128(reinterpret_cast<const __m128i*>(textured)));
   for (int c = 0; c < 3; ++c) tex[c] = _mm_or_ps(_mm_and_ps(mask, s[c]), _mm_andnot_ps(mask, one));
 }
@@ -235,25 +260,34 @@ void texture_lanes(const float (&corner)[6][4], const float (&size)[2][4],
 }  // namespace
 
 void HitShader::shade_block(const PrimaryBlock& b, BlockShade& s) const {
+  constexpr int kGroups = PrimaryBlock::kLanes / 4;
   const __m128 one = _mm_set1_ps(1.0f), inv_pi = _mm_set1_ps(kInvPi);
-  for (int k0 = 0; k0 < PrimaryBlock::kLanes; k0 += 4) {
-    Lanes l;
-    gather_lanes(b, k0, l);
-    const __m128 u = _mm_load_ps(b.u + k0), v = _mm_load_ps(b.v + k0);
-    const __m128 w = _mm_sub_ps(_mm_sub_ps(one, u), v);
+  // First every group's texel addresses (prefetched), then the lightmaps while they arrive.
+  Lanes l[kGroups];
+  TextureLanes tl[kGroups];
+  __m128 u[kGroups], v[kGroups], w[kGroups];
+  for (int g = 0; g < kGroups; ++g) {
+    gather_lanes(b, 4 * g, l[g]);
+    u[g] = _mm_load_ps(b.u + 4 * g);
+    v[g] = _mm_load_ps(b.v + 4 * g);
+    w[g] = _mm_sub_ps(_mm_sub_ps(one, u[g]), v[g]);
+    texture_lanes(l[g].tex_corner, l[g].tex_size, l[g].texture, u[g], v[g], w[g], tl[g]);
+  }
+  for (int g = 0; g < kGroups; ++g) {
+    const int k0 = 4 * g;
     __m128 e[3], tex[3];
-    lightmap_lanes(l.corner, l.lightmap, u, v, w, e);
-    texture_lanes(l.tex_corner, l.tex_size, l.texture, u, v, w, tex);
+    lightmap_lanes(l[g].corner, l[g].lightmap, u[g], v[g], w[g], e);
+    texture_mix(tl[g], tex);
     // albedo = base colour x texture; diffuse = albedo * (1 / pi) * E.
     for (int c = 0; c < 3; ++c) {
-      const __m128 albedo = _mm_mul_ps(_mm_load_ps(l.base[c]), tex[c]);
+      const __m128 albedo = _mm_mul_ps(_mm_load_ps(l[g].base[c]), tex[c]);
       _mm_store_ps(s.diffuse[c] + k0, _mm_mul_ps(_mm_mul_ps(albedo, inv_pi), e[c]));
       _mm_store_ps(s.emission[c] + k0, _mm_setzero_ps());
     }
     for (int i = 0; i < 4; ++i)
-      if (l.material[i] && l.material[i]->emissive) {
+      if (l[g].material[i] && l[g].material[i]->emissive) {
         HitShade hs;
-        emission(b.hit_at(k0 + i), b.direction(k0 + i), *l.material[i], hs);
+        emission(b.hit_at(k0 + i), b.direction(k0 + i), *l[g].material[i], hs);
         for (int c = 0; c < 3; ++c) s.emission[c][k0 + i] = hs.emission[c];
       }
   }
