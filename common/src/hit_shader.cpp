@@ -33,14 +33,15 @@ inline __m128 load3(const glm::vec3& v) {
 
 // Lightmap::bilinear's four texels of one lane at the floored texel coordinates (fx, fy): the
 // same clamping, returned as (r, g, b, 0) each.
-inline void bilinear_taps(const Lightmap& m, float fx, float fy, __m128 (&tap)[4]) {
-  const int x0 = std::clamp(static_cast<int>(fx), 0, m.width - 1);
-  const int y0 = std::clamp(static_cast<int>(fy), 0, m.height - 1);
-  int x1 = std::min(x0 + 1, m.width - 1), y1 = std::min(y0 + 1, m.height - 1);
+inline void bilinear_taps(const glm::vec3* texels, int width, int height, float fx, float fy,
+                          __m128 (&tap)[4]) {
+  const int x0 = std::clamp(static_cast<int>(fx), 0, width - 1);
+  const int y0 = std::clamp(static_cast<int>(fy), 0, height - 1);
+  int x1 = std::min(x0 + 1, width - 1), y1 = std::min(y0 + 1, height - 1);
   if (fx < 0.0f) x1 = x0;
   if (fy < 0.0f) y1 = y0;
-  const glm::vec3* row0 = m.texels.data() + static_cast<std::size_t>(y0) * m.width;
-  const glm::vec3* row1 = m.texels.data() + static_cast<std::size_t>(y1) * m.width;
+  const glm::vec3* row0 = texels + static_cast<std::size_t>(y0) * width;
+  const glm::vec3* row1 = texels + static_cast<std::size_t>(y1) * width;
   tap[0] = load3(row0[x0]);
   tap[1] = load3(row0[x1]);
   tap[2] = load3(row1[x0]);
@@ -102,7 +103,8 @@ struct HitShader::Lanes {
   alignas(16) float base[3][4];        // the material's base colour
   alignas(16) float tex_corner[6][4];  // the base colour texture's uv at the corners
   alignas(16) float tex_size[2][4];    // its width and height
-  const Lightmap* lightmap[4];         // nullptr: a miss
+  const glm::vec3* lightmap[4];        // the lightmap's texels; nullptr: a miss
+  int lightmap_size[2][4];             // its width and height
   const Shading* material[4];
   const Texture* texture[4];  // nullptr: none (or an empty one)
 };
@@ -119,6 +121,14 @@ HitShader::HitShader(const World& world, const Atlas& atlas, const std::vector<L
     o.lightmap = &lightmaps[i];
     o.triangle_material = o.world->source->triangle_material.data();
     o.triangle_count = o.world->source->triangle_material.size();
+    o.corner_uv = o.atlas->corner_uv.data();
+    o.texels = o.lightmap->texels.data();
+    o.lightmap_width = o.lightmap->width;
+    o.lightmap_height = o.lightmap->height;
+    const Mesh& mesh = *o.world->source;
+    o.triangles = mesh.triangles.data();
+    o.uv[0] = mesh.uv0.empty() ? nullptr : mesh.uv0.data();
+    o.uv[1] = mesh.uv1.empty() ? nullptr : mesh.uv1.data();
   }
   // As World::material: an index past the scene's materials means the default Material{}.
   std::vector<const Material*> materials;
@@ -151,12 +161,14 @@ void HitShader::gather_lanes(const PrimaryBlock& b, int k0, Lanes& l) const {
     }
     const Object& o = objects_[static_cast<std::size_t>(b.object[k])];
     const std::uint32_t t = b.triangle[k];
-    const glm::vec2* c = o.atlas->corner_uv.data() + 3 * static_cast<std::size_t>(t);
+    const glm::vec2* c = o.corner_uv + 3 * static_cast<std::size_t>(t);
     for (int j = 0; j < 3; ++j) {
       l.corner[2 * j][i] = c[j].x;
       l.corner[2 * j + 1][i] = c[j].y;
     }
-    l.lightmap[i] = o.lightmap;
+    l.lightmap[i] = o.texels;
+    l.lightmap_size[0][i] = o.lightmap_width;
+    l.lightmap_size[1][i] = o.lightmap_height;
     const std::uint32_t mi = t < o.triangle_count ? o.triangle_material[t] : kFallback;
     const Shading& m = materials_[mi < materials_.size() - 1 ? mi : materials_.size() - 1];
     l.material[i] = &m;
@@ -166,11 +178,10 @@ void HitShader::gather_lanes(const PrimaryBlock& b, int k0, Lanes& l) const {
     l.tex_size[0][i] = static_cast<float>(m.texture->width);
     l.tex_size[1][i] = static_cast<float>(m.texture->height);
     // WorldObject::uv's corners; (0, 0) without the set.
-    const Mesh& mesh = *o.world->source;
-    const std::vector<glm::vec2>& uvs = m.texture_uv == 1 ? mesh.uv1 : mesh.uv0;
-    const glm::uvec3 tri = uvs.empty() ? glm::uvec3(0) : mesh.triangles[t];
+    const glm::vec2* uvs = o.uv[m.texture_uv == 1 ? 1 : 0];
+    const glm::uvec3 tri = uvs ? o.triangles[t] : glm::uvec3(0);
     for (int j = 0; j < 3; ++j) {
-      const glm::vec2 cj = uvs.empty() ? glm::vec2(0.0f) : uvs[tri[j]];
+      const glm::vec2 cj = uvs ? uvs[tri[j]] : glm::vec2(0.0f);
       l.tex_corner[2 * j][i] = cj.x;
       l.tex_corner[2 * j + 1][i] = cj.y;
     }
@@ -190,8 +201,8 @@ inline void interpolate(const float (&corner)[6][4], __m128 u, __m128 v, __m128 
 }
 
 // Lightmap::bilinear at the atlas uv (corners `corner`) of 4 lanes; 0 where `lightmap` is null.
-void lightmap_lanes(const float (&corner)[6][4], const Lightmap* const (&lightmap)[4], __m128 u,
-                    __m128 v, __m128 w, __m128 (&e)[3]) {
+void lightmap_lanes(const float (&corner)[6][4], const glm::vec3* const (&lightmap)[4],
+                    const int (&size)[2][4], __m128 u, __m128 v, __m128 w, __m128 (&e)[3]) {
   __m128 uv[2];
   interpolate(corner, u, v, w, uv);
   const __m128 half = _mm_set1_ps(0.5f);
@@ -203,7 +214,7 @@ void lightmap_lanes(const float (&corner)[6][4], const Lightmap* const (&lightma
   __m128 tap[4][4];  // [lane][tap]: (r, g, b, 0)
   for (int i = 0; i < 4; ++i) {
     if (lightmap[i])
-      bilinear_taps(*lightmap[i], fxs[i], fys[i], tap[i]);
+      bilinear_taps(lightmap[i], size[0][i], size[1][i], fxs[i], fys[i], tap[i]);
     else
       for (__m128& t : tap[i]) t = _mm_setzero_ps();
   }
@@ -276,7 +287,7 @@ void HitShader::shade_block(const PrimaryBlock& b, BlockShade& s) const {
   for (int g = 0; g < kGroups; ++g) {
     const int k0 = 4 * g;
     __m128 e[3], tex[3];
-    lightmap_lanes(l[g].corner, l[g].lightmap, u[g], v[g], w[g], e);
+    lightmap_lanes(l[g].corner, l[g].lightmap, l[g].lightmap_size, u[g], v[g], w[g], e);
     texture_mix(tl[g], tex);
     // albedo = base colour x texture; diffuse = albedo * (1 / pi) * E.
     for (int c = 0; c < 3; ++c) {

@@ -68,6 +68,12 @@ class HitShader {
     const Lightmap* lightmap = nullptr;
     const std::uint32_t* triangle_material = nullptr;
     std::size_t triangle_count = 0;
+    // The same data one pointer closer, for shade_block.
+    const glm::vec2* corner_uv = nullptr;  // atlas corners, 3 per triangle
+    const glm::vec3* texels = nullptr;     // the lightmap's
+    int lightmap_width = 0, lightmap_height = 0;
+    const glm::uvec3* triangles = nullptr;
+    const glm::vec2* uv[2] = {nullptr, nullptr};  // TEXCOORD_0 and _1; null where absent
   };
   struct Shading {
     glm::vec3 base_color{0.8f};
