@@ -22,7 +22,8 @@ struct PrimaryBlock {
   static constexpr int kWidth = 4, kHeight = 4, kLanes = kWidth * kHeight;
   glm::vec3 origin{0.0f};
   int x0 = 0, y0 = 0;
-  alignas(16) std::int32_t active[kLanes];  // -1 inside the image, 0 outside
+  // -1 inside the image, 0 outside; Embree's valid mask (aligned as rtcIntersect16 needs).
+  alignas(64) std::int32_t active[kLanes];
   alignas(16) float dir_x[kLanes], dir_y[kLanes], dir_z[kLanes];
   alignas(16) std::int32_t object[kLanes];  // -1: a miss (or an inactive lane)
   alignas(16) std::uint32_t triangle[kLanes];
