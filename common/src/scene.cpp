@@ -12,18 +12,6 @@
 namespace irradcast {
 namespace {
 
-const std::array<float, 256>& srgb_table() {
-  static const std::array<float, 256> table = [] {
-    std::array<float, 256> t{};
-    for (int i = 0; i < 256; ++i) {
-      float c = static_cast<float>(i) / 255.0f;
-      t[i] = c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
-    }
-    return t;
-  }();
-  return table;
-}
-
 bool usable_point(glm::vec3 p) {
   return std::abs(p.x) <= kMaxCoordinate && std::abs(p.y) <= kMaxCoordinate &&
          std::abs(p.z) <= kMaxCoordinate;  // false for NaN too
@@ -46,6 +34,18 @@ bool finite_matrix(const glm::mat4& m) {
 
 }  // namespace
 
+const std::array<float, 256>& srgb_to_linear_table() {
+  static const std::array<float, 256> table = [] {
+    std::array<float, 256> t{};
+    for (int i = 0; i < 256; ++i) {
+      float c = static_cast<float>(i) / 255.0f;
+      t[i] = c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+    }
+    return t;
+  }();
+  return table;
+}
+
 bool usable_triangle(glm::vec3 a, glm::vec3 b, glm::vec3 c) {
   if (!usable_point(a) || !usable_point(b) || !usable_point(c)) return false;
   const float area = 0.5f * glm::length(glm::cross(b - a, c - a));
@@ -54,7 +54,7 @@ bool usable_triangle(glm::vec3 a, glm::vec3 b, glm::vec3 c) {
 
 glm::vec4 Texture::sample_srgb(glm::vec2 uv) const {
   if (width <= 0 || height <= 0) return glm::vec4(1.0f);
-  const auto& lut = srgb_table();
+  const auto& lut = srgb_to_linear_table();
   float x = uv.x * static_cast<float>(width) - 0.5f;
   float y = uv.y * static_cast<float>(height) - 0.5f;
   float fx = std::floor(x), fy = std::floor(y);

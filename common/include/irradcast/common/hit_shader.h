@@ -2,8 +2,9 @@
 // per object its lightmap, atlas corners and triangle materials, and per material what the
 // shading needs (colour, texture, emission), so a hit costs one lightmap bilinear lookup, an
 // albedo (a texture sample where the material has one) and nothing else. The numbers are those of
-// World::albedo / World::emission, bit for bit. Used by compose() and the client passes' frame
-// G-buffer.
+// World::albedo / World::emission, bit for bit. shade() is one hit; shade_block() a primary
+// packet's 16 lanes in SoA, 4 at a time with SSE2 (the same operations in the same order, so the
+// same bits). Used by compose() and the client passes' frame G-buffer.
 #pragma once
 
 #include <cstdint>
@@ -13,6 +14,7 @@
 
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/lightmap.h"
+#include "irradcast/common/primary_hits.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/sampling.h"
 #include "irradcast/common/world.h"
@@ -24,6 +26,12 @@ namespace irradcast {
 struct HitShade {
   glm::vec3 diffuse{0.0f};
   glm::vec3 emission{0.0f};
+};
+
+// The shades of a packet's lanes, SoA: [channel][lane].
+struct BlockShade {
+  alignas(16) float diffuse[3][PrimaryBlock::kLanes];
+  alignas(16) float emission[3][PrimaryBlock::kLanes];
 };
 
 class HitShader {
@@ -49,6 +57,9 @@ class HitShader {
     return s;
   }
 
+  // shade() of every lane of b that hits, bit for bit; the lanes that miss are left undefined.
+  void shade_block(const PrimaryBlock& b, BlockShade& s) const;
+
  private:
   static constexpr std::uint32_t kFallback = ~0u;
   struct Object {
@@ -57,6 +68,12 @@ class HitShader {
     const Lightmap* lightmap = nullptr;
     const std::uint32_t* triangle_material = nullptr;
     std::size_t triangle_count = 0;
+    // The same data one pointer closer, for shade_block.
+    const glm::vec2* corner_uv = nullptr;  // atlas corners, 3 per triangle
+    const glm::vec3* texels = nullptr;     // the lightmap's
+    int lightmap_width = 0, lightmap_height = 0;
+    const glm::uvec3* triangles = nullptr;
+    const glm::vec2* uv[2] = {nullptr, nullptr};  // TEXCOORD_0 and _1; null where absent
   };
   struct Shading {
     glm::vec3 base_color{0.8f};
@@ -65,6 +82,9 @@ class HitShader {
     bool emissive = false;
     bool double_sided = false;
   };
+  // The atlas corners, lightmap and material of each of 4 lanes; see hit_shader.cpp.
+  struct Lanes;
+  void gather_lanes(const PrimaryBlock& b, int k0, Lanes& l) const;
   // The emission of an emissive material (rare: kept out of line).
   void emission(const Hit& h, glm::vec3 direction, const Shading& m, HitShade& s) const;
 

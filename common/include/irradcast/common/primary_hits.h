@@ -1,10 +1,12 @@
 // A pinhole camera's primary rays, one through each pixel centre (camera_ray()'s rays, bit for
-// bit, from PinholeRays), traced in coherent 4 x 4 pixel Embree packets (rtcIntersect16 on
-// RayScene::embree_scene()) over tiles of packets in parallel. Used by compose() and by the client
-// passes' frame G-buffer, so both see exactly the same pixels; the shading they share is HitShader
-// (hit_shader.h).
+// bit, from PinholeRays, set up 4 lanes at a time with SSE), traced in coherent 4 x 4 pixel Embree
+// packets (rtcIntersect16 on RayScene::embree_scene()) over tiles of packets in parallel; each
+// packet's rays and hits are kept in SoA (PrimaryBlock), as Embree returns them. Used by compose()
+// and by the client passes' frame G-buffer, so both see exactly the same pixels; the shading they
+// share is HitShader (hit_shader.h).
 #pragma once
 
+#include <cstdint>
 #include <functional>
 
 #include <glm/glm.hpp>
@@ -14,15 +16,32 @@
 
 namespace irradcast {
 
-// One packet: up to 16 pixels (lanes with active false lie outside the image), their rays from
-// `origin` and their hits.
+// One packet: 4 x 4 pixels, lane k at (x0 + k % 4, y0 + k / 4); lanes outside the image are
+// inactive. Rays from `origin` along the unit dir_*; a lane that hits has object >= 0.
 struct PrimaryBlock {
   static constexpr int kWidth = 4, kHeight = 4, kLanes = kWidth * kHeight;
   glm::vec3 origin{0.0f};
-  int x[kLanes], y[kLanes];
-  bool active[kLanes];
-  glm::vec3 direction[kLanes];
-  Hit hits[kLanes];
+  int x0 = 0, y0 = 0;
+  // -1 inside the image, 0 outside; Embree's valid mask (aligned as rtcIntersect16 needs).
+  alignas(64) std::int32_t active[kLanes];
+  alignas(16) float dir_x[kLanes], dir_y[kLanes], dir_z[kLanes];
+  alignas(16) std::int32_t object[kLanes];  // -1: a miss (or an inactive lane)
+  alignas(16) std::uint32_t triangle[kLanes];
+  alignas(16) float u[kLanes], v[kLanes], t[kLanes];
+
+  int x(int k) const { return x0 + k % kWidth; }
+  int y(int k) const { return y0 + k / kWidth; }
+  glm::vec3 direction(int k) const { return {dir_x[k], dir_y[k], dir_z[k]}; }
+  bool hit(int k) const { return object[k] >= 0; }
+  Hit hit_at(int k) const {
+    Hit h;
+    h.object = object[k];
+    h.triangle = triangle[k];
+    h.u = u[k];
+    h.v = v[k];
+    h.t = t[k];
+    return h;
+  }
 };
 
 // block(b) for every packet of the image; concurrently for different packets.
@@ -37,13 +56,13 @@ void for_each_primary_ray(const RayScene& rays, const CameraPose& camera, int wi
   trace_primary_blocks(rays, camera, width, height, [&](const PrimaryBlock& b) {
     for (int k = 0; k < PrimaryBlock::kLanes; ++k) {
       if (!b.active[k]) continue;
-      if (b.hits[k].valid()) {
+      if (b.hit(k)) {
         Ray ray;
         ray.origin = b.origin;
-        ray.direction = b.direction[k];
-        hit(b.x[k], b.y[k], ray, b.hits[k]);
+        ray.direction = b.direction(k);
+        hit(b.x(k), b.y(k), ray, b.hit_at(k));
       } else {
-        miss(b.x[k], b.y[k], b.direction[k]);
+        miss(b.x(k), b.y(k), b.direction(k));
       }
     }
   });

@@ -3,6 +3,7 @@
 // can be exported again and edited live. World-space views of it live in world.h.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -24,6 +25,9 @@ struct Texture {
   // Bilinear, wrap mode REPEAT, sRGB decoded to linear RGB; alpha is linear.
   glm::vec4 sample_srgb(glm::vec2 uv) const;
 };
+
+// The linear value of each 8-bit sRGB code, as sample_srgb decodes them.
+const std::array<float, 256>& srgb_to_linear_table();
 
 // Lambertian material: albedo = baseColor (factor x texture); emission is radiance
 // (emissiveFactor x emissiveTexture x KHR_materials_emissive_strength).
