@@ -278,7 +278,7 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
     for (int s0 = 0; s0 < n; s0 += kBatch) {
       const int m = std::min(kBatch, n - s0);
       for (int s = 0; s < m; ++s) {
-        ray[s].direction = frame.to_world(cosine_hemisphere(rng.next_2d()));
+        ray[s].direction = frame.to_world(cosine_hemisphere_fast(rng.next_2d()));
         ray[s].origin = rays_->offset(p, ng, ray[s].direction);
         ray[s].tmax = range;
       }
