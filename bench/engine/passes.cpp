@@ -137,7 +137,7 @@ Capture capture_scatter(const RayScene& rays, const PassInput& in) {
     const float range = scatter_range(in, i);
     Frame frame(nrm);
     for (int s = 0; s < n; ++s) {
-      glm::vec3 dir = frame.to_world(cosine_hemisphere(rng.next_2d()));
+      glm::vec3 dir = frame.to_world(cosine_hemisphere_fast(rng.next_2d()));
       c.rays.push_back({rays.offset(p, ng, dir), 0.0f, dir, range});
       c.owner.push_back(i);
     }

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "irradcast/common/hit_shader.h"
 #include "irradcast/common/sampling.h"
 
 namespace irradcast {
@@ -34,17 +35,30 @@ glm::vec3 sample_probe(const std::vector<glm::vec3>& radiance, std::size_t probe
                   glm::mix(at(x, y + 1), at(x + 1, y + 1), a.x), a.y);
 }
 
-float exit_distance(const Bounds& b, glm::vec3 p, glm::vec3 d) {
-  glm::vec3 pad = 1e-3f * glm::max(b.extent(), glm::vec3(1e-6f));
+namespace {
+
+// The enlarged bounds exit_distance runs to.
+glm::vec3 exit_pad(const Bounds& b) {
+  return 1e-3f * glm::max(b.extent(), glm::vec3(1e-6f));
+}
+
+float exit_distance_to(glm::vec3 lo, glm::vec3 hi, glm::vec3 p, glm::vec3 d) {
   float t = 3.4e38f;
   for (int a = 0; a < 3; ++a) {
     // The face the ray runs toward on this axis (none where d[a] == 0), chosen without a branch:
     // the direction's signs are random.
-    const float face = d[a] > 0.0f ? b.hi[a] + pad[a] : b.lo[a] - pad[a];
+    const float face = d[a] > 0.0f ? hi[a] : lo[a];
     const float ta = (face - p[a]) / d[a];
     t = d[a] != 0.0f ? std::min(t, ta) : t;
   }
   return std::max(t, 0.0f);
+}
+
+}  // namespace
+
+float exit_distance(const Bounds& b, glm::vec3 p, glm::vec3 d) {
+  const glm::vec3 pad = exit_pad(b);
+  return exit_distance_to(b.lo - pad, b.hi + pad, p, d);
 }
 
 glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d) {
@@ -57,25 +71,35 @@ float scatter_range(const PassInput& in, std::uint32_t i) {
   return probes ? in.params.tracing_range * in.world.bounds.max_extent() : 3.4e38f;
 }
 
-glm::vec3 scatter_miss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance,
-                       std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng& pick) {
-  if (in.params.unbiased() || in.probe_weights.empty() || in.probe_weights[i].count == 0)
-    return glm::vec3(0.0f);
-  const float range = in.params.tracing_range * in.world.bounds.max_extent();
-  const float exit = exit_distance(in.world.bounds, p, d);
-  if (exit <= range) return glm::vec3(0.0f);  // it left the scene: nothing out there
+ScatterMiss::ScatterMiss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance)
+    : in_(&in),
+      radiance_(&probe_radiance),
+      lo_(in.world.bounds.lo - exit_pad(in.world.bounds)),
+      hi_(in.world.bounds.hi + exit_pad(in.world.bounds)),
+      range_(in.params.tracing_range * in.world.bounds.max_extent()),
+      extent_(in.world.bounds.max_extent()),
+      probes_(!in.params.unbiased() && !in.probe_weights.empty()),
+      fixed_(in.params.distant_point == DistantPoint::FixedDistance) {}
+
+glm::vec3 ScatterMiss::operator()(std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng& pick) const {
+  const float exit = exit_distance_to(lo_, hi_, p, d);
+  if (exit <= range_) return glm::vec3(0.0f);  // it left the scene: nothing out there
   // One probe, picked with probability equal to its interpolation weight: the same expectation
   // as the weighted sum over all (up to 8) of them, at one lookup instead of eight; over many
   // rays and updates the choice averages out.
-  const glm::vec3 q = in.params.distant_point == DistantPoint::FixedDistance
-                          ? p + in.world.bounds.max_extent() * d
-                          : p + exit * d;
-  const ProbeWeights& w = in.probe_weights[i];
+  const glm::vec3 q = fixed_ ? p + extent_ * d : p + exit * d;
+  const ProbeWeights& w = in_->probe_weights[i];
   const int k = pick_probe(w, pick.next_float());
-  const glm::vec3 to = q - in.probes.position[w.probe[k]];
+  const glm::vec3 to = q - in_->probes.position[w.probe[k]];
   const float len = glm::length(to);
-  return len > 0.0f ? sample_probe(probe_radiance, w.probe[k], in.probes.resolution, to / len)
+  return len > 0.0f ? sample_probe(*radiance_, w.probe[k], in_->probes.resolution, to / len)
                     : glm::vec3(0.0f);
+}
+
+glm::vec3 scatter_miss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance,
+                       std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng& pick) {
+  const ScatterMiss miss(in, probe_radiance);
+  return miss.reads_probes(i) ? miss(i, p, d, pick) : glm::vec3(0.0f);
 }
 
 glm::vec3 probe_direction(std::size_t t, int res, glm::vec2 jitter) {
@@ -99,12 +123,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 using namespace embree_sampling;
-
-// radiance_at with the hit's lightmap coordinates already known.
-glm::vec3 radiance_at(const RadianceField& f, const Hit& h, glm::vec2 uv) {
-  glm::vec3 e = (*f.irradiance)[h.object].bilinear(uv);
-  return f.world->albedo(h.object, h.triangle, h.u, h.v) * kInvPi * e;
-}
 
 // The hit's lightmap coordinates, with the two lightmap rows its bilinear lookup reads requested
 // from memory (a hint: it changes no result).
@@ -144,7 +162,9 @@ std::uint64_t for_each_texel(const PassInput& in, Body&& body) {
 }  // namespace
 
 glm::vec3 radiance_at(const RadianceField& f, const Hit& h) {
-  return radiance_at(f, h, f.atlas->objects[h.object].uv(h.triangle, h.u, h.v));
+  const glm::vec3 e =
+      (*f.irradiance)[h.object].bilinear(f.atlas->objects[h.object].uv(h.triangle, h.u, h.v));
+  return f.world->albedo(h.object, h.triangle, h.u, h.v) * kInvPi * e;
 }
 
 glm::vec3 EmbreeBackend::sky_direct(const PassInput& in, std::uint32_t i,
@@ -258,6 +278,8 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
   auto start = Clock::now();
   out.assign(in.texels.size(), glm::vec3(0.0f));
   const int n = in.params.indirect_samples;
+  const ScatterMiss miss(in, probe_radiance);
+  const HitShader shader(*prev.world, *prev.atlas, *prev.irradiance);
   PassResult r;
   r.rays = for_each_texel(in, [&](std::uint32_t i) -> std::uint64_t {
     const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
@@ -267,6 +289,7 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
     // missed.
     Rng pick = texel_rng(in.params, i, in.update, kProbePick, in.bounce);
     const float range = scatter_range(in, i);
+    const bool probes = miss.reads_probes(i);
     Frame frame(nrm);
     glm::vec3 sum(0.0f);
     // The texel's rays in batches: all drawn first, then traced, then the hits' lightmap texels
@@ -278,7 +301,7 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
     for (int s0 = 0; s0 < n; s0 += kBatch) {
       const int m = std::min(kBatch, n - s0);
       for (int s = 0; s < m; ++s) {
-        ray[s].direction = frame.to_world(cosine_hemisphere(rng.next_2d()));
+        ray[s].direction = frame.to_world(cosine_hemisphere_fast(rng.next_2d()));
         ray[s].origin = rays_->offset(p, ng, ray[s].direction);
         ray[s].tmax = range;
       }
@@ -286,8 +309,10 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
       for (int s = 0; s < m; ++s)
         if (hit[s].valid()) uv[s] = prefetch_radiance(prev, hit[s]);
       for (int s = 0; s < m; ++s)
-        sum += hit[s].valid() ? radiance_at(prev, hit[s], uv[s])
-                              : scatter_miss(in, probe_radiance, i, p, ray[s].direction, pick);
+        if (hit[s].valid())
+          sum += shader.diffuse(hit[s], uv[s]);
+        else if (probes)
+          sum += miss(i, p, ray[s].direction, pick);
     }
     // Cosine-weighted sampling: E = pi / N * sum L.
     out[i] = sum * (kPi / static_cast<float>(n));

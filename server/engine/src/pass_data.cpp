@@ -51,16 +51,6 @@ float SceneChange::distance(glm::vec3 p) const {
   return nearest;
 }
 
-glm::vec2 octahedral_encode(glm::vec3 d) {
-  d /= (std::fabs(d.x) + std::fabs(d.y) + std::fabs(d.z));
-  glm::vec2 e(d.x, d.y);
-  if (d.z < 0.0f) {
-    e = (1.0f - glm::abs(glm::vec2(d.y, d.x))) *
-        glm::vec2(d.x >= 0.0f ? 1.0f : -1.0f, d.y >= 0.0f ? 1.0f : -1.0f);
-  }
-  return 0.5f * e + 0.5f;
-}
-
 glm::vec3 octahedral_decode(glm::vec2 uv) {
   glm::vec2 e = 2.0f * uv - 1.0f;
   glm::vec3 d(e.x, e.y, 1.0f - std::fabs(e.x) - std::fabs(e.y));

@@ -4,7 +4,8 @@
 // albedo (a texture sample where the material has one) and nothing else. The numbers are those of
 // World::albedo / World::emission, bit for bit. shade() is one hit; shade_block() a primary
 // packet's 16 lanes in SoA, 4 at a time with SSE2 (the same operations in the same order, so the
-// same bits). Used by compose() and the client passes' frame G-buffer.
+// same bits). Used by compose() and the client passes' frame G-buffer, and (diffuse()) the
+// engine's scatter pass at its hits.
 #pragma once
 
 #include <cstdint>
@@ -43,22 +44,29 @@ class HitShader {
   // The shade at hit h of a ray along `direction`.
   [[gnu::always_inline, gnu::flatten]] HitShade shade(glm::vec3 direction, const Hit& h) const {
     const Object& o = objects_[static_cast<std::size_t>(h.object)];
-    const std::uint32_t t = h.triangle;
-    const glm::vec2 uv = o.atlas->uv(t, h.u, h.v);
+    const glm::vec2 uv = o.atlas->uv(h.triangle, h.u, h.v);
     const glm::vec3 e = o.lightmap->bilinear(uv);
-    const std::uint32_t mi = t < o.triangle_count ? o.triangle_material[t] : kFallback;
-    const Shading& m = materials_[mi < materials_.size() - 1 ? mi : materials_.size() - 1];
-    glm::vec3 albedo = m.base_color;
-    if (m.texture)
-      albedo *= glm::vec3(m.texture->sample_srgb(o.world->uv(m.texture_uv, t, h.u, h.v)));
+    const Shading& m = shading(o, h.triangle);
     HitShade s;
     if (m.emissive) emission(h, direction, m, s);
-    s.diffuse = albedo * kInvPi * e;
+    s.diffuse = albedo(o, m, h) * kInvPi * e;
     return s;
   }
 
   // shade() of every lane of b that hits, bit for bit; the lanes that miss are left undefined.
   void shade_block(const PrimaryBlock& b, BlockShade& s) const;
+
+  // The lightmap term alone, albedo / pi * E, at hit h whose lightmap coordinates are uv (see
+  // lightmap_uv): the outgoing radiance of the previous bounce that the engine's scatter pass
+  // reads at a hit (radiance_at in pass_data.h, bit for bit).
+  [[gnu::always_inline]] glm::vec3 diffuse(const Hit& h, glm::vec2 uv) const {
+    const Object& o = objects_[static_cast<std::size_t>(h.object)];
+    const glm::vec3 e = o.lightmap->bilinear(uv);
+    return albedo(o, shading(o, h.triangle), h) * kInvPi * e;
+  }
+  glm::vec2 lightmap_uv(const Hit& h) const {
+    return objects_[static_cast<std::size_t>(h.object)].atlas->uv(h.triangle, h.u, h.v);
+  }
 
  private:
   static constexpr std::uint32_t kFallback = ~0u;
@@ -85,6 +93,17 @@ class HitShader {
   // The atlas corners, lightmap and material of each of 4 lanes; see hit_shader.cpp.
   struct Lanes;
   void gather_lanes(const PrimaryBlock& b, int k0, Lanes& l) const;
+  const Shading& shading(const Object& o, std::uint32_t t) const {
+    const std::uint32_t mi = t < o.triangle_count ? o.triangle_material[t] : kFallback;
+    return materials_[mi < materials_.size() - 1 ? mi : materials_.size() - 1];
+  }
+  // As World::albedo: the base colour, times a texture sample where the material has one.
+  static glm::vec3 albedo(const Object& o, const Shading& m, const Hit& h) {
+    glm::vec3 a = m.base_color;
+    if (m.texture)
+      a *= glm::vec3(m.texture->sample_srgb(o.world->uv(m.texture_uv, h.triangle, h.u, h.v)));
+    return a;
+  }
   // The emission of an emissive material (rare: kept out of line).
   void emission(const Hit& h, glm::vec3 direction, const Shading& m, HitShade& s) const;
 

@@ -35,6 +35,23 @@ float scatter_range(const PassInput& in, std::uint32_t i);
 // of the texel's probes, picked by weight with `pick`.
 glm::vec3 scatter_miss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance,
                        std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng& pick);
+// scatter_miss with what is the same for every miss of a pass worked out once (the enlarged
+// bounds, the range, whether probes are read): the same arithmetic, less of it per miss.
+class ScatterMiss {
+ public:
+  ScatterMiss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance);
+  // Whether texel i's misses can bring anything (it reads probes); if not, they bring zero.
+  bool reads_probes(std::uint32_t i) const { return probes_ && in_->probe_weights[i].count > 0; }
+  // scatter_miss for a texel that reads_probes().
+  glm::vec3 operator()(std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng& pick) const;
+
+ private:
+  const PassInput* in_;
+  const std::vector<glm::vec3>* radiance_;
+  glm::vec3 lo_, hi_;  // the scene's bounds, enlarged as exit_distance enlarges them
+  float range_, extent_;
+  bool probes_, fixed_;
+};
 // The direction of a probe's gather ray for octahedral texel t (res x res), jittered.
 glm::vec3 probe_direction(std::size_t t, int res, glm::vec2 jitter);
 // One of a texel's probes, chosen with probability equal to its weight (u uniform in [0, 1)).

@@ -1,0 +1,49 @@
+#!/bin/sh
+# Two builds of irradcast-bench-engine side by side: the pass benchmark of each, run alternately
+# (A B A B ...), one thread, then per round and pass engine / raw Embree and the engine's time.
+# Usage: bench/engine/compare.sh A_BIN B_BIN [ROUNDS] [OUT_DIR] [-- extra bench options]
+# (default 2 rounds, OUT_DIR /tmp/bench-engine-compare; the JSON of every run is kept there).
+# On a loaded machine build both with the engine's and the bench's timers reading the thread's
+# CPU time (docs/BENCHMARKS.md section 1 says how); the script itself only runs and reads them.
+set -eu
+a=$1
+b=$2
+rounds=${3:-2}
+out=${4:-/tmp/bench-engine-compare}
+shift $(($# < 4 ? $# : 4))
+[ "${1:-}" = "--" ] && shift
+mkdir -p "$out"
+uptime
+r=1
+while [ "$r" -le "$rounds" ]; do
+  for side in A B; do
+    bin=$a
+    [ "$side" = B ] && bin=$b
+    nice -n 10 "$bin" --skip-scaling --threads 1 --reps 3 --min-time 0 --out "$out" \
+      --json "$out/$side-$r.json" "$@" > "$out/$side-$r.log" 2>&1
+  done
+  r=$((r + 1))
+done
+uptime
+python3 - "$out" "$rounds" <<'PY'
+import json, sys
+out, rounds = sys.argv[1], int(sys.argv[2])
+rows = {}
+for side in "AB":
+    for r in range(1, rounds + 1):
+        for scene in json.load(open(f"{out}/{side}-{r}.json"))["passes"]:
+            for p in ("direct", "scatter"):
+                ms = [m for m in scene["passes"] if m["pass"] == p]
+                eng = sum(m["pipeline_s_min"] for m in ms)
+                raw = sum(m["raw_s_min"] for m in ms)
+                verify = max(m["verify_max_abs_diff"] for m in ms)
+                rows.setdefault((scene["scene"], p), {}).setdefault(side, []).append(
+                    (raw / eng, eng, verify))
+print(f"{'scene':10} {'pass':8} {'A engine/raw':>22} {'B engine/raw':>22} {'engine ms A -> B':>22}")
+for (scene, p), s in rows.items():
+    f = lambda side: ", ".join(f"{x[0] * 100:.1f} %" for x in s[side])
+    ms = lambda side: sum(x[1] for x in s[side]) / len(s[side]) * 1e3
+    v = max(x[2] for side in "AB" for x in s[side])
+    print(f"{scene:10} {p:8} {f('A'):>22} {f('B'):>22} {ms('A'):9.1f} -> {ms('B'):7.1f}"
+          f"  ({(ms('B') / ms('A') - 1) * 100:+.1f} %, verify {v:g})")
+PY
