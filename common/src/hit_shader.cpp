@@ -270,7 +270,13 @@ void texture_mix(const TextureLanes& t, __m128 (&tex)[3]) {
 
 }  // namespace
 
+bool HitShader::cpu_has_avx512() {
+  static const bool has = __builtin_cpu_supports("avx512f");
+  return has;
+}
+
 void HitShader::shade_block(const PrimaryBlock& b, BlockShade& s) const {
+  if (avx512_ && shade_block_avx512(b, s)) return;
   constexpr int kGroups = PrimaryBlock::kLanes / 4;
   const __m128 one = _mm_set1_ps(1.0f), inv_pi = _mm_set1_ps(kInvPi);
   // First every group's texel addresses (prefetched), then the lightmaps while they arrive.

@@ -3,9 +3,10 @@
 // shading needs (colour, texture, emission), so a hit costs one lightmap bilinear lookup, an
 // albedo (a texture sample where the material has one) and nothing else. The numbers are those of
 // World::albedo / World::emission, bit for bit. shade() is one hit; shade_block() a primary
-// packet's 16 lanes in SoA, 4 at a time with SSE2 (the same operations in the same order, so the
-// same bits). Used by compose() and the client passes' frame G-buffer, and (diffuse()) the
-// engine's scatter pass at its hits.
+// packet's 16 lanes in SoA, all 16 at once with AVX-512 where the CPU has it and the packet's hits
+// share one object and material, else 4 at a time with SSE2 (the same operations in the same
+// order, so the same bits). Used by compose() and the client passes' frame G-buffer, and
+// (diffuse()) the engine's scatter pass at its hits.
 #pragma once
 
 #include <cstdint>
@@ -54,7 +55,14 @@ class HitShader {
   }
 
   // shade() of every lane of b that hits, bit for bit; the lanes that miss are left undefined.
+  // With AVX-512 (avx512() true) a packet whose hits share one object and material is shaded
+  // 16 lanes at once; every other one 4 lanes at a time with SSE2.
   void shade_block(const PrimaryBlock& b, BlockShade& s) const;
+  // Whether shade_block uses AVX-512: where the CPU has it, unless turned off (tests compare the
+  // two paths).
+  bool avx512() const { return avx512_; }
+  void set_avx512(bool on) { avx512_ = on && cpu_has_avx512(); }
+  static bool cpu_has_avx512();
 
   // The lightmap term alone, albedo / pi * E, at hit h whose lightmap coordinates are uv (see
   // lightmap_uv): the outgoing radiance of the previous bounce that the engine's scatter pass
@@ -93,6 +101,9 @@ class HitShader {
   // The atlas corners, lightmap and material of each of 4 lanes; see hit_shader.cpp.
   struct Lanes;
   void gather_lanes(const PrimaryBlock& b, int k0, Lanes& l) const;
+  // shade_block of a packet whose hits share one object and material (hit_shader_avx512.cpp);
+  // false (nothing written) for any other packet.
+  bool shade_block_avx512(const PrimaryBlock& b, BlockShade& s) const;
   const Shading& shading(const Object& o, std::uint32_t t) const {
     const std::uint32_t mi = t < o.triangle_count ? o.triangle_material[t] : kFallback;
     return materials_[mi < materials_.size() - 1 ? mi : materials_.size() - 1];
@@ -108,6 +119,7 @@ class HitShader {
   void emission(const Hit& h, glm::vec3 direction, const Shading& m, HitShade& s) const;
 
   const World* world_;
+  bool avx512_ = cpu_has_avx512();
   std::vector<Object> objects_;
   std::vector<Shading> materials_;  // the scene's, then the fallback Material{}
 };

@@ -1,0 +1,217 @@
+// HitShader::shade_block_avx512: a primary packet's 16 lanes in one AVX-512 register each, taken
+// when every lane that hits has the same object and material (most packets). The lanes' atlas
+// corners, texture uv corners and the lightmap and texture texels come in through gathers from that
+// object's and texture's arrays (masked to the lanes that hit, at the addresses the scalar code
+// reads). The arithmetic is that of the SSE2 path and of HitShader::shade, operation for operation
+// (add, sub, mul, floor; no FMA: this file is built with -ffp-contract=off), so the bits are the
+// same. Only the functions below are compiled for AVX-512 (target pragma after the includes);
+// shade_block calls them only where the CPU has it.
+// GCC 12's AVX-512 intrinsics start from _mm512_undefined_*(), which -Wmaybe-uninitialized reports
+// at every use (GCC bug 105593).
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <immintrin.h>
+
+#include <algorithm>
+#include <array>
+
+#include "irradcast/common/hit_shader.h"
+
+#pragma GCC push_options
+#pragma GCC target("avx512f")
+
+namespace irradcast {
+namespace {
+
+// glm::mix(a, b, w) per lane: a * (1 - w) + b * w.
+inline __m512 mix16(__m512 a, __m512 b, __m512 w) {
+  return _mm512_add_ps(_mm512_mul_ps(a, _mm512_sub_ps(_mm512_set1_ps(1.0f), w)),
+                       _mm512_mul_ps(b, w));
+}
+
+// (1 - u - v) * c0 + u * c1 + v * c2 per lane (w = 1 - u - v), corners [c0, c1, c2][axis].
+inline __m512 interpolate16(const __m512 (&c)[3][2], int a, __m512 u, __m512 v, __m512 w) {
+  return _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(w, c[0][a]), _mm512_mul_ps(u, c[1][a])),
+                       _mm512_mul_ps(v, c[2][a]));
+}
+
+// Masked gathers (lanes outside `m` read nothing and give 0).
+inline __m512 gather_ps(__mmask16 m, __m512i index, const float* base) {
+  return _mm512_mask_i32gather_ps(_mm512_setzero_ps(), m, index, base, 4);
+}
+inline __m512i gather_epi32(__mmask16 m, __m512i index, const void* base) {
+  return _mm512_mask_i32gather_epi32(_mm512_setzero_si512(), m, index, base, 4);
+}
+
+inline __m512 floor16(__m512 x) {
+  return _mm512_roundscale_ps(x, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+}
+
+// The bilinear mix of 4 taps [tap] (t0 t1 over t2 t3).
+inline __m512 mix_taps16(const __m512 (&t)[4], __m512 ax, __m512 ay) {
+  return mix16(mix16(t[0], t[1], ax), mix16(t[2], t[3], ax), ay);
+}
+
+// Lightmap::bilinear at the atlas uv (x, y) of the lanes m, texels of a width x height map.
+void lightmap16(__mmask16 m, const glm::vec3* texels, int width, int height, __m512 uvx, __m512 uvy,
+                __m512 (&e)[3]) {
+  const __m512 half = _mm512_set1_ps(0.5f);
+  const __m512 x = _mm512_sub_ps(uvx, half), y = _mm512_sub_ps(uvy, half);
+  const __m512 fx = floor16(x), fy = floor16(y);
+  const __m512 ax = _mm512_sub_ps(x, fx), ay = _mm512_sub_ps(y, fy);
+  const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi32(1);
+  const __m512i wm = _mm512_set1_epi32(width - 1), hm = _mm512_set1_epi32(height - 1);
+  // std::clamp(int(f), 0, n - 1); the +1 neighbour clamped too, and none left of 0.
+  const __m512i x0 = _mm512_min_epi32(_mm512_max_epi32(_mm512_cvttps_epi32(fx), zero), wm);
+  const __m512i y0 = _mm512_min_epi32(_mm512_max_epi32(_mm512_cvttps_epi32(fy), zero), hm);
+  const __mmask16 xl = _mm512_cmp_ps_mask(fx, _mm512_setzero_ps(), _CMP_LT_OQ);
+  const __mmask16 yl = _mm512_cmp_ps_mask(fy, _mm512_setzero_ps(), _CMP_LT_OQ);
+  const __m512i x1 = _mm512_mask_mov_epi32(_mm512_min_epi32(_mm512_add_epi32(x0, one), wm), xl, x0);
+  const __m512i y1 = _mm512_mask_mov_epi32(_mm512_min_epi32(_mm512_add_epi32(y0, one), hm), yl, y0);
+  const __m512i w = _mm512_set1_epi32(width), three = _mm512_set1_epi32(3);
+  const __m512i row0 = _mm512_mullo_epi32(y0, w), row1 = _mm512_mullo_epi32(y1, w);
+  const __m512i at[4] = {_mm512_mullo_epi32(_mm512_add_epi32(row0, x0), three),
+                         _mm512_mullo_epi32(_mm512_add_epi32(row0, x1), three),
+                         _mm512_mullo_epi32(_mm512_add_epi32(row1, x0), three),
+                         _mm512_mullo_epi32(_mm512_add_epi32(row1, x1), three)};
+  const float* f = &texels->x;
+  for (int c = 0; c < 3; ++c) {
+    __m512 tap[4];
+    for (int t = 0; t < 4; ++t)
+      tap[t] = gather_ps(m, _mm512_add_epi32(at[t], _mm512_set1_epi32(c)), f);
+    e[c] = mix_taps16(tap, ax, ay);
+  }
+}
+
+// Texture::sample_srgb's wrap of texel i into 0 .. n-1 (see hit_shader.cpp).
+inline int wrap(long i, int n) {
+  if (i >= 0 && i < n) return static_cast<int>(i);
+  return static_cast<int>(((i % n) + n) % n);
+}
+
+// The wrapped texel column (or row) of floored coordinates f in a texture n wide: cvtt where the
+// result is inside already, Texture::sample_srgb's wrap of long(f) per lane elsewhere.
+inline __m512i wrap16(__mmask16 m, __m512 f, int n) {
+  __m512i i = _mm512_cvttps_epi32(f);
+  const __mmask16 inside = _mm512_cmp_ps_mask(f, _mm512_setzero_ps(), _CMP_GE_OQ) &
+                           _mm512_cmp_ps_mask(f, _mm512_set1_ps(static_cast<float>(n)), _CMP_LT_OQ);
+  if ((m & ~inside) == 0) return i;
+  alignas(64) float fs[16];
+  alignas(64) std::int32_t is[16];
+  _mm512_store_ps(fs, f);
+  _mm512_store_si512(is, i);
+  for (int k = 0; k < 16; ++k)
+    if ((m >> k) & 1 && !((inside >> k) & 1)) is[k] = wrap(static_cast<long>(fs[k]), n);
+  return _mm512_load_si512(is);
+}
+
+// Texture::sample_srgb (rgb) at the uv (x, y) of the lanes m.
+void texture16(__mmask16 m, const Texture& tex, __m512 uvx, __m512 uvy, __m512 (&out)[3]) {
+  const __m512 half = _mm512_set1_ps(0.5f);
+  const __m512 x =
+      _mm512_sub_ps(_mm512_mul_ps(uvx, _mm512_set1_ps(static_cast<float>(tex.width))), half);
+  const __m512 y =
+      _mm512_sub_ps(_mm512_mul_ps(uvy, _mm512_set1_ps(static_cast<float>(tex.height))), half);
+  const __m512 fx = floor16(x), fy = floor16(y);
+  const __m512 ax = _mm512_sub_ps(x, fx), ay = _mm512_sub_ps(y, fy);
+  const __m512i x0 = wrap16(m, fx, tex.width), y0 = wrap16(m, fy, tex.height);
+  const __m512i one = _mm512_set1_epi32(1), zero = _mm512_setzero_si512();
+  const __m512i x1p = _mm512_add_epi32(x0, one), y1p = _mm512_add_epi32(y0, one);
+  const __m512i x1 =
+      _mm512_mask_mov_epi32(x1p, _mm512_cmpeq_epi32_mask(x1p, _mm512_set1_epi32(tex.width)), zero);
+  const __m512i y1 =
+      _mm512_mask_mov_epi32(y1p, _mm512_cmpeq_epi32_mask(y1p, _mm512_set1_epi32(tex.height)), zero);
+  const __m512i w = _mm512_set1_epi32(tex.width);
+  const __m512i row0 = _mm512_mullo_epi32(y0, w), row1 = _mm512_mullo_epi32(y1, w);
+  const __m512i at[4] = {_mm512_add_epi32(row0, x0), _mm512_add_epi32(row0, x1),
+                         _mm512_add_epi32(row1, x0), _mm512_add_epi32(row1, x1)};
+  __m512i rgba[4];
+  for (int t = 0; t < 4; ++t) rgba[t] = gather_epi32(m, at[t], tex.rgba8.data());
+  const float* lut = srgb_to_linear_table().data();
+  const __m512i byte = _mm512_set1_epi32(0xff);
+  for (int c = 0; c < 3; ++c) {
+    __m512 tap[4];
+    for (int t = 0; t < 4; ++t)
+      tap[t] = gather_ps(m, _mm512_and_si512(_mm512_srli_epi32(rgba[t], 8 * c), byte), lut);
+    out[c] = mix_taps16(tap, ax, ay);
+  }
+}
+
+}  // namespace
+
+bool HitShader::shade_block_avx512(const PrimaryBlock& b, BlockShade& s) const {
+  const __m512i object = _mm512_loadu_si512(b.object);
+  const __mmask16 m =
+      _mm512_cmpneq_epi32_mask(_mm512_load_si512(b.active), _mm512_setzero_si512()) &
+      _mm512_cmpge_epi32_mask(object, _mm512_setzero_si512());
+  if (m == 0) return false;
+  // One object for all the lanes that hit, else the SSE2 path.
+  const int first = __builtin_ctz(m);
+  const std::int32_t id = b.object[first];
+  if (_mm512_mask_cmpneq_epi32_mask(m, object, _mm512_set1_epi32(id)) != 0) return false;
+  const Object& o = objects_[static_cast<std::size_t>(id)];
+  if (o.lightmap_width <= 0 || o.lightmap_height <= 0) return false;
+  // One material (shading()) too.
+  const __m512i tri = _mm512_loadu_si512(b.triangle);
+  const __mmask16 in = _mm512_mask_cmplt_epu32_mask(
+      m, tri,
+      _mm512_set1_epi32(
+          static_cast<std::int32_t>(std::min<std::size_t>(o.triangle_count, 0x7fffffff))));
+  const std::uint32_t t0 = b.triangle[first];
+  const std::uint32_t mi0 = t0 < o.triangle_count ? o.triangle_material[t0] : kFallback;
+  if (in != m && in != 0) return false;
+  if (in != 0 &&
+      _mm512_mask_cmpneq_epi32_mask(m, gather_epi32(m, tri, o.triangle_material),
+                                    _mm512_set1_epi32(static_cast<std::int32_t>(mi0))) != 0)
+    return false;
+  const Shading& mat = materials_[mi0 < materials_.size() - 1 ? mi0 : materials_.size() - 1];
+  // The atlas corners.
+  const __m512 u = _mm512_loadu_ps(b.u), v = _mm512_loadu_ps(b.v);
+  const __m512 w = _mm512_sub_ps(_mm512_sub_ps(_mm512_set1_ps(1.0f), u), v);
+  const __m512i tri6 = _mm512_mullo_epi32(tri, _mm512_set1_epi32(6));
+  __m512 c[3][2];
+  for (int j = 0; j < 3; ++j)
+    for (int a = 0; a < 2; ++a)
+      c[j][a] = gather_ps(m, _mm512_add_epi32(tri6, _mm512_set1_epi32(2 * j + a)), &o.corner_uv->x);
+  __m512 e[3];
+  lightmap16(m, o.texels, o.lightmap_width, o.lightmap_height, interpolate16(c, 0, u, v, w),
+             interpolate16(c, 1, u, v, w), e);
+  __m512 tex[3] = {_mm512_set1_ps(1.0f), _mm512_set1_ps(1.0f), _mm512_set1_ps(1.0f)};
+  const Texture* t =
+      mat.texture && mat.texture->width > 0 && mat.texture->height > 0 ? mat.texture : nullptr;
+  if (t) {
+    // WorldObject::uv's corners; (0, 0) without the set.
+    const glm::vec2* uvs = o.uv[mat.texture_uv == 1 ? 1 : 0];
+    __m512 tc[3][2];
+    const __m512i tri3 = _mm512_mullo_epi32(tri, _mm512_set1_epi32(3));
+    for (int j = 0; j < 3; ++j) {
+      if (!uvs) {
+        tc[j][0] = tc[j][1] = _mm512_setzero_ps();
+        continue;
+      }
+      const __m512i vi = gather_epi32(m, _mm512_add_epi32(tri3, _mm512_set1_epi32(j)), o.triangles);
+      const __m512i vi2 = _mm512_add_epi32(vi, vi);
+      tc[j][0] = gather_ps(m, vi2, &uvs->x);
+      tc[j][1] = gather_ps(m, _mm512_add_epi32(vi2, _mm512_set1_epi32(1)), &uvs->x);
+    }
+    texture16(m, *t, interpolate16(tc, 0, u, v, w), interpolate16(tc, 1, u, v, w), tex);
+  }
+  // albedo = base colour x texture; diffuse = albedo * (1 / pi) * E.
+  const __m512 inv_pi = _mm512_set1_ps(kInvPi);
+  for (int ch = 0; ch < 3; ++ch) {
+    const __m512 albedo = _mm512_mul_ps(_mm512_set1_ps(mat.base_color[ch]), tex[ch]);
+    _mm512_storeu_ps(s.diffuse[ch], _mm512_mul_ps(_mm512_mul_ps(albedo, inv_pi), e[ch]));
+    _mm512_storeu_ps(s.emission[ch], _mm512_setzero_ps());
+  }
+  if (mat.emissive)
+    for (int k = 0; k < PrimaryBlock::kLanes; ++k)
+      if ((m >> k) & 1) {
+        HitShade hs;
+        emission(b.hit_at(k), b.direction(k), mat, hs);
+        for (int ch = 0; ch < 3; ++ch) s.emission[ch][k] = hs.emission[ch];
+      }
+  return true;
+}
+
+}  // namespace irradcast
+
+#pragma GCC pop_options
