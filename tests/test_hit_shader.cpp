@@ -82,8 +82,8 @@ void compare_paths(const World& world, const RayScene& rays, const Atlas& atlas,
 
 TEST(HitShader, BothPathsMatchShadeAtWrappedUvsAndClampedTexels) {
   Scene scene;
-  // A textured quad whose uvs run from -2.3 to 3.7 (the texture repeats; 5 x 3 texels, odd so
-  // that the wrap matters), next to an emitter, both facing +z.
+  // A textured quad whose uvs run from -1234.3 to 2345.7 across and -2.3 to 2.6 up (the texture
+  // repeats; 5 x 3 texels, odd so that the wrap matters), next to an emitter, both facing +z.
   Texture tex;
   tex.width = 5;
   tex.height = 3;
@@ -95,7 +95,7 @@ TEST(HitShader, BothPathsMatchShadeAtWrappedUvsAndClampedTexels) {
   const std::uint32_t emitter = test::add_material(scene, glm::vec3(0.5f), glm::vec3(2, 1, 3));
   test::add_quad_object(scene, "textured", {-2, -1, 0}, {0.5f, -1, 0}, {0.5f, 1, 0}, {-2, 1, 0},
                         textured);
-  scene.meshes[0].uv0 = {{-2.3f, -1.9f}, {3.7f, -1.9f}, {3.7f, 2.6f}, {-2.3f, 2.6f}};
+  scene.meshes[0].uv0 = {{-1234.3f, -2.3f}, {2345.7f, -2.3f}, {2345.7f, 2.6f}, {-1234.3f, 2.6f}};
   test::add_quad_object(scene, "emitter", {0.5f, -1, 0}, {2, -1, 0}, {2, 1, 0}, {0.5f, 1, 0},
                         emitter);
   const World world = World::build(scene);

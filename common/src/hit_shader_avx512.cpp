@@ -88,20 +88,32 @@ inline int wrap(long i, int n) {
   return static_cast<int>(((i % n) + n) % n);
 }
 
-// The wrapped texel column (or row) of floored coordinates f in a texture n wide: cvtt where the
-// result is inside already, Texture::sample_srgb's wrap of long(f) per lane elsewhere.
+// The wrapped texel column (or row) of floored coordinates f in a texture n wide, as
+// Texture::sample_srgb's wrap of long(f): cvtt where that is inside already; where |f| < 2^24
+// (f and its quotient by n exact enough), i - n * floor(f / n), off by at most one n and corrected,
+// which is the one value in 0 .. n-1 that wrap gives; the scalar wrap for the rest (NaN, huge).
 inline __m512i wrap16(__mmask16 m, __m512 f, int n) {
-  __m512i i = _mm512_cvttps_epi32(f);
+  const __m512i i = _mm512_cvttps_epi32(f);
+  const __m512 nf = _mm512_set1_ps(static_cast<float>(n));
   const __mmask16 inside = _mm512_cmp_ps_mask(f, _mm512_setzero_ps(), _CMP_GE_OQ) &
-                           _mm512_cmp_ps_mask(f, _mm512_set1_ps(static_cast<float>(n)), _CMP_LT_OQ);
+                           _mm512_cmp_ps_mask(f, nf, _CMP_LT_OQ);
   if ((m & ~inside) == 0) return i;
+  const __m512i vn = _mm512_set1_epi32(n);
+  const __m512i q = _mm512_cvttps_epi32(floor16(_mm512_div_ps(f, nf)));
+  __m512i r = _mm512_sub_epi32(i, _mm512_mullo_epi32(q, vn));
+  r = _mm512_mask_add_epi32(r, _mm512_cmplt_epi32_mask(r, _mm512_setzero_si512()), r, vn);
+  r = _mm512_mask_sub_epi32(r, _mm512_cmpge_epi32_mask(r, vn), r, vn);
+  r = _mm512_mask_mov_epi32(r, inside, i);
+  const __mmask16 exact =
+      _mm512_cmp_ps_mask(_mm512_abs_ps(f), _mm512_set1_ps(16777216.0f), _CMP_LT_OQ);
+  if ((m & ~exact) == 0) return r;
   alignas(64) float fs[16];
-  alignas(64) std::int32_t is[16];
+  alignas(64) std::int32_t rs[16];
   _mm512_store_ps(fs, f);
-  _mm512_store_si512(is, i);
+  _mm512_store_si512(rs, r);
   for (int k = 0; k < 16; ++k)
-    if ((m >> k) & 1 && !((inside >> k) & 1)) is[k] = wrap(static_cast<long>(fs[k]), n);
-  return _mm512_load_si512(is);
+    if ((m >> k) & 1 && !((exact >> k) & 1)) rs[k] = wrap(static_cast<long>(fs[k]), n);
+  return _mm512_load_si512(rs);
 }
 
 // Texture::sample_srgb (rgb) at the uv (x, y) of the lanes m.
