@@ -38,26 +38,26 @@ ImageRGB compose(const World& world, const RayScene& rays, const Atlas& atlas,
   const HitShader shader(world, atlas, lightmaps);
   const Sky* sky = world.scene && world.scene->sky.enabled() ? &world.scene->sky : nullptr;
   ImageRGB image(width, height);
-  trace_primary_blocks(rays, camera, width, height, [&](const PrimaryBlock& b) {
-    BlockShade s;
-    shader.shade_block(b, s);
-    for (int j = 0; j < PrimaryBlock::kHeight; ++j) {
-      const int k0 = j * PrimaryBlock::kWidth;
-      if (b.x0 + 4 <= width && b.active[k0] && b.hit(k0) && b.hit(k0 + 1) && b.hit(k0 + 2) &&
-          b.hit(k0 + 3)) {
-        store_row(s, j, &image.at(b.x0, b.y0 + j));
-        continue;
+  trace_primary_tiles(rays, camera, width, height, [&](PacketStream& packets) {
+    shader.shade_stream(packets, [&](const PrimaryBlock& b, const BlockShade& s) {
+      for (int j = 0; j < PrimaryBlock::kHeight; ++j) {
+        const int k0 = j * PrimaryBlock::kWidth;
+        if (b.x0 + 4 <= width && b.active[k0] && b.hit(k0) && b.hit(k0 + 1) && b.hit(k0 + 2) &&
+            b.hit(k0 + 3)) {
+          store_row(s, j, &image.at(b.x0, b.y0 + j));
+          continue;
+        }
+        for (int k = k0; k < k0 + PrimaryBlock::kWidth; ++k) {
+          if (!b.active[k]) continue;
+          glm::vec3& p = image.at(b.x(k), b.y(k));
+          if (b.hit(k))
+            p = glm::vec3(s.diffuse[0][k], s.diffuse[1][k], s.diffuse[2][k]) +
+                glm::vec3(s.emission[0][k], s.emission[1][k], s.emission[2][k]);
+          else if (sky)
+            p = sky->radiance(b.direction(k));
+        }
       }
-      for (int k = k0; k < k0 + PrimaryBlock::kWidth; ++k) {
-        if (!b.active[k]) continue;
-        glm::vec3& p = image.at(b.x(k), b.y(k));
-        if (b.hit(k))
-          p = glm::vec3(s.diffuse[0][k], s.diffuse[1][k], s.diffuse[2][k]) +
-              glm::vec3(s.emission[0][k], s.emission[1][k], s.emission[2][k]);
-        else if (sky)
-          p = sky->radiance(b.direction(k));
-      }
-    }
+    });
   });
   if (stats) {
     stats->rays = static_cast<std::uint64_t>(width) * height;

@@ -276,7 +276,36 @@ bool HitShader::cpu_has_avx512() {
 }
 
 void HitShader::shade_block(const PrimaryBlock& b, BlockShade& s) const {
-  if (avx512_ && shade_block_avx512(b, s)) return;
+  Avx512Loads l;
+  if (avx512_ && begin_avx512(b, l))
+    finish_avx512(b, l, s);
+  else
+    shade_block_sse2(b, s);
+}
+
+void HitShader::shade_stream(
+    PacketStream& packets,
+    const std::function<void(const PrimaryBlock&, const BlockShade&)>& out) const {
+  // Two packets in flight: the next one is traced (and its texels requested) before this one's
+  // texels are read, so their loads overlap a traversal.
+  PrimaryBlock b[2];
+  Avx512Loads loads[2];
+  BlockShade s;
+  if (!packets.next(b[0])) return;
+  loads[0].taken = avx512_ && begin_avx512(b[0], loads[0]);
+  for (int i = 0;; i ^= 1) {
+    const bool more = packets.next(b[i ^ 1]);
+    if (more) loads[i ^ 1].taken = avx512_ && begin_avx512(b[i ^ 1], loads[i ^ 1]);
+    if (loads[i].taken)
+      finish_avx512(b[i], loads[i], s);
+    else
+      shade_block_sse2(b[i], s);
+    out(b[i], s);
+    if (!more) return;
+  }
+}
+
+void HitShader::shade_block_sse2(const PrimaryBlock& b, BlockShade& s) const {
   constexpr int kGroups = PrimaryBlock::kLanes / 4;
   const __m128 one = _mm_set1_ps(1.0f), inv_pi = _mm_set1_ps(kInvPi);
   // First every group's texel addresses (prefetched), then the lightmaps while they arrive.

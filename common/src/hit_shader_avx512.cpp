@@ -1,13 +1,12 @@
-// HitShader::shade_block_avx512: a primary packet's 16 lanes in one AVX-512 register each, taken
-// when every lane that hits has the same object and material (most packets). The lanes' atlas
-// corners, texture uv corners and the lightmap and texture texels come in through gathers from that
-// object's and texture's arrays (masked to the lanes that hit, at the addresses the scalar code
-// reads). The arithmetic is that of the SSE2 path and of HitShader::shade, operation for operation
-// (add, sub, mul, floor; no FMA: this file is built with -ffp-contract=off), so the bits are the
-// same. Only the functions below are compiled for AVX-512 (target pragma after the includes);
-// shade_block calls them only where the CPU has it.
-// GCC 12's AVX-512 intrinsics start from _mm512_undefined_*(), which -Wmaybe-uninitialized reports
-// at every use (GCC bug 105593).
+// HitShader::begin_avx512 / finish_avx512: a primary packet's 16 lanes in one AVX-512 register
+// each, taken when every lane that hits has the same object and material (most packets). The lanes'
+// atlas corners, texture uv corners and the lightmap and texture texels come in through gathers
+// from that object's and texture's arrays (masked to the lanes that hit, at the addresses the
+// scalar code reads). The arithmetic is that of the SSE2 path and of HitShader::shade, operation
+// for operation (add, sub, mul, floor; no FMA: this file is built with -ffp-contract=off), so the
+// bits are the same. Only the functions below are compiled for AVX-512 (target pragma after the
+// includes); shade_block calls them only where the CPU has it. GCC 12's AVX-512 intrinsics start
+// from _mm512_undefined_*(), which -Wmaybe-uninitialized reports at every use (GCC bug 105593).
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include <immintrin.h>
 
@@ -51,13 +50,14 @@ inline __m512 mix_taps16(const __m512 (&t)[4], __m512 ax, __m512 ay) {
   return mix16(mix16(t[0], t[1], ax), mix16(t[2], t[3], ax), ay);
 }
 
-// Lightmap::bilinear at the atlas uv (x, y) of the lanes m, texels of a width x height map.
-void lightmap16(__mmask16 m, const glm::vec3* texels, int width, int height, __m512 uvx, __m512 uvy,
-                __m512 (&e)[3]) {
+// The first half of Lightmap::bilinear at the atlas uv (x, y) of the lanes m in a width x height
+// map: its texels' float indices (x 3) and the weights, into t.
+void lightmap_taps16(int width, int height, __m512 uvx, __m512 uvy, HitShader::Taps16& t) {
   const __m512 half = _mm512_set1_ps(0.5f);
   const __m512 x = _mm512_sub_ps(uvx, half), y = _mm512_sub_ps(uvy, half);
   const __m512 fx = floor16(x), fy = floor16(y);
-  const __m512 ax = _mm512_sub_ps(x, fx), ay = _mm512_sub_ps(y, fy);
+  _mm512_store_ps(t.a[0], _mm512_sub_ps(x, fx));
+  _mm512_store_ps(t.a[1], _mm512_sub_ps(y, fy));
   const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi32(1);
   const __m512i wm = _mm512_set1_epi32(width - 1), hm = _mm512_set1_epi32(height - 1);
   // std::clamp(int(f), 0, n - 1); the +1 neighbour clamped too, and none left of 0.
@@ -69,15 +69,21 @@ void lightmap16(__mmask16 m, const glm::vec3* texels, int width, int height, __m
   const __m512i y1 = _mm512_mask_mov_epi32(_mm512_min_epi32(_mm512_add_epi32(y0, one), hm), yl, y0);
   const __m512i w = _mm512_set1_epi32(width), three = _mm512_set1_epi32(3);
   const __m512i row0 = _mm512_mullo_epi32(y0, w), row1 = _mm512_mullo_epi32(y1, w);
-  const __m512i at[4] = {_mm512_mullo_epi32(_mm512_add_epi32(row0, x0), three),
-                         _mm512_mullo_epi32(_mm512_add_epi32(row0, x1), three),
-                         _mm512_mullo_epi32(_mm512_add_epi32(row1, x0), three),
-                         _mm512_mullo_epi32(_mm512_add_epi32(row1, x1), three)};
+  _mm512_store_si512(t.at[0], _mm512_mullo_epi32(_mm512_add_epi32(row0, x0), three));
+  _mm512_store_si512(t.at[1], _mm512_mullo_epi32(_mm512_add_epi32(row0, x1), three));
+  _mm512_store_si512(t.at[2], _mm512_mullo_epi32(_mm512_add_epi32(row1, x0), three));
+  _mm512_store_si512(t.at[3], _mm512_mullo_epi32(_mm512_add_epi32(row1, x1), three));
+}
+
+// The second half: the texels (r, g, b at index, + 1, + 2) gathered and mixed.
+void lightmap_mix16(__mmask16 m, const glm::vec3* texels, const HitShader::Taps16& t,
+                    __m512 (&e)[3]) {
   const float* f = &texels->x;
+  const __m512 ax = _mm512_load_ps(t.a[0]), ay = _mm512_load_ps(t.a[1]);
   for (int c = 0; c < 3; ++c) {
     __m512 tap[4];
-    for (int t = 0; t < 4; ++t)
-      tap[t] = gather_ps(m, _mm512_add_epi32(at[t], _mm512_set1_epi32(c)), f);
+    for (int k = 0; k < 4; ++k)
+      tap[k] = gather_ps(m, _mm512_add_epi32(_mm512_load_si512(t.at[k]), _mm512_set1_epi32(c)), f);
     e[c] = mix_taps16(tap, ax, ay);
   }
 }
@@ -116,15 +122,17 @@ inline __m512i wrap16(__mmask16 m, __m512 f, int n) {
   return _mm512_load_si512(rs);
 }
 
-// Texture::sample_srgb (rgb) at the uv (x, y) of the lanes m.
-void texture16(__mmask16 m, const Texture& tex, __m512 uvx, __m512 uvy, __m512 (&out)[3]) {
+// The first half of Texture::sample_srgb at the uv (x, y) of the lanes m: its texels' indices and
+// the weights, into t; the texels' cache lines are prefetched.
+void texture_taps16(__mmask16 m, const Texture& tex, __m512 uvx, __m512 uvy, HitShader::Taps16& t) {
   const __m512 half = _mm512_set1_ps(0.5f);
   const __m512 x =
       _mm512_sub_ps(_mm512_mul_ps(uvx, _mm512_set1_ps(static_cast<float>(tex.width))), half);
   const __m512 y =
       _mm512_sub_ps(_mm512_mul_ps(uvy, _mm512_set1_ps(static_cast<float>(tex.height))), half);
   const __m512 fx = floor16(x), fy = floor16(y);
-  const __m512 ax = _mm512_sub_ps(x, fx), ay = _mm512_sub_ps(y, fy);
+  _mm512_store_ps(t.a[0], _mm512_sub_ps(x, fx));
+  _mm512_store_ps(t.a[1], _mm512_sub_ps(y, fy));
   const __m512i x0 = wrap16(m, fx, tex.width), y0 = wrap16(m, fy, tex.height);
   const __m512i one = _mm512_set1_epi32(1), zero = _mm512_setzero_si512();
   const __m512i x1p = _mm512_add_epi32(x0, one), y1p = _mm512_add_epi32(y0, one);
@@ -134,23 +142,39 @@ void texture16(__mmask16 m, const Texture& tex, __m512 uvx, __m512 uvy, __m512 (
       _mm512_mask_mov_epi32(y1p, _mm512_cmpeq_epi32_mask(y1p, _mm512_set1_epi32(tex.height)), zero);
   const __m512i w = _mm512_set1_epi32(tex.width);
   const __m512i row0 = _mm512_mullo_epi32(y0, w), row1 = _mm512_mullo_epi32(y1, w);
-  const __m512i at[4] = {_mm512_add_epi32(row0, x0), _mm512_add_epi32(row0, x1),
-                         _mm512_add_epi32(row1, x0), _mm512_add_epi32(row1, x1)};
+  _mm512_store_si512(t.at[0], _mm512_add_epi32(row0, x0));
+  _mm512_store_si512(t.at[1], _mm512_add_epi32(row0, x1));
+  _mm512_store_si512(t.at[2], _mm512_add_epi32(row1, x0));
+  _mm512_store_si512(t.at[3], _mm512_add_epi32(row1, x1));
+  const std::uint8_t* rgba = tex.rgba8.data();
+  for (int k = 0; k < PrimaryBlock::kLanes; ++k)
+    if ((m >> k) & 1) {
+      _mm_prefetch(reinterpret_cast<const char*>(rgba + 4 * static_cast<std::size_t>(t.at[0][k])),
+                   _MM_HINT_T0);
+      _mm_prefetch(reinterpret_cast<const char*>(rgba + 4 * static_cast<std::size_t>(t.at[2][k])),
+                   _MM_HINT_T0);
+    }
+}
+
+// The second half: the texels gathered, decoded to linear and mixed, rgb.
+void texture_mix16(__mmask16 m, const Texture& tex, const HitShader::Taps16& t, __m512 (&out)[3]) {
   __m512i rgba[4];
-  for (int t = 0; t < 4; ++t) rgba[t] = gather_epi32(m, at[t], tex.rgba8.data());
+  for (int k = 0; k < 4; ++k)
+    rgba[k] = gather_epi32(m, _mm512_load_si512(t.at[k]), tex.rgba8.data());
   const float* lut = srgb_to_linear_table().data();
   const __m512i byte = _mm512_set1_epi32(0xff);
+  const __m512 ax = _mm512_load_ps(t.a[0]), ay = _mm512_load_ps(t.a[1]);
   for (int c = 0; c < 3; ++c) {
     __m512 tap[4];
-    for (int t = 0; t < 4; ++t)
-      tap[t] = gather_ps(m, _mm512_and_si512(_mm512_srli_epi32(rgba[t], 8 * c), byte), lut);
+    for (int k = 0; k < 4; ++k)
+      tap[k] = gather_ps(m, _mm512_and_si512(_mm512_srli_epi32(rgba[k], 8 * c), byte), lut);
     out[c] = mix_taps16(tap, ax, ay);
   }
 }
 
 }  // namespace
 
-bool HitShader::shade_block_avx512(const PrimaryBlock& b, BlockShade& s) const {
+bool HitShader::begin_avx512(const PrimaryBlock& b, Avx512Loads& l) const {
   const __m512i object = _mm512_loadu_si512(b.object);
   const __mmask16 m =
       _mm512_cmpneq_epi32_mask(_mm512_load_si512(b.active), _mm512_setzero_si512()) &
@@ -184,12 +208,14 @@ bool HitShader::shade_block_avx512(const PrimaryBlock& b, BlockShade& s) const {
   for (int j = 0; j < 3; ++j)
     for (int a = 0; a < 2; ++a)
       c[j][a] = gather_ps(m, _mm512_add_epi32(tri6, _mm512_set1_epi32(2 * j + a)), &o.corner_uv->x);
-  __m512 e[3];
-  lightmap16(m, o.texels, o.lightmap_width, o.lightmap_height, interpolate16(c, 0, u, v, w),
-             interpolate16(c, 1, u, v, w), e);
-  __m512 tex[3] = {_mm512_set1_ps(1.0f), _mm512_set1_ps(1.0f), _mm512_set1_ps(1.0f)};
+  lightmap_taps16(o.lightmap_width, o.lightmap_height, interpolate16(c, 0, u, v, w),
+                  interpolate16(c, 1, u, v, w), l.lightmap_taps);
+  l.mask = m;
+  l.material = &mat;
+  l.lightmap = o.texels;
   const Texture* t =
       mat.texture && mat.texture->width > 0 && mat.texture->height > 0 ? mat.texture : nullptr;
+  l.texture = t;
   if (t) {
     // WorldObject::uv's corners; (0, 0) without the set.
     const glm::vec2* uvs = o.uv[mat.texture_uv == 1 ? 1 : 0];
@@ -205,8 +231,19 @@ bool HitShader::shade_block_avx512(const PrimaryBlock& b, BlockShade& s) const {
       tc[j][0] = gather_ps(m, vi2, &uvs->x);
       tc[j][1] = gather_ps(m, _mm512_add_epi32(vi2, _mm512_set1_epi32(1)), &uvs->x);
     }
-    texture16(m, *t, interpolate16(tc, 0, u, v, w), interpolate16(tc, 1, u, v, w), tex);
+    texture_taps16(m, *t, interpolate16(tc, 0, u, v, w), interpolate16(tc, 1, u, v, w),
+                   l.texture_taps);
   }
+  return true;
+}
+
+void HitShader::finish_avx512(const PrimaryBlock& b, const Avx512Loads& l, BlockShade& s) const {
+  const __mmask16 m = l.mask;
+  const Shading& mat = *l.material;
+  __m512 e[3];
+  lightmap_mix16(m, l.lightmap, l.lightmap_taps, e);
+  __m512 tex[3] = {_mm512_set1_ps(1.0f), _mm512_set1_ps(1.0f), _mm512_set1_ps(1.0f)};
+  if (l.texture) texture_mix16(m, *l.texture, l.texture_taps, tex);
   // albedo = base colour x texture; diffuse = albedo * (1 / pi) * E.
   const __m512 inv_pi = _mm512_set1_ps(kInvPi);
   for (int ch = 0; ch < 3; ++ch) {
@@ -221,7 +258,6 @@ bool HitShader::shade_block_avx512(const PrimaryBlock& b, BlockShade& s) const {
         emission(b.hit_at(k), b.direction(k), mat, hs);
         for (int ch = 0; ch < 3; ++ch) s.emission[ch][k] = hs.emission[ch];
       }
-  return true;
 }
 
 }  // namespace irradcast

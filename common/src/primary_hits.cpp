@@ -87,10 +87,48 @@ void trace_block(RTCScene scene, const PinholeRays& pin, const float* sx, const 
   }
 }
 
+// The packets of one task's tile range, row by row, traced one at a time into the caller's block.
+class TilePackets final : public PacketStream {
+ public:
+  TilePackets(RTCScene scene, const PinholeRays& pin, const float* sx, const float* sy, int width,
+              int height, const tbb::blocked_range2d<int>& r)
+      : scene_(scene),
+        pin_(pin),
+        sx_(sx),
+        sy_(sy),
+        width_(width),
+        height_(height),
+        r_(r),
+        packet_(pin.eye),
+        by_(r.rows().begin()),
+        bx_(r.cols().begin()) {}
+  bool next(PrimaryBlock& b) override {
+    if (by_ >= r_.rows().end() || r_.cols().empty()) return false;
+    b.origin = pin_.eye;
+    b.x0 = bx_ * kBw;
+    b.y0 = by_ * kBh;
+    trace_block(scene_, pin_, sx_, sy_, width_, height_, packet_, b);
+    if (++bx_ == r_.cols().end()) {
+      bx_ = r_.cols().begin();
+      ++by_;
+    }
+    return true;
+  }
+
+ private:
+  RTCScene scene_;
+  const PinholeRays& pin_;
+  const float *sx_, *sy_;
+  int width_, height_;
+  const tbb::blocked_range2d<int>& r_;
+  Packet packet_;
+  int by_, bx_;
+};
+
 }  // namespace
 
-void trace_primary_blocks(const RayScene& rays, const CameraPose& camera, int width, int height,
-                          const std::function<void(const PrimaryBlock&)>& block) {
+void trace_primary_tiles(const RayScene& rays, const CameraPose& camera, int width, int height,
+                         const std::function<void(PacketStream&)>& tile) {
   const PinholeRays pin(camera, width, height);
   const int bw = (width + kBw - 1) / kBw, bh = (height + kBh - 1) / kBh;
   // The image-plane offsets per column and per row (camera_ray's expressions, once each), padded
@@ -100,17 +138,17 @@ void trace_primary_blocks(const RayScene& rays, const CameraPose& camera, int wi
   for (int y = 0; y < bh * kBh; ++y) sy[static_cast<std::size_t>(y)] = pin.sy(y + 0.5f);
   tbb::parallel_for(
       tbb::blocked_range2d<int>(0, bh, 2, 0, bw, 4), [&](const tbb::blocked_range2d<int>& r) {
-        Packet p(pin.eye);
-        PrimaryBlock b;
-        b.origin = pin.eye;
-        for (int by = r.rows().begin(); by < r.rows().end(); ++by)
-          for (int bx = r.cols().begin(); bx < r.cols().end(); ++bx) {
-            b.x0 = bx * kBw;
-            b.y0 = by * kBh;
-            trace_block(rays.embree_scene(), pin, sx.data(), sy.data(), width, height, p, b);
-            block(b);
-          }
+        TilePackets packets(rays.embree_scene(), pin, sx.data(), sy.data(), width, height, r);
+        tile(packets);
       });
+}
+
+void trace_primary_blocks(const RayScene& rays, const CameraPose& camera, int width, int height,
+                          const std::function<void(const PrimaryBlock&)>& block) {
+  trace_primary_tiles(rays, camera, width, height, [&](PacketStream& packets) {
+    PrimaryBlock b;
+    while (packets.next(b)) block(b);
+  });
 }
 
 }  // namespace irradcast

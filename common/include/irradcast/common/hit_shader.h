@@ -10,6 +10,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -58,6 +59,10 @@ class HitShader {
   // With AVX-512 (avx512() true) a packet whose hits share one object and material is shaded
   // 16 lanes at once; every other one 4 lanes at a time with SSE2.
   void shade_block(const PrimaryBlock& b, BlockShade& s) const;
+  // shade_block() of every packet of `packets`, out(b, s) for each in order; an AVX-512 packet's
+  // texture texels are requested before the next packet is traced and read after it.
+  void shade_stream(PacketStream& packets,
+                    const std::function<void(const PrimaryBlock&, const BlockShade&)>& out) const;
   // Whether shade_block uses AVX-512: where the CPU has it, unless turned off (tests compare the
   // two paths).
   bool avx512() const { return avx512_; }
@@ -101,9 +106,30 @@ class HitShader {
   // The atlas corners, lightmap and material of each of 4 lanes; see hit_shader.cpp.
   struct Lanes;
   void gather_lanes(const PrimaryBlock& b, int k0, Lanes& l) const;
-  // shade_block of a packet whose hits share one object and material (hit_shader_avx512.cpp);
-  // false (nothing written) for any other packet.
-  bool shade_block_avx512(const PrimaryBlock& b, BlockShade& s) const;
+  void shade_block_sse2(const PrimaryBlock& b, BlockShade& s) const;
+
+ public:
+  // A bilinear lookup of a packet's 16 lanes between its halves: the four taps' texel indices,
+  // the weights in x and y.
+  struct Taps16 {
+    alignas(64) std::int32_t at[4][PrimaryBlock::kLanes];
+    alignas(64) float a[2][PrimaryBlock::kLanes];
+  };
+
+ private:
+  // shade_block of a packet whose hits share one object and material, in two halves
+  // (hit_shader_avx512.cpp): begin_avx512 finds the texels (false, nothing done, for any other
+  // packet) and prefetches the texture's, finish_avx512 reads them and writes the shades.
+  struct Avx512Loads {
+    bool taken = false;
+    std::uint16_t mask = 0;  // the lanes that hit
+    const Shading* material = nullptr;
+    const glm::vec3* lightmap = nullptr;
+    const Texture* texture = nullptr;  // null: none
+    Taps16 lightmap_taps, texture_taps;
+  };
+  bool begin_avx512(const PrimaryBlock& b, Avx512Loads& l) const;
+  void finish_avx512(const PrimaryBlock& b, const Avx512Loads& l, BlockShade& s) const;
   const Shading& shading(const Object& o, std::uint32_t t) const {
     const std::uint32_t mi = t < o.triangle_count ? o.triangle_material[t] : kFallback;
     return materials_[mi < materials_.size() - 1 ? mi : materials_.size() - 1];

@@ -44,6 +44,21 @@ struct PrimaryBlock {
   }
 };
 
+// The packets of one tile of the image, in order; next(b) traces the next one into b (false at
+// the end). A consumer that holds two blocks can start one packet's memory loads before it traces
+// the next (HitShader::shade_stream).
+class PacketStream {
+ public:
+  virtual bool next(PrimaryBlock& b) = 0;
+
+ protected:
+  ~PacketStream() = default;
+};
+
+// tile(packets) for every tile of packets of the image; concurrently for different tiles.
+void trace_primary_tiles(const RayScene& rays, const CameraPose& camera, int width, int height,
+                         const std::function<void(PacketStream&)>& tile);
+
 // block(b) for every packet of the image; concurrently for different packets.
 void trace_primary_blocks(const RayScene& rays, const CameraPose& camera, int width, int height,
                           const std::function<void(const PrimaryBlock&)>& block);
