@@ -41,8 +41,12 @@ inline __m512i gather_epi32(__mmask16 m, __m512i index, const void* base) {
   return _mm512_mask_i32gather_epi32(_mm512_setzero_si512(), m, index, base, 4);
 }
 
+// floor and truncation to int per lane.
 inline __m512 floor16(__m512 x) {
   return _mm512_roundscale_ps(x, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+}
+inline __m512i cvtt16(__m512 x) {
+  return _mm512_cvttps_epi32(x);
 }
 
 // The bilinear mix of 4 taps [tap] (t0 t1 over t2 t3).
@@ -61,8 +65,8 @@ void lightmap_taps16(int width, int height, __m512 uvx, __m512 uvy, HitShader::T
   const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi32(1);
   const __m512i wm = _mm512_set1_epi32(width - 1), hm = _mm512_set1_epi32(height - 1);
   // std::clamp(int(f), 0, n - 1); the +1 neighbour clamped too, and none left of 0.
-  const __m512i x0 = _mm512_min_epi32(_mm512_max_epi32(_mm512_cvttps_epi32(fx), zero), wm);
-  const __m512i y0 = _mm512_min_epi32(_mm512_max_epi32(_mm512_cvttps_epi32(fy), zero), hm);
+  const __m512i x0 = _mm512_min_epi32(_mm512_max_epi32(cvtt16(fx), zero), wm);
+  const __m512i y0 = _mm512_min_epi32(_mm512_max_epi32(cvtt16(fy), zero), hm);
   const __mmask16 xl = _mm512_cmp_ps_mask(fx, _mm512_setzero_ps(), _CMP_LT_OQ);
   const __mmask16 yl = _mm512_cmp_ps_mask(fy, _mm512_setzero_ps(), _CMP_LT_OQ);
   const __m512i x1 = _mm512_mask_mov_epi32(_mm512_min_epi32(_mm512_add_epi32(x0, one), wm), xl, x0);
@@ -99,13 +103,13 @@ inline int wrap(long i, int n) {
 // (f and its quotient by n exact enough), i - n * floor(f / n), off by at most one n and corrected,
 // which is the one value in 0 .. n-1 that wrap gives; the scalar wrap for the rest (NaN, huge).
 inline __m512i wrap16(__mmask16 m, __m512 f, int n) {
-  const __m512i i = _mm512_cvttps_epi32(f);
+  const __m512i i = cvtt16(f);
   const __m512 nf = _mm512_set1_ps(static_cast<float>(n));
   const __mmask16 inside = _mm512_cmp_ps_mask(f, _mm512_setzero_ps(), _CMP_GE_OQ) &
                            _mm512_cmp_ps_mask(f, nf, _CMP_LT_OQ);
   if ((m & ~inside) == 0) return i;
   const __m512i vn = _mm512_set1_epi32(n);
-  const __m512i q = _mm512_cvttps_epi32(floor16(_mm512_div_ps(f, nf)));
+  const __m512i q = cvtt16(floor16(_mm512_div_ps(f, nf)));
   __m512i r = _mm512_sub_epi32(i, _mm512_mullo_epi32(q, vn));
   r = _mm512_mask_add_epi32(r, _mm512_cmplt_epi32_mask(r, _mm512_setzero_si512()), r, vn);
   r = _mm512_mask_sub_epi32(r, _mm512_cmpge_epi32_mask(r, vn), r, vn);
@@ -175,31 +179,44 @@ void texture_mix16(__mmask16 m, const Texture& tex, const HitShader::Taps16& t, 
 }  // namespace
 
 bool HitShader::begin_avx512(const PrimaryBlock& b, Avx512Loads& l) const {
-  const __m512i object = _mm512_loadu_si512(b.object);
-  const __mmask16 m =
-      _mm512_cmpneq_epi32_mask(_mm512_load_si512(b.active), _mm512_setzero_si512()) &
-      _mm512_cmpge_epi32_mask(object, _mm512_setzero_si512());
-  if (m == 0) return false;
-  // One object for all the lanes that hit, else the SSE2 path.
-  const int first = __builtin_ctz(m);
-  const std::int32_t id = b.object[first];
-  if (_mm512_mask_cmpneq_epi32_mask(m, object, _mm512_set1_epi32(id)) != 0) return false;
-  const Object& o = objects_[static_cast<std::size_t>(id)];
-  if (o.lightmap_width <= 0 || o.lightmap_height <= 0) return false;
-  // One material (shading()) too.
+  const __m512i object = _mm512_loadu_si512(b.object), tri = _mm512_loadu_si512(b.triangle);
+  __mmask16 left = _mm512_cmpneq_epi32_mask(_mm512_load_si512(b.active), _mm512_setzero_si512()) &
+                   _mm512_cmpge_epi32_mask(object, _mm512_setzero_si512());
+  if (left == 0) return false;
+  const __m512i last = _mm512_set1_epi32(static_cast<std::int32_t>(materials_.size() - 1));
+  l.groups = 0;
+  while (left) {
+    if (l.groups == kAvx512Groups) return false;
+    // The lanes left with the first one's object and material (shading()'s index per lane).
+    const int first = __builtin_ctz(left);
+    const std::int32_t id = b.object[first];
+    const Object& o = objects_[static_cast<std::size_t>(id)];
+    if (o.lightmap_width <= 0 || o.lightmap_height <= 0) return false;
+    const __mmask16 same = _mm512_mask_cmpeq_epi32_mask(left, object, _mm512_set1_epi32(id));
+    const __mmask16 in = _mm512_mask_cmplt_epu32_mask(
+        same, tri,
+        _mm512_set1_epi32(
+            static_cast<std::int32_t>(std::min<std::size_t>(o.triangle_count, 0x7fffffff))));
+    const __m512i mi = _mm512_min_epu32(
+        _mm512_mask_mov_epi32(_mm512_set1_epi32(static_cast<std::int32_t>(kFallback)), in,
+                              gather_epi32(in, tri, o.triangle_material)),
+        last);
+    alignas(64) std::int32_t mis[PrimaryBlock::kLanes];
+    _mm512_store_si512(mis, mi);
+    const __mmask16 g = _mm512_mask_cmpeq_epi32_mask(same, mi, _mm512_set1_epi32(mis[first]));
+    Avx512Group& group = l.group[l.groups++];
+    group.material = &materials_[static_cast<std::uint32_t>(mis[first])];
+    begin_avx512_group(b, o, g, group);
+    left &= static_cast<__mmask16>(~g);
+  }
+  return true;
+}
+
+void HitShader::begin_avx512_group(const PrimaryBlock& b, const Object& o, std::uint16_t mask,
+                                   Avx512Group& l) const {
+  const __mmask16 m = mask;
+  const Shading& mat = *l.material;
   const __m512i tri = _mm512_loadu_si512(b.triangle);
-  const __mmask16 in = _mm512_mask_cmplt_epu32_mask(
-      m, tri,
-      _mm512_set1_epi32(
-          static_cast<std::int32_t>(std::min<std::size_t>(o.triangle_count, 0x7fffffff))));
-  const std::uint32_t t0 = b.triangle[first];
-  const std::uint32_t mi0 = t0 < o.triangle_count ? o.triangle_material[t0] : kFallback;
-  if (in != m && in != 0) return false;
-  if (in != 0 &&
-      _mm512_mask_cmpneq_epi32_mask(m, gather_epi32(m, tri, o.triangle_material),
-                                    _mm512_set1_epi32(static_cast<std::int32_t>(mi0))) != 0)
-    return false;
-  const Shading& mat = materials_[mi0 < materials_.size() - 1 ? mi0 : materials_.size() - 1];
   // The atlas corners.
   const __m512 u = _mm512_loadu_ps(b.u), v = _mm512_loadu_ps(b.v);
   const __m512 w = _mm512_sub_ps(_mm512_sub_ps(_mm512_set1_ps(1.0f), u), v);
@@ -211,7 +228,6 @@ bool HitShader::begin_avx512(const PrimaryBlock& b, Avx512Loads& l) const {
   lightmap_taps16(o.lightmap_width, o.lightmap_height, interpolate16(c, 0, u, v, w),
                   interpolate16(c, 1, u, v, w), l.lightmap_taps);
   l.mask = m;
-  l.material = &mat;
   l.lightmap = o.texels;
   const Texture* t =
       mat.texture && mat.texture->width > 0 && mat.texture->height > 0 ? mat.texture : nullptr;
@@ -234,30 +250,36 @@ bool HitShader::begin_avx512(const PrimaryBlock& b, Avx512Loads& l) const {
     texture_taps16(m, *t, interpolate16(tc, 0, u, v, w), interpolate16(tc, 1, u, v, w),
                    l.texture_taps);
   }
-  return true;
 }
 
-void HitShader::finish_avx512(const PrimaryBlock& b, const Avx512Loads& l, BlockShade& s) const {
-  const __mmask16 m = l.mask;
-  const Shading& mat = *l.material;
-  __m512 e[3];
-  lightmap_mix16(m, l.lightmap, l.lightmap_taps, e);
-  __m512 tex[3] = {_mm512_set1_ps(1.0f), _mm512_set1_ps(1.0f), _mm512_set1_ps(1.0f)};
-  if (l.texture) texture_mix16(m, *l.texture, l.texture_taps, tex);
-  // albedo = base colour x texture; diffuse = albedo * (1 / pi) * E.
-  const __m512 inv_pi = _mm512_set1_ps(kInvPi);
+void HitShader::finish_avx512(const PrimaryBlock& b, const Avx512Loads& loads,
+                              BlockShade& s) const {
   for (int ch = 0; ch < 3; ++ch) {
-    const __m512 albedo = _mm512_mul_ps(_mm512_set1_ps(mat.base_color[ch]), tex[ch]);
-    _mm512_storeu_ps(s.diffuse[ch], _mm512_mul_ps(_mm512_mul_ps(albedo, inv_pi), e[ch]));
+    _mm512_storeu_ps(s.diffuse[ch], _mm512_setzero_ps());
     _mm512_storeu_ps(s.emission[ch], _mm512_setzero_ps());
   }
-  if (mat.emissive)
-    for (int k = 0; k < PrimaryBlock::kLanes; ++k)
-      if ((m >> k) & 1) {
-        HitShade hs;
-        emission(b.hit_at(k), b.direction(k), mat, hs);
-        for (int ch = 0; ch < 3; ++ch) s.emission[ch][k] = hs.emission[ch];
-      }
+  for (int gi = 0; gi < loads.groups; ++gi) {
+    const Avx512Group& l = loads.group[gi];
+    const __mmask16 m = l.mask;
+    const Shading& mat = *l.material;
+    __m512 e[3];
+    lightmap_mix16(m, l.lightmap, l.lightmap_taps, e);
+    __m512 tex[3] = {_mm512_set1_ps(1.0f), _mm512_set1_ps(1.0f), _mm512_set1_ps(1.0f)};
+    if (l.texture) texture_mix16(m, *l.texture, l.texture_taps, tex);
+    // albedo = base colour x texture; diffuse = albedo * (1 / pi) * E.
+    const __m512 inv_pi = _mm512_set1_ps(kInvPi);
+    for (int ch = 0; ch < 3; ++ch) {
+      const __m512 albedo = _mm512_mul_ps(_mm512_set1_ps(mat.base_color[ch]), tex[ch]);
+      _mm512_mask_storeu_ps(s.diffuse[ch], m, _mm512_mul_ps(_mm512_mul_ps(albedo, inv_pi), e[ch]));
+    }
+    if (mat.emissive)
+      for (int k = 0; k < PrimaryBlock::kLanes; ++k)
+        if ((m >> k) & 1) {
+          HitShade hs;
+          emission(b.hit_at(k), b.direction(k), mat, hs);
+          for (int ch = 0; ch < 3; ++ch) s.emission[ch][k] = hs.emission[ch];
+        }
+  }
 }
 
 }  // namespace irradcast

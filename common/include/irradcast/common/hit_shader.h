@@ -117,17 +117,25 @@ class HitShader {
   };
 
  private:
-  // shade_block of a packet whose hits share one object and material, in two halves
-  // (hit_shader_avx512.cpp): begin_avx512 finds the texels (false, nothing done, for any other
-  // packet) and prefetches the texture's, finish_avx512 reads them and writes the shades.
-  struct Avx512Loads {
-    bool taken = false;
-    std::uint16_t mask = 0;  // the lanes that hit
+  // shade_block of a packet with AVX-512 in two halves (hit_shader_avx512.cpp): begin_avx512
+  // splits its hits into groups of one object and material (false, nothing done, for a packet
+  // with more than kAvx512Groups) and finds each group's texels (prefetching the texture's),
+  // finish_avx512 reads them and writes the shades.
+  static constexpr int kAvx512Groups = 4;
+  struct Avx512Group {
+    std::uint16_t mask = 0;  // its lanes
     const Shading* material = nullptr;
     const glm::vec3* lightmap = nullptr;
     const Texture* texture = nullptr;  // null: none
     Taps16 lightmap_taps, texture_taps;
   };
+  struct Avx512Loads {
+    bool taken = false;
+    int groups = 0;
+    Avx512Group group[kAvx512Groups];
+  };
+  void begin_avx512_group(const PrimaryBlock& b, const Object& o, std::uint16_t mask,
+                          Avx512Group& g) const;
   bool begin_avx512(const PrimaryBlock& b, Avx512Loads& l) const;
   void finish_avx512(const PrimaryBlock& b, const Avx512Loads& l, BlockShade& s) const;
   const Shading& shading(const Object& o, std::uint32_t t) const {
