@@ -283,25 +283,54 @@ void HitShader::shade_block(const PrimaryBlock& b, BlockShade& s) const {
     shade_block_sse2(b, s);
 }
 
+void HitShader::touch_block(const PrimaryBlock& b) const {
+  for (int k = 0; k < PrimaryBlock::kLanes; ++k) {
+    if (!b.active[k] || !b.hit(k)) continue;
+    const Object& o = objects_[static_cast<std::size_t>(b.object[k])];
+    const std::size_t t = b.triangle[k];
+    _mm_prefetch(reinterpret_cast<const char*>(o.corner_uv + 3 * t), _MM_HINT_T0);
+    if (o.uv[0] || o.uv[1])
+      _mm_prefetch(reinterpret_cast<const char*>(o.triangles + t), _MM_HINT_T0);
+  }
+}
+
 void HitShader::shade_stream(
     PacketStream& packets,
     const std::function<void(const PrimaryBlock&, const BlockShade&)>& out) const {
-  // Two packets in flight: the next one is traced (and its texels requested) before this one's
-  // texels are read, so their loads overlap a traversal.
-  PrimaryBlock b[2];
-  Avx512Loads loads[2];
+  // Three packets in flight: a packet's triangle data is requested right after it is traced
+  // (touch_block), its texels found and requested after the next packet is traced (begin), and
+  // read after the one after that (finish), so the loads overlap traversals.
+  PrimaryBlock b[3];
+  Avx512Loads loads[3];
   BlockShade s;
-  if (!packets.next(b[0])) return;
-  loads[0].taken = avx512_ && begin_avx512(b[0], loads[0]);
-  for (int i = 0;; i ^= 1) {
-    const bool more = packets.next(b[i ^ 1]);
-    if (more) loads[i ^ 1].taken = avx512_ && begin_avx512(b[i ^ 1], loads[i ^ 1]);
+  const auto begin = [&](int i) { loads[i].taken = avx512_ && begin_avx512(b[i], loads[i]); };
+  const auto finish = [&](int i) {
     if (loads[i].taken)
       finish_avx512(b[i], loads[i], s);
     else
       shade_block_sse2(b[i], s);
     out(b[i], s);
-    if (!more) return;
+  };
+  if (!packets.next(b[0])) return;
+  touch_block(b[0]);
+  if (!packets.next(b[1])) {
+    begin(0);
+    finish(0);
+    return;
+  }
+  touch_block(b[1]);
+  begin(0);
+  // b[i] begun, b[(i + 1) % 3] touched.
+  for (int i = 0;; i = (i + 1) % 3) {
+    const int j = (i + 1) % 3, k = (i + 2) % 3;
+    const bool more = packets.next(b[k]);
+    if (more) touch_block(b[k]);
+    begin(j);
+    finish(i);
+    if (!more) {
+      finish(j);
+      return;
+    }
   }
 }
 

@@ -1,13 +1,12 @@
 // HitShader::begin_avx512 / finish_avx512: a primary packet's 16 lanes in one AVX-512 register
-// each, taken when every lane that hits has the same object and material (most packets). The lanes'
-// atlas corners, texture uv corners and the lightmap and texture texels come in through gathers
-// from that object's and texture's arrays (masked to the lanes that hit, at the addresses the
-// scalar code reads). The arithmetic is that of the SSE2 path and of HitShader::shade, operation
-// for operation (add, sub, mul, floor; no FMA: this file is built with -ffp-contract=off), so the
-// bits are the same. Only the functions below are compiled for AVX-512 (target pragma after the
-// includes); shade_block calls them only where the CPU has it. GCC 12's AVX-512 intrinsics start
-// from _mm512_undefined_*(), which -Wmaybe-uninitialized reports at every use (GCC bug 105593).
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+// each, in groups of the lanes that share one object and material (most packets have one group;
+// one with more than HitShader::kAvx512Groups goes to the SSE2 path). The lanes' atlas corners,
+// texture uv corners and the lightmap and texture texels come in through gathers from that
+// object's and texture's arrays (masked to the group's lanes, at the addresses the scalar code
+// reads). The arithmetic is that of the SSE2 path and of HitShader::shade, operation for operation
+// (add, sub, mul, floor; no FMA: this file is built with -ffp-contract=off), so the bits are the
+// same. Only the functions below are compiled for AVX-512 (target pragma after the includes);
+// shade_block calls them only where the CPU has it (common/CMakeLists.txt has this file's flags).
 #include <immintrin.h>
 
 #include <algorithm>

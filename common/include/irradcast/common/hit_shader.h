@@ -59,8 +59,8 @@ class HitShader {
   // With AVX-512 (avx512() true) a packet whose hits share one object and material is shaded
   // 16 lanes at once; every other one 4 lanes at a time with SSE2.
   void shade_block(const PrimaryBlock& b, BlockShade& s) const;
-  // shade_block() of every packet of `packets`, out(b, s) for each in order; an AVX-512 packet's
-  // texture texels are requested before the next packet is traced and read after it.
+  // shade_block() of every packet of `packets`, out(b, s) for each in order, three packets in
+  // flight so that a packet's memory loads overlap the next packets' traversals (the same bits).
   void shade_stream(PacketStream& packets,
                     const std::function<void(const PrimaryBlock&, const BlockShade&)>& out) const;
   // Whether shade_block uses AVX-512: where the CPU has it, unless turned off (tests compare the
@@ -107,6 +107,8 @@ class HitShader {
   struct Lanes;
   void gather_lanes(const PrimaryBlock& b, int k0, Lanes& l) const;
   void shade_block_sse2(const PrimaryBlock& b, BlockShade& s) const;
+  // Prefetches the hits' triangle data (atlas corners, vertex indices).
+  void touch_block(const PrimaryBlock& b) const;
 
  public:
   // A bilinear lookup of a packet's 16 lanes between its halves: the four taps' texel indices,
