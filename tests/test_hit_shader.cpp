@@ -12,6 +12,7 @@
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
+#include "irradcast/common/compositor.h"
 #include "irradcast/common/hit_shader.h"
 #include "irradcast/common/primary_hits.h"
 #include "scene_builders.h"
@@ -139,6 +140,37 @@ TEST(HitShader, BothPathsMatchShadeOnTheTexturedSponza) {
   EXPECT_GT(n.lanes, 60000);
   EXPECT_EQ(n.sse2_differs, 0);
   EXPECT_EQ(n.avx512_differs, 0);
+}
+
+// compose() (HitShader::shade_stream, three packets in flight per tile) against shade() per pixel,
+// bit for bit, at image sizes whose tiles hold one, two, three and many packets.
+TEST(HitShader, ComposeMatchesShadeAtEverySizeOfTile) {
+  IRRADCAST_NEED_TESTDATA();
+  ::setenv("IRRADCAST_TESTDATA", test::testdata_dir().c_str(), 1);
+  const Scene scene = load_scene("sponza");
+  const World world = World::build(scene);
+  const RayScene rays(world);
+  const Atlas atlas = build_atlas(world);
+  const std::vector<Lightmap> maps = hashed_lightmaps(atlas);
+  const HitShader shader(world, atlas, maps);
+  const CameraPose camera = default_camera(scene, world);
+  const int sizes[][2] = {{1, 1}, {4, 4}, {8, 4}, {12, 4}, {5, 9}, {13, 7}, {200, 120}};
+  for (const auto& size : sizes) {
+    const int w = size[0], h = size[1];
+    const ImageRGB img = compose(world, rays, atlas, maps, camera, w, h);
+    ImageRGB ref(w, h);
+    for_each_primary_ray(
+        rays, camera, w, h,
+        [&](int x, int y, const Ray& r, const Hit& hit) {
+          const HitShade s = shader.shade(r.direction, hit);
+          ref.at(x, y) = s.diffuse + s.emission;
+        },
+        [&](int x, int y, glm::vec3 d) { ref.at(x, y) = scene.sky.radiance(d); });
+    ASSERT_EQ(img.pixels.size(), ref.pixels.size());
+    EXPECT_EQ(
+        std::memcmp(img.pixels.data(), ref.pixels.data(), img.pixels.size() * sizeof(glm::vec3)), 0)
+        << w << " x " << h;
+  }
 }
 
 }  // namespace
