@@ -219,11 +219,17 @@ void HitShader::begin_avx512_group(const PrimaryBlock& b, const Object& o, std::
   // The atlas corners.
   const __m512 u = _mm512_loadu_ps(b.u), v = _mm512_loadu_ps(b.v);
   const __m512 w = _mm512_sub_ps(_mm512_sub_ps(_mm512_set1_ps(1.0f), u), v);
+  // One triangle under all the lanes (large triangles): its corners broadcast, not gathered.
+  const std::uint32_t t0 = b.triangle[__builtin_ctz(m)];
+  const bool one =
+      _mm512_mask_cmpneq_epi32_mask(m, tri, _mm512_set1_epi32(static_cast<std::int32_t>(t0))) == 0;
   const __m512i tri6 = _mm512_mullo_epi32(tri, _mm512_set1_epi32(6));
   __m512 c[3][2];
   for (int j = 0; j < 3; ++j)
     for (int a = 0; a < 2; ++a)
-      c[j][a] = gather_ps(m, _mm512_add_epi32(tri6, _mm512_set1_epi32(2 * j + a)), &o.corner_uv->x);
+      c[j][a] =
+          one ? _mm512_set1_ps(o.corner_uv[3 * static_cast<std::size_t>(t0) + j][a])
+              : gather_ps(m, _mm512_add_epi32(tri6, _mm512_set1_epi32(2 * j + a)), &o.corner_uv->x);
   lightmap_taps16(o.lightmap_width, o.lightmap_height, interpolate16(c, 0, u, v, w),
                   interpolate16(c, 1, u, v, w), l.lightmap_taps);
   l.mask = m;
@@ -239,6 +245,12 @@ void HitShader::begin_avx512_group(const PrimaryBlock& b, const Object& o, std::
     for (int j = 0; j < 3; ++j) {
       if (!uvs) {
         tc[j][0] = tc[j][1] = _mm512_setzero_ps();
+        continue;
+      }
+      if (one) {
+        const glm::vec2 cj = uvs[o.triangles[t0][j]];
+        tc[j][0] = _mm512_set1_ps(cj.x);
+        tc[j][1] = _mm512_set1_ps(cj.y);
         continue;
       }
       const __m512i vi = gather_epi32(m, _mm512_add_epi32(tri3, _mm512_set1_epi32(j)), o.triangles);
