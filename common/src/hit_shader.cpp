@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cstring>
 
 #include "irradcast/common/error.h"
 
@@ -27,7 +28,10 @@ inline __m128 mix4(__m128 a, __m128 b, __m128 w) {
 
 // (x, y, z, 0) from a texel.
 inline __m128 load3(const glm::vec3& v) {
-  const __m128 xy = _mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(&v.x)));
+  double xy_bits;  // x and y as one 8-byte load (a texel is only 4-byte aligned: memcpy, not a
+                   // double*)
+  std::memcpy(&xy_bits, &v.x, sizeof xy_bits);
+  const __m128 xy = _mm_castpd_ps(_mm_set_sd(xy_bits));
   return _mm_movelh_ps(xy, _mm_load_ss(&v.z));
 }
 

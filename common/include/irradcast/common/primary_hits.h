@@ -1,7 +1,9 @@
 // A pinhole camera's primary rays, one through each pixel centre (camera_ray()'s rays, bit for
 // bit, from PinholeRays, set up 4 lanes at a time with SSE), traced in coherent 4 x 4 pixel Embree
 // packets (rtcIntersect16 on RayScene::embree_scene()) over tiles of packets in parallel; each
-// packet's rays and hits are kept in SoA (PrimaryBlock), as Embree returns them. Used by compose()
+// packet's rays and hits are kept in SoA (PrimaryBlock), as Embree returns them. A tile's packets
+// come one at a time from a PacketStream (trace_primary_tiles), so a consumer can keep several in
+// flight (HitShader::shade_stream), or one block at a time (trace_primary_blocks). Used by compose()
 // and by the client passes' frame G-buffer, so both see exactly the same pixels; the shading they
 // share is HitShader (hit_shader.h).
 #pragma once
