@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cstdlib>
 #include <cstring>
+#include <memory>
 
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/builtin.h"
@@ -45,9 +46,33 @@ std::vector<Lightmap> hashed_lightmaps(const Atlas& atlas) {
   return maps;
 }
 
+// The Sponza (sample data) with hashed lightmaps.
+struct HashedSponza {
+  HashedSponza() {
+    ::setenv("IRRADCAST_TESTDATA", test::testdata_dir().c_str(), 1);
+    scene = load_scene("sponza");
+    world = World::build(scene);
+    rays = std::make_unique<RayScene>(world);
+    atlas = build_atlas(world);
+    maps = hashed_lightmaps(atlas);
+  }
+  Scene scene;
+  World world;
+  std::unique_ptr<RayScene> rays;
+  Atlas atlas;
+  std::vector<Lightmap> maps;
+};
+
 struct PathCounts {
   std::atomic<int> lanes{0}, sse2_differs{0}, avx512_differs{0};
 };
+
+// At least min_lanes compared, and no lane differs on either path.
+void expect_same_bits(const PathCounts& n, int min_lanes) {
+  EXPECT_GT(n.lanes, min_lanes);
+  EXPECT_EQ(n.sse2_differs, 0);
+  EXPECT_EQ(n.avx512_differs, 0);
+}
 
 bool same_bits(const BlockShade& s, int k, const HitShade& r) {
   for (int c = 0; c < 3; ++c) {
@@ -118,54 +143,40 @@ TEST(HitShader, BothPathsMatchShadeAtWrappedUvsAndClampedTexels) {
   camera.yfov = glm::radians(60.0f);
   PathCounts n;
   compare_paths(world, rays, atlas, maps, camera, 160, 120, n);
-  EXPECT_GT(n.lanes, 5000);
-  EXPECT_EQ(n.sse2_differs, 0);
-  EXPECT_EQ(n.avx512_differs, 0);
+  expect_same_bits(n, 5000);
 }
 
 TEST(HitShader, BothPathsMatchShadeOnTheTexturedSponza) {
   IRRADCAST_NEED_TESTDATA();
-  ::setenv("IRRADCAST_TESTDATA", test::testdata_dir().c_str(), 1);
-  const Scene scene = load_scene("sponza");
-  const World world = World::build(scene);
-  const RayScene rays(world);
-  const Atlas atlas = build_atlas(world);
-  const std::vector<Lightmap> maps = hashed_lightmaps(atlas);
+  const HashedSponza sp;
   PathCounts n;
-  CameraPose camera = default_camera(scene, world);
-  compare_paths(world, rays, atlas, maps, camera, 256, 144, n);
+  CameraPose camera = default_camera(sp.scene, sp.world);
+  compare_paths(sp.world, *sp.rays, sp.atlas, sp.maps, camera, 256, 144, n);
   // Turned towards the walls and arches (more materials per packet).
   camera.forward = glm::normalize(glm::vec3(0.3f, 0.2f, 1.0f));
-  compare_paths(world, rays, atlas, maps, camera, 256, 144, n);
-  EXPECT_GT(n.lanes, 60000);
-  EXPECT_EQ(n.sse2_differs, 0);
-  EXPECT_EQ(n.avx512_differs, 0);
+  compare_paths(sp.world, *sp.rays, sp.atlas, sp.maps, camera, 256, 144, n);
+  expect_same_bits(n, 60000);
 }
 
 // compose() (HitShader::shade_stream, three packets in flight per tile) against shade() per pixel,
 // bit for bit, at image sizes whose tiles hold one, two, three and many packets.
 TEST(HitShader, ComposeMatchesShadeAtEverySizeOfTile) {
   IRRADCAST_NEED_TESTDATA();
-  ::setenv("IRRADCAST_TESTDATA", test::testdata_dir().c_str(), 1);
-  const Scene scene = load_scene("sponza");
-  const World world = World::build(scene);
-  const RayScene rays(world);
-  const Atlas atlas = build_atlas(world);
-  const std::vector<Lightmap> maps = hashed_lightmaps(atlas);
-  const HitShader shader(world, atlas, maps);
-  const CameraPose camera = default_camera(scene, world);
+  const HashedSponza sp;
+  const HitShader shader(sp.world, sp.atlas, sp.maps);
+  const CameraPose camera = default_camera(sp.scene, sp.world);
   const int sizes[][2] = {{1, 1}, {4, 4}, {8, 4}, {12, 4}, {5, 9}, {13, 7}, {200, 120}};
   for (const auto& size : sizes) {
     const int w = size[0], h = size[1];
-    const ImageRGB img = compose(world, rays, atlas, maps, camera, w, h);
+    const ImageRGB img = compose(sp.world, *sp.rays, sp.atlas, sp.maps, camera, w, h);
     ImageRGB ref(w, h);
     for_each_primary_ray(
-        rays, camera, w, h,
+        *sp.rays, camera, w, h,
         [&](int x, int y, const Ray& r, const Hit& hit) {
           const HitShade s = shader.shade(r.direction, hit);
           ref.at(x, y) = s.diffuse + s.emission;
         },
-        [&](int x, int y, glm::vec3 d) { ref.at(x, y) = scene.sky.radiance(d); });
+        [&](int x, int y, glm::vec3 d) { ref.at(x, y) = sp.scene.sky.radiance(d); });
     ASSERT_EQ(img.pixels.size(), ref.pixels.size());
     EXPECT_EQ(
         std::memcmp(img.pixels.data(), ref.pixels.data(), img.pixels.size() * sizeof(glm::vec3)), 0)
