@@ -3,8 +3,8 @@
 # (A B A B ...), one thread, then per round and pass engine / raw Embree and the engine's time.
 # Usage: bench/engine/compare.sh A_BIN B_BIN [ROUNDS] [OUT_DIR] [-- extra bench options]
 # (default 2 rounds, OUT_DIR /tmp/bench-engine-compare; the JSON of every run is kept there).
-# On a loaded machine build both with the engine's and the bench's timers reading the thread's
-# CPU time (docs/BENCHMARKS.md section 1 says how); the script itself only runs and reads them.
+# Every side is timed with the thread's CPU time (--cpu-time), so a loaded machine's other work
+# does not count.
 set -eu
 a=$1
 b=$2
@@ -19,7 +19,7 @@ while [ "$r" -le "$rounds" ]; do
   for side in A B; do
     bin=$a
     [ "$side" = B ] && bin=$b
-    nice -n 10 "$bin" --skip-scaling --threads 1 --reps 3 --min-time 0 --out "$out" \
+    nice -n 10 "$bin" --skip-scaling --threads 1 --cpu-time --reps 3 --min-time 0 --out "$out" \
       --json "$out/$side-$r.json" "$@" > "$out/$side-$r.log" 2>&1
   done
   r=$((r + 1))

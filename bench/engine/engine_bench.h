@@ -21,6 +21,10 @@ struct MeasureOptions {
   int min_reps = 5;
   int max_reps = 200;
   double min_seconds = 0.25;  // of pipeline time per pass
+  // Time every side with the calling thread's CPU time instead of the wall clock (only with one
+  // TBB thread, which runs the passes on the calling thread): a loaded machine's other work does
+  // not count.
+  bool cpu_time = false;
 };
 
 // One pass of one scene, bounces summed.

@@ -29,6 +29,7 @@
 
 #include "bench_util.h"
 #include "engine_bench.h"
+#include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/progress.h"
 #include "plot.h"
@@ -144,12 +145,15 @@ json params_json(const Options& o) {
           {"density_sweep_texels_per_metre", o.scaling.sweep_text},
           {"scaling_updates", o.scaling.updates},
           {"min_reps", o.mo.min_reps},
-          {"min_seconds", o.mo.min_seconds}};
+          {"min_seconds", o.mo.min_seconds},
+          {"cpu_time", o.mo.cpu_time}};
 }
 
 int run(Options o) {
   const auto limit = start_run(o.threads, o.out_dir, o.json_path, "bench_engine.json");
   const int used_threads = tbb_threads();
+  if (o.mo.cpu_time && used_threads != 1)
+    throw Error("--cpu-time needs --threads 1 (the other threads' CPU time would not count)");
   const Stopwatch total;
   json result;
   result["machine"] = machine_json(used_threads);
@@ -190,6 +194,8 @@ int main(int argc, char** argv) {
   app.add_option("--reps", o.mo.min_reps, "minimum repetitions per pass");
   app.add_option("--min-time", o.mo.min_seconds, "minimum engine seconds per pass measurement");
   app.add_option("--threads", o.threads, "TBB threads (0: all cores)");
+  app.add_flag("--cpu-time", o.mo.cpu_time,
+               "time with the thread's CPU time, not the wall clock (needs --threads 1)");
   app.add_flag("--skip-passes", o.skip_passes, "skip the pass-vs-Embree benchmark");
   app.add_flag("--skip-scaling", o.skip_scaling, "skip the update-vs-texels benchmark");
   CLI11_PARSE(app, argc, argv);
