@@ -10,6 +10,7 @@
 
 #include "irradcast/common/hit_shader.h"
 #include "irradcast/common/sampling.h"
+#include "scatter_texel.h"
 
 namespace irradcast {
 namespace embree_sampling {
@@ -22,7 +23,12 @@ Rng texel_rng(const EngineParams& p, std::uint64_t index, std::uint32_t update, 
 
 glm::vec3 sample_probe(const std::vector<glm::vec3>& radiance, std::size_t probe, int res,
                        glm::vec3 dir) {
-  glm::vec2 uv = octahedral_encode(dir) * static_cast<float>(res) - 0.5f;
+  return sample_probe_at(radiance, probe, res, octahedral_encode(dir));
+}
+
+glm::vec3 sample_probe_at(const std::vector<glm::vec3>& radiance, std::size_t probe, int res,
+                          glm::vec2 enc) {
+  glm::vec2 uv = enc * static_cast<float>(res) - 0.5f;
   glm::vec2 f = glm::floor(uv);
   glm::vec2 a = uv - f;
   auto at = [&](int x, int y) {
@@ -44,13 +50,7 @@ glm::vec3 exit_pad(const Bounds& b) {
 
 float exit_distance_to(glm::vec3 lo, glm::vec3 hi, glm::vec3 p, glm::vec3 d) {
   float t = 3.4e38f;
-  for (int a = 0; a < 3; ++a) {
-    // The face the ray runs toward on this axis (none where d[a] == 0), chosen without a branch:
-    // the direction's signs are random.
-    const float face = d[a] > 0.0f ? hi[a] : lo[a];
-    const float ta = (face - p[a]) / d[a];
-    t = d[a] != 0.0f ? std::min(t, ta) : t;
-  }
+  for (int a = 0; a < 3; ++a) t = exit_axis(t, lo[a], hi[a], p[a], d[a]);
   return std::max(t, 0.0f);
 }
 
@@ -123,19 +123,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 using namespace embree_sampling;
-
-// The hit's lightmap coordinates, with the two lightmap rows its bilinear lookup reads requested
-// from memory (a hint: it changes no result).
-glm::vec2 prefetch_radiance(const RadianceField& f, const Hit& h) {
-  const glm::vec2 uv = f.atlas->objects[h.object].uv(h.triangle, h.u, h.v);
-  const Lightmap& m = (*f.irradiance)[h.object];
-  const int x = std::clamp(static_cast<int>(uv.x - 0.5f), 0, m.width - 1);
-  const int y = std::clamp(static_cast<int>(uv.y - 0.5f), 0, m.height - 1);
-  const glm::vec3* row = m.texels.data() + static_cast<std::size_t>(y) * m.width + x;
-  __builtin_prefetch(row);
-  if (y + 1 < m.height) __builtin_prefetch(row + m.width);
-  return uv;
-}
 
 // Runs body(texel) over every work unit (cell or object) in dispatch order, units in parallel
 // and large units split further; each worker adds its ray count.
@@ -277,46 +264,14 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
                                   std::vector<glm::vec3>& out) {
   auto start = Clock::now();
   out.assign(in.texels.size(), glm::vec3(0.0f));
-  const int n = in.params.indirect_samples;
   const ScatterMiss miss(in, probe_radiance);
   const HitShader shader(*prev.world, *prev.atlas, *prev.irradiance);
+  const ScatterTexel texel(in, *rays_, prev, miss, shader);
+  const auto n = static_cast<std::uint64_t>(in.params.indirect_samples);
   PassResult r;
   r.rays = for_each_texel(in, [&](std::uint32_t i) -> std::uint64_t {
-    const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
-                    ng = in.texels.geo_normal[i];
-    Rng rng = texel_rng(in.params, i, in.update, kScatter, in.bounce);
-    // A stream of its own for probe choices, so the ray directions do not depend on which rays
-    // missed.
-    Rng pick = texel_rng(in.params, i, in.update, kProbePick, in.bounce);
-    const float range = scatter_range(in, i);
-    const bool probes = miss.reads_probes(i);
-    Frame frame(nrm);
-    glm::vec3 sum(0.0f);
-    // The texel's rays in batches: all drawn first, then traced, then the hits' lightmap texels
-    // fetched together (their cache misses overlap), then shaded in the order of the rays.
-    constexpr int kBatch = 32;
-    Ray ray[kBatch];
-    Hit hit[kBatch];
-    glm::vec2 uv[kBatch];
-    for (int s0 = 0; s0 < n; s0 += kBatch) {
-      const int m = std::min(kBatch, n - s0);
-      for (int s = 0; s < m; ++s) {
-        ray[s].direction = frame.to_world(cosine_hemisphere_fast(rng.next_2d()));
-        ray[s].origin = rays_->offset(p, ng, ray[s].direction);
-        ray[s].tmax = range;
-      }
-      for (int s = 0; s < m; ++s) hit[s] = rays_->intersect(ray[s]);
-      for (int s = 0; s < m; ++s)
-        if (hit[s].valid()) uv[s] = prefetch_radiance(prev, hit[s]);
-      for (int s = 0; s < m; ++s)
-        if (hit[s].valid())
-          sum += shader.diffuse(hit[s], uv[s]);
-        else if (probes)
-          sum += miss(i, p, ray[s].direction, pick);
-    }
-    // Cosine-weighted sampling: E = pi / N * sum L.
-    out[i] = sum * (kPi / static_cast<float>(n));
-    return static_cast<std::uint64_t>(n);
+    out[i] = texel(i);
+    return n;
   });
   r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return r;

@@ -1,6 +1,8 @@
 // The CPU backend: the engine's passes on Embree rays, TBB across all cores.
 #pragma once
 
+#include <algorithm>
+
 #include "irradcast/common/lights.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/sampling.h"
@@ -22,9 +24,19 @@ Rng texel_rng(const EngineParams& p, std::uint64_t index, std::uint32_t update, 
 // A probe's radiance in direction dir, bilinear in its octahedral map (res x res per probe).
 glm::vec3 sample_probe(const std::vector<glm::vec3>& radiance, std::size_t probe, int res,
                        glm::vec3 dir);
+// The same at the direction's octahedral coordinates enc (octahedral_encode(dir), in [0, 1]^2).
+glm::vec3 sample_probe_at(const std::vector<glm::vec3>& radiance, std::size_t probe, int res,
+                          glm::vec2 enc);
 // How far a ray from p along d runs until it leaves the scene's bounds (slightly enlarged), and
 // the point where it does.
 float exit_distance(const Bounds& b, glm::vec3 p, glm::vec3 d);
+// One axis of it: t lowered to where p + t d reaches the face of [lo, hi] it runs toward on that
+// axis (t unchanged where d == 0). The face is chosen without a branch: directions are random.
+inline float exit_axis(float t, float lo, float hi, float p, float d) {
+  const float face = d > 0.0f ? hi : lo;
+  const float ta = (face - p) / d;
+  return d != 0.0f ? std::min(t, ta) : t;
+}
 glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d);
 // The length of texel i's scatter rays: the tracing range, or unbounded where no probe stands in
 // for what lies beyond it (the unbiased mode; a texel that sees no probe).
@@ -35,6 +47,7 @@ float scatter_range(const PassInput& in, std::uint32_t i);
 // of the texel's probes, picked by weight with `pick`.
 glm::vec3 scatter_miss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance,
                        std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng& pick);
+class ScatterTexel;
 // scatter_miss with what is the same for every miss of a pass worked out once (the enlarged
 // bounds, the range, whether probes are read): the same arithmetic, less of it per miss.
 class ScatterMiss {
@@ -51,6 +64,7 @@ class ScatterMiss {
   glm::vec3 lo_, hi_;  // the scene's bounds, enlarged as exit_distance enlarges them
   float range_, extent_;
   bool probes_, fixed_;
+  friend class ScatterTexel;  // its batches run operator()'s arithmetic over many misses at once
 };
 // The direction of a probe's gather ray for octahedral texel t (res x res), jittered.
 glm::vec3 probe_direction(std::size_t t, int res, glm::vec2 jitter);
