@@ -196,6 +196,30 @@ Hit RayScene::intersect(const Ray& ray) const {
   return to_hit(rh);
 }
 
+void RayScene::intersect(RayBatch& b) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  for (int i = 0; i < b.count; ++i) {
+    RTCRayHit rh;
+    rh.ray.org_x = b.ox[i];
+    rh.ray.org_y = b.oy[i];
+    rh.ray.org_z = b.oz[i];
+    rh.ray.tnear = 0.0f;
+    rh.ray.dir_x = b.dx[i];
+    rh.ray.dir_y = b.dy[i];
+    rh.ray.dir_z = b.dz[i];
+    rh.ray.time = 0.0f;
+    rh.ray.tfar = b.tmax;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.id = 0;
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(impl_->scene, &ctx, &rh);
+    b.hit[i] = to_hit(rh);
+  }
+}
+
 bool RayScene::occluded(const Ray& ray) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);

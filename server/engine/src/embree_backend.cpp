@@ -124,6 +124,23 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using namespace embree_sampling;
 
+// Runs body(texels, count) over runs of consecutive texels of every work unit (cell or object)
+// in dispatch order, units in parallel and large units split further into runs of >= 256.
+template <typename Body>
+void for_each_texel_run(const PassInput& in, Body&& body) {
+  const std::size_t units = in.unit_offsets.empty() ? 0 : in.unit_offsets.size() - 1;
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, units, 1), [&](const tbb::blocked_range<std::size_t>& ur) {
+        for (std::size_t u = ur.begin(); u < ur.end(); ++u) {
+          tbb::parallel_for(
+              tbb::blocked_range<std::uint32_t>(in.unit_offsets[u], in.unit_offsets[u + 1], 256),
+              [&](const tbb::blocked_range<std::uint32_t>& r) {
+                body(in.unit_texels.data() + r.begin(), r.size());
+              });
+        }
+      });
+}
+
 // Runs body(texel) over every work unit (cell or object) in dispatch order, units in parallel
 // and large units split further; each worker adds its ray count.
 template <typename Body>
@@ -266,13 +283,14 @@ PassResult EmbreeBackend::scatter(const PassInput& in, const RadianceField& prev
   out.assign(in.texels.size(), glm::vec3(0.0f));
   const ScatterMiss miss(in, probe_radiance);
   const HitShader shader(*prev.world, *prev.atlas, *prev.irradiance);
-  const ScatterTexel texel(in, *rays_, prev, miss, shader);
-  const auto n = static_cast<std::uint64_t>(in.params.indirect_samples);
-  PassResult r;
-  r.rays = for_each_texel(in, [&](std::uint32_t i) -> std::uint64_t {
-    out[i] = texel(i);
-    return n;
+  const ScatterTexel texels(in, *rays_, prev, miss, shader);
+  std::atomic<std::uint64_t> count{0};
+  for_each_texel_run(in, [&](const std::uint32_t* run, std::size_t size) {
+    texels.run(run, size, out);
+    count += size;
   });
+  PassResult r;
+  r.rays = count.load() * static_cast<std::uint64_t>(in.params.indirect_samples);
   r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return r;
 }

@@ -7,6 +7,16 @@
 
 namespace irradcast::embree_sampling {
 
+struct ScatterTexel::Texel {
+  glm::vec3 p, ng;
+  Frame frame{glm::vec3(0.0f, 0.0f, 1.0f)};
+  Rng rng;   // the ray directions
+  Rng pick;  // the probe choices: a stream of its own, so that the directions do not depend on
+             // which rays missed
+  float range = 0.0f;
+  bool probes = false;
+};
+
 namespace {
 
 using Batch = ScatterTexel::Batch;
@@ -45,22 +55,25 @@ int pick_probe_flat(const ProbeWeights& w, float u) {
 // The misses of batch b that go on past the tracing range inside the scene read one probe each
 // (ScatterMiss::operator(), step by step over arrays): which misses do, their picks in ray order,
 // the direction to the picked probe and its octahedral coordinates four at a time, the lookups.
-void ScatterTexel::shade_misses(std::uint32_t i, glm::vec3 p, Batch& b, Rng& pick) const {
+void ScatterTexel::shade_misses(std::uint32_t i, Texel& t, Batch& b) const {
   const ScatterMiss& miss = *miss_;
-  const int m = b.count;
+  const RayBatch& r = b.rays;
+  const int m = r.count;
+  const glm::vec3 p = t.p;
+  Rng& pick = t.pick;
   for (int s = 0; s < m; ++s) {
-    float t = 3.4e38f;
-    t = exit_axis(t, miss.lo_.x, miss.hi_.x, p.x, b.dx[s]);
-    t = exit_axis(t, miss.lo_.y, miss.hi_.y, p.y, b.dy[s]);
-    t = exit_axis(t, miss.lo_.z, miss.hi_.z, p.z, b.dz[s]);
-    b.exit[s] = std::max(t, 0.0f);
+    float e = 3.4e38f;
+    e = exit_axis(e, miss.lo_.x, miss.hi_.x, p.x, r.dx[s]);
+    e = exit_axis(e, miss.lo_.y, miss.hi_.y, p.y, r.dy[s]);
+    e = exit_axis(e, miss.lo_.z, miss.hi_.z, p.z, r.dz[s]);
+    b.exit[s] = std::max(e, 0.0f);
   }
   // The misses that read a probe (operator() returns zero where the ray left the scene).
   int idx[kBatch];
   int k = 0;
   for (int s = 0; s < m; ++s) {
     idx[k] = s;
-    k += !b.hit[s].valid() && !(b.exit[s] <= miss.range_);
+    k += !r.hit[s].valid() && !(b.exit[s] <= miss.range_);
   }
   const ProbeWeights& w = in_->probe_weights[i];
   const std::vector<glm::vec3>& position = in_->probes.position;
@@ -69,7 +82,7 @@ void ScatterTexel::shade_misses(std::uint32_t i, glm::vec3 p, Batch& b, Rng& pic
   for (int j = 0; j < k; ++j) {
     const int s = idx[j];
     probe[j] = w.probe[pick_probe_flat(w, pick.next_float())];
-    const glm::vec3 d(b.dx[s], b.dy[s], b.dz[s]);
+    const glm::vec3 d(r.dx[s], r.dy[s], r.dz[s]);
     const glm::vec3 q = miss.fixed_ ? p + miss.extent_ * d : p + b.exit[s] * d;
     const glm::vec3 to = q - position[probe[j]];
     tx[j] = to.x;
@@ -94,21 +107,32 @@ void ScatterTexel::shade_misses(std::uint32_t i, glm::vec3 p, Batch& b, Rng& pic
   }
   const int res = in_->probes.resolution;
   for (int j = 0; j < k; ++j)
-    b.radiance[idx[j]] = valid[j] ? sample_probe_at(*miss.radiance_, probe[j], res,
-                                                    glm::vec2(ex[j], ey[j]))
-                                  : glm::vec3(0.0f);
+    b.radiance[idx[j]] =
+        valid[j] ? sample_probe_at(*miss.radiance_, probe[j], res, glm::vec2(ex[j], ey[j]))
+                 : glm::vec3(0.0f);
 }
 
-void ScatterTexel::draw(Rng& rng, const Frame& frame, glm::vec3 p, glm::vec3 ng,
-                        Batch& b) const {
+// The texel's streams, frame and range, set up before its first batch.
+void ScatterTexel::begin(std::uint32_t i, Texel& t) const {
+  const PassInput& in = *in_;
+  t.p = in.texels.position[i];
+  t.ng = in.texels.geo_normal[i];
+  t.frame = Frame(in.texels.normal[i]);
+  t.rng = texel_rng(in.params, i, in.update, kScatter, in.bounce);
+  t.pick = texel_rng(in.params, i, in.update, kProbePick, in.bounce);
+  t.range = scatter_range(in, i);
+  t.probes = miss_->reads_probes(i);
+}
+
+void ScatterTexel::draw(Texel& t, RayBatch& b) const {
   alignas(16) float u0[kBatch], u1[kBatch];
   for (int s = 0; s < b.count; ++s) {
-    u0[s] = rng.next_float();
-    u1[s] = rng.next_float();
+    u0[s] = t.rng.next_float();
+    u1[s] = t.rng.next_float();
   }
   for (int s = 0; s < b.count; ++s) {
-    const glm::vec3 d = frame.to_world(cosine_hemisphere_fast(glm::vec2(u0[s], u1[s])));
-    const glm::vec3 o = rays_->offset(p, ng, d);
+    const glm::vec3 d = t.frame.to_world(cosine_hemisphere_fast(glm::vec2(u0[s], u1[s])));
+    const glm::vec3 o = rays_->offset(t.p, t.ng, d);
     b.dx[s] = d.x;
     b.dy[s] = d.y;
     b.dz[s] = d.z;
@@ -116,56 +140,46 @@ void ScatterTexel::draw(Rng& rng, const Frame& frame, glm::vec3 p, glm::vec3 ng,
     b.oy[s] = o.y;
     b.oz[s] = o.z;
   }
-}
-
-void ScatterTexel::trace(float range, Batch& b) const {
-  for (int s = 0; s < b.count; ++s) {
-    Ray ray;
-    ray.origin = glm::vec3(b.ox[s], b.oy[s], b.oz[s]);
-    ray.direction = glm::vec3(b.dx[s], b.dy[s], b.dz[s]);
-    ray.tmax = range;
-    b.hit[s] = rays_->intersect(ray);
-    b.radiance[s] = glm::vec3(0.0f);
-  }
+  b.tmax = t.range;
 }
 
 // The hits' radiance (HitShader::diffuse), their lightmap rows fetched together first so that
 // their cache misses overlap.
 void ScatterTexel::shade_hits(Batch& b) const {
+  const RayBatch& r = b.rays;
   int idx[kBatch];
   int k = 0;
-  for (int s = 0; s < b.count; ++s) {
+  for (int s = 0; s < r.count; ++s) {
     idx[k] = s;
-    k += b.hit[s].valid();
+    k += r.hit[s].valid();
   }
   glm::vec2 uv[kBatch];
-  for (int j = 0; j < k; ++j) uv[j] = prefetch_radiance(*prev_, b.hit[idx[j]]);
-  for (int j = 0; j < k; ++j) b.radiance[idx[j]] = shader_->diffuse(b.hit[idx[j]], uv[j]);
+  for (int j = 0; j < k; ++j) uv[j] = prefetch_radiance(*prev_, r.hit[idx[j]]);
+  for (int j = 0; j < k; ++j) b.radiance[idx[j]] = shader_->diffuse(r.hit[idx[j]], uv[j]);
 }
 
-glm::vec3 ScatterTexel::operator()(std::uint32_t i) const {
-  const PassInput& in = *in_;
-  const int n = in.params.indirect_samples;
-  const glm::vec3 p = in.texels.position[i], ng = in.texels.geo_normal[i];
-  Rng rng = texel_rng(in.params, i, in.update, kScatter, in.bounce);
-  // A stream of its own for probe choices, so the ray directions do not depend on which rays
-  // missed.
-  Rng pick = texel_rng(in.params, i, in.update, kProbePick, in.bounce);
-  const float range = scatter_range(in, i);
-  const bool probes = miss_->reads_probes(i);
-  const Frame frame(in.texels.normal[i]);
-  Batch b;
-  glm::vec3 sum(0.0f);
-  for (int s0 = 0; s0 < n; s0 += kBatch) {
-    b.count = std::min(kBatch, n - s0);
-    draw(rng, frame, p, ng, b);
-    trace(range, b);
-    shade_hits(b);
-    if (probes) shade_misses(i, p, b, pick);
-    for (int s = 0; s < b.count; ++s) sum += b.radiance[s];
+void ScatterTexel::run(const std::uint32_t* texels, std::size_t count,
+                       std::vector<glm::vec3>& out) const {
+  const int n = in_->params.indirect_samples;
+  Batch b;  // once per run: its arrays are not cleared per texel
+  Texel t;
+  for (std::size_t k = 0; k < count; ++k) {
+    const std::uint32_t i = texels[k];
+    begin(i, t);
+    glm::vec3 sum(0.0f);
+    for (int s0 = 0; s0 < n; s0 += kBatch) {
+      const int m = std::min(kBatch, n - s0);
+      b.rays.count = m;
+      draw(t, b.rays);
+      rays_->intersect(b.rays);
+      for (int s = 0; s < m; ++s) b.radiance[s] = glm::vec3(0.0f);
+      shade_hits(b);
+      if (t.probes) shade_misses(i, t, b);
+      for (int s = 0; s < m; ++s) sum += b.radiance[s];
+    }
+    // Cosine-weighted sampling: E = pi / N * sum L.
+    out[i] = sum * (kPi / static_cast<float>(n));
   }
-  // Cosine-weighted sampling: E = pi / N * sum L.
-  return sum * (kPi / static_cast<float>(n));
 }
 
 }  // namespace irradcast::embree_sampling

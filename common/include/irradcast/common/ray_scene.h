@@ -33,6 +33,17 @@ struct Ray {
   float tmax = 3.4e38f;
 };
 
+// Up to kSize rays that share one tmax (tmin 0), held as arrays so that the loops that draw them
+// vectorize, and their hits: RayScene::intersect(RayBatch&) traces them in one call.
+struct RayBatch {
+  static constexpr int kSize = 32;
+  int count = 0;
+  float tmax = 3.4e38f;
+  alignas(16) float ox[kSize], oy[kSize], oz[kSize];  // origins
+  alignas(16) float dx[kSize], dy[kSize], dz[kSize];  // directions
+  Hit hit[kSize];
+};
+
 class RayScene {
  public:
   // `editable`: build the two-level structure that update() changes incrementally (traversal is
@@ -46,6 +57,8 @@ class RayScene {
   bool occluded(const Ray& ray) const;
   // Up to 8 rays at once (count <= 8), one Embree packet.
   void intersect8(const Ray* rays, int count, Hit* hits) const;
+  // intersect() of each of the batch's rays, into b.hit (the same hits, without a call per ray).
+  void intersect(RayBatch& b) const;
 
   // Offset used to leave a surface: scales with the scene so that it works in millimetres and
   // in kilometres alike.
