@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "irradcast/common/sampling.h"
 
@@ -15,6 +16,10 @@ struct ScatterTexel::Texel {
              // which rays missed
   float range = 0.0f;
   bool probes = false;
+  // The running sums of its probe weights as pick_probe forms them (the unused ones +inf), and
+  // whether they never fall (weights >= 0, as CellsMethod makes them).
+  float sums[7];
+  bool sums_rise = false;
 };
 
 namespace {
@@ -75,13 +80,27 @@ void ScatterTexel::shade_misses(std::uint32_t i, Texel& t, Batch& b) const {
     idx[k] = s;
     k += !r.hit[s].valid() && !(b.exit[s] <= miss.range_);
   }
+  // The picks, in ray order (pick_probe's result: with running sums that never fall, the count
+  // of those at or below u).
+  alignas(16) float u[kBatch];
+  alignas(16) int which[kBatch];
+  for (int j = 0; j < k; ++j) u[j] = pick.next_float();
   const ProbeWeights& w = in_->probe_weights[i];
+  if (t.sums_rise) {
+    for (int j = 0; j < k; ++j) {
+      int c = 0;
+      for (int q = 0; q < 7; ++q) c += u[j] >= t.sums[q];
+      which[j] = c;
+    }
+  } else {
+    for (int j = 0; j < k; ++j) which[j] = pick_probe_flat(w, u[j]);
+  }
   const std::vector<glm::vec3>& position = in_->probes.position;
   alignas(16) float tx[kBatch], ty[kBatch], tz[kBatch];
   std::uint32_t probe[kBatch];
   for (int j = 0; j < k; ++j) {
     const int s = idx[j];
-    probe[j] = w.probe[pick_probe_flat(w, pick.next_float())];
+    probe[j] = w.probe[which[j]];
     const glm::vec3 d(r.dx[s], r.dy[s], r.dz[s]);
     const glm::vec3 q = miss.fixed_ ? p + miss.extent_ * d : p + b.exit[s] * d;
     const glm::vec3 to = q - position[probe[j]];
@@ -102,14 +121,44 @@ void ScatterTexel::shade_misses(std::uint32_t i, Texel& t, Batch& b) const {
     z /= l1;
     const float fx = (1.0f - std::fabs(y)) * (x >= 0.0f ? 1.0f : -1.0f);
     const float fy = (1.0f - std::fabs(x)) * (y >= 0.0f ? 1.0f : -1.0f);
-    ex[j] = 0.5f * (z < 0.0f ? fx : x) + 0.5f;
-    ey[j] = 0.5f * (z < 0.0f ? fy : y) + 0.5f;
+    // (A zero-length direction reads nothing: its coordinates are kept finite for the lookups.)
+    ex[j] = valid[j] ? 0.5f * (z < 0.0f ? fx : x) + 0.5f : 0.5f;
+    ey[j] = valid[j] ? 0.5f * (z < 0.0f ? fy : y) + 0.5f : 0.5f;
   }
+  probe_lookups(k, idx, probe, ex, ey, valid, b);
+}
+
+// sample_probe_at for each of the k misses (probe[j] at octahedral coordinates ex[j], ey[j];
+// zero where !valid[j]) into b.radiance[idx[j]]: its texel coordinates and weights four at a
+// time, then the four taps and their blend.
+void ScatterTexel::probe_lookups(int k, const int* idx, const std::uint32_t* probe, const float* ex,
+                                 const float* ey, const int* valid, Batch& b) const {
   const int res = in_->probes.resolution;
-  for (int j = 0; j < k; ++j)
-    b.radiance[idx[j]] =
-        valid[j] ? sample_probe_at(*miss.radiance_, probe[j], res, glm::vec2(ex[j], ey[j]))
-                 : glm::vec3(0.0f);
+  const float fres = static_cast<float>(res);
+  alignas(16) float ax[kBatch], ay[kBatch];
+  alignas(16) int x0[kBatch], x1[kBatch], y0[kBatch], y1[kBatch];
+  for (int j = 0; j < k; ++j) {
+    const float uvx = ex[j] * fres - 0.5f, uvy = ey[j] * fres - 0.5f;
+    // floor() as truncation, one lower where that rounded up (exact: |uv| < 2^31).
+    const int tx = static_cast<int>(uvx), ty = static_cast<int>(uvy);
+    const int fx = tx - (uvx < static_cast<float>(tx)), fy = ty - (uvy < static_cast<float>(ty));
+    ax[j] = uvx - static_cast<float>(fx);
+    ay[j] = uvy - static_cast<float>(fy);
+    x0[j] = std::clamp(fx, 0, res - 1);
+    x1[j] = std::clamp(fx + 1, 0, res - 1);
+    y0[j] = std::clamp(fy, 0, res - 1);
+    y1[j] = std::clamp(fy + 1, 0, res - 1);
+  }
+  const glm::vec3* radiance = miss_->radiance_->data();
+  const std::size_t per = static_cast<std::size_t>(res) * res;
+  for (int j = 0; j < k; ++j) {
+    const glm::vec3* map = radiance + probe[j] * per;
+    const std::size_t r0 = static_cast<std::size_t>(y0[j]) * res,
+                      r1 = static_cast<std::size_t>(y1[j]) * res;
+    const glm::vec3 c = glm::mix(glm::mix(map[r0 + x0[j]], map[r0 + x1[j]], ax[j]),
+                                 glm::mix(map[r1 + x0[j]], map[r1 + x1[j]], ax[j]), ay[j]);
+    b.radiance[idx[j]] = valid[j] ? c : glm::vec3(0.0f);
+  }
 }
 
 // The texel's streams, frame and range, set up before its first batch.
@@ -122,6 +171,17 @@ void ScatterTexel::begin(std::uint32_t i, Texel& t) const {
   t.pick = texel_rng(in.params, i, in.update, kProbePick, in.bounce);
   t.range = scatter_range(in, i);
   t.probes = miss_->reads_probes(i);
+  if (!t.probes) return;
+  const ProbeWeights& w = in.probe_weights[i];
+  float acc = 0.0f;
+  t.sums_rise = true;
+  for (int q = 0; q < 7; ++q) {
+    const bool used = q + 1 < w.count;
+    const float next = used ? acc + w.weight[q] : acc;
+    t.sums_rise = t.sums_rise && next >= acc;
+    acc = next;
+    t.sums[q] = used ? acc : std::numeric_limits<float>::infinity();  // u >= it never holds
+  }
 }
 
 void ScatterTexel::draw(Texel& t, RayBatch& b) const {

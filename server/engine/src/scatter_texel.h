@@ -38,6 +38,8 @@ class ScatterTexel {
   void draw(Texel& t, RayBatch& b) const;
   void shade_hits(Batch& b) const;
   void shade_misses(std::uint32_t i, Texel& t, Batch& b) const;
+  void probe_lookups(int k, const int* idx, const std::uint32_t* probe, const float* ex,
+                     const float* ey, const int* valid, Batch& b) const;
 
   const PassInput* in_;
   const RayScene* rays_;
