@@ -26,6 +26,7 @@ namespace {
 
 using Batch = ScatterTexel::Batch;
 constexpr int kBatch = ScatterTexel::kBatch;
+constexpr std::size_t kAhead = 4;  // how many texels ahead run() requests a texel's data
 
 // The hit's lightmap coordinates, with the two lightmap rows its bilinear lookup reads requested
 // from memory (a hint: it changes no result).
@@ -223,8 +224,18 @@ void ScatterTexel::run(const std::uint32_t* texels, std::size_t count,
   const int n = in_->params.indirect_samples;
   Batch b;  // once per run: its arrays are not cleared per texel
   Texel t;
+  const PassInput& in = *in_;
   for (std::size_t k = 0; k < count; ++k) {
     const std::uint32_t i = texels[k];
+    // The texels of a work unit lie scattered in memory: what a texel a few ahead reads is
+    // requested now (a hint: it changes no result).
+    if (k + kAhead < count) {
+      const std::uint32_t a = texels[k + kAhead];
+      __builtin_prefetch(&in.texels.position[a]);
+      __builtin_prefetch(&in.texels.normal[a]);
+      __builtin_prefetch(&in.texels.geo_normal[a]);
+      if (t.probes) __builtin_prefetch(&in.probe_weights[a]);
+    }
     begin(i, t);
     glm::vec3 sum(0.0f);
     for (int s0 = 0; s0 < n; s0 += kBatch) {
