@@ -105,6 +105,9 @@ struct RayScene::Impl {
   // pointers into it).
   std::vector<CutOutFilter> filters;
   bool editable = false;
+  // Whether Embree runs 16-wide packets natively here (AVX-512): intersect(RayBatch&) then traces
+  // in packets of 16, else one ray at a time (the same hits either way).
+  bool packets16 = __builtin_cpu_supports("avx512f");
 };
 
 RayScene::RayScene(const World& world, bool editable)
@@ -196,9 +199,52 @@ Hit RayScene::intersect(const Ray& ray) const {
   return to_hit(rh);
 }
 
+namespace {
+
+// Rays first .. first + 16 of b (those below b.count) as one Embree packet.
+void intersect16(RTCScene scene, RTCIntersectContext& ctx, RayBatch& b, int first) {
+  alignas(64) int valid[16];
+  alignas(64) RTCRayHit16 rh;
+  for (int l = 0; l < 16; ++l) {
+    const int i = first + l < b.count ? first + l : first;
+    valid[l] = first + l < b.count ? -1 : 0;
+    rh.ray.org_x[l] = b.ox[i];
+    rh.ray.org_y[l] = b.oy[i];
+    rh.ray.org_z[l] = b.oz[i];
+    rh.ray.tnear[l] = 0.0f;
+    rh.ray.dir_x[l] = b.dx[i];
+    rh.ray.dir_y[l] = b.dy[i];
+    rh.ray.dir_z[l] = b.dz[i];
+    rh.ray.time[l] = 0.0f;
+    rh.ray.tfar[l] = b.tmax;
+    rh.ray.mask[l] = 0xFFFFFFFFu;
+    rh.ray.id[l] = 0;
+    rh.ray.flags[l] = 0;
+    rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
+  }
+  rtcIntersect16(valid, scene, &ctx, &rh);
+  for (int l = 0; l < 16 && first + l < b.count; ++l) {
+    Hit& h = b.hit[first + l];
+    h = Hit{};
+    if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) continue;
+    h.object = static_cast<int>(rh.hit.geomID[l]);
+    h.triangle = rh.hit.primID[l];
+    h.u = rh.hit.u[l];
+    h.v = rh.hit.v[l];
+    h.t = rh.ray.tfar[l];
+  }
+}
+
+}  // namespace
+
 void RayScene::intersect(RayBatch& b) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
+  if (impl_->packets16) {
+    for (int first = 0; first < b.count; first += 16) intersect16(impl_->scene, ctx, b, first);
+    return;
+  }
   for (int i = 0; i < b.count; ++i) {
     RTCRayHit rh;
     rh.ray.org_x = b.ox[i];
