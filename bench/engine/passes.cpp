@@ -90,13 +90,17 @@ Capture capture_direct(const RayScene& rays, const LightSampler& lights, const P
       c.rays.push_back(to_raw(s.shadow));
     }
     if (!area) return;
+    LightSampler::FrontLights front;
+    const bool culled = lights.front_lights(p, nrm, front);
+    if (culled && front.count == 0) return;
     Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
     for (int k = 0; k < n; ++k) {
       float pick = (static_cast<float>(k) + rng.next_float()) / static_cast<float>(n);
       glm::vec2 pos = rng.next_2d();
-      const std::size_t li = lights.pick_triangle(pick);
-      if (!lights.triangle_sample(rays, li, p, nrm, ng, pos, s)) continue;
-      glm::vec3 w = lights.triangle_emitted(s) / lights.pick_pdf()[li];
+      glm::vec3 w;
+      if (!lights.direct_sample(rays, culled ? &front : nullptr, p, nrm, ng, glm::vec3(pick, pos),
+                                s, w))
+        continue;
       std::int32_t index = -1;
       if (s.shadow.tmax > 0.0f) {
         index = static_cast<std::int32_t>(c.rays.size());
