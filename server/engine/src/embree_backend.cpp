@@ -228,11 +228,20 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i,
     const int m = std::min(kBatch, n - s0);
     lights_->direct_samples(*rays_, culled ? &front : nullptr, p, nrm, ng, rng, s0, m, n,
                             &sample[0], weight, lit);
+    // The shadow rays to trace, 8 to a packet (a texel's rays toward its lights are coherent).
+    Uninitialized<Ray, kBatch> shadow;
+    int which[kBatch];
+    int count = 0;
     for (int s = 0; s < m; ++s)
       if (lit[s] && sample[s].shadow.tmax > 0.0f) {
-        ++rays;
-        lit[s] = !rays_->occluded(sample[s].shadow);
+        shadow[count] = sample[s].shadow;
+        which[count++] = s;
       }
+    bool blocked[kBatch];
+    for (int k = 0; k < count; k += 8)
+      rays_->occluded8(&shadow[k], std::min(8, count - k), blocked + k);
+    for (int k = 0; k < count; ++k) lit[which[k]] = !blocked[k];
+    rays += static_cast<std::uint64_t>(count);
     for (int s = 0; s < m; ++s)
       if (lit[s]) sum += weight[s];
   }

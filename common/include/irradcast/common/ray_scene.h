@@ -46,6 +46,8 @@ class RayScene {
   bool occluded(const Ray& ray) const;
   // Up to 8 rays at once (count <= 8), one Embree packet.
   void intersect8(const Ray* rays, int count, Hit* hits) const;
+  // occluded() for up to 8 rays at once (count <= 8), one Embree packet: blocked[i] for ray i.
+  void occluded8(const Ray* rays, int count, bool* blocked) const;
 
   // Offset used to leave a surface: scales with the scene so that it works in millimetres and
   // in kilometres alike.
