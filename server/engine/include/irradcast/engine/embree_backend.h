@@ -78,7 +78,8 @@ class EmbreeBackend final : public TraceBackend {
   glm::vec3 sky_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced) const;
   // Texel i's direct irradiance from the area lights: the mean of direct_samples
   // LightSampler::direct_sample estimates of the lights in front of it, stratified in the light
-  // pick; the shadow rays it traced are added to *traced.
+  // pick (LightSampler::direct_samples), their shadow rays traced 8 to a packet
+  // (RayScene::occluded8); the shadow rays it traced are added to *traced.
   glm::vec3 area_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced) const;
 
   const RayScene* rays_;
