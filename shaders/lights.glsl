@@ -52,21 +52,12 @@ vec3 emission_at(uint k, vec2 b) {
   return e;
 }
 
-// LightSampler::area_irradiance: a triangle picked by power, a uniform point on it.
-vec3 area_irradiance(vec3 p, vec3 n, vec3 ng, vec3 u) {
-  uint lo = 0u, hi = pc.emissive_count;
-  while (lo < hi) {
-    uint mid = (lo + hi) / 2u;
-    if (emissive[7 * mid + 4].x > u.x)
-      hi = mid;
-    else
-      lo = mid + 1u;
-  }
-  uint k = min(lo, pc.emissive_count - 1u);
+// LightSampler::triangle_sample and its shadow ray: a uniform point (u) on emissive triangle k,
+// picked with probability pick_pdf; rays counts the shadow rays traced.
+vec3 area_sample(vec3 p, vec3 n, vec3 ng, uint k, float pick_pdf, vec2 u, inout float rays) {
   vec4 p0 = emissive[7 * k], e1 = emissive[7 * k + 1], e2 = emissive[7 * k + 2],
        nrm = emissive[7 * k + 3];
-  float pick_pdf = emissive[7 * k + 4].y;
-  vec2 b = uniform_triangle(u.yz);
+  vec2 b = uniform_triangle(u);
   vec3 y = p0.xyz + b.x * e1.xyz + b.y * e2.xyz;
   vec3 d = y - p;
   float dist2 = dot(d, d);
@@ -82,6 +73,23 @@ vec3 area_irradiance(vec3 p, vec3 n, vec3 ng, vec3 u) {
   vec3 to_light = y - o;
   float len = length(to_light);
   float tmax = len - pc.epsilon;
-  if (tmax > 0.0 && occluded(o, to_light / len, tmax)) return vec3(0.0);
+  if (tmax > 0.0) {
+    rays += 1.0;
+    if (occluded(o, to_light / len, tmax)) return vec3(0.0);
+  }
   return emission_at(k, b) * (cos_x * cos_y * nrm.w / dist2) / pick_pdf;
+}
+
+// LightSampler::area_irradiance: a triangle picked by power, a uniform point on it.
+vec3 area_irradiance(vec3 p, vec3 n, vec3 ng, vec3 u, inout float rays) {
+  uint lo = 0u, hi = pc.emissive_count;
+  while (lo < hi) {
+    uint mid = (lo + hi) / 2u;
+    if (emissive[7 * mid + 4].x > u.x)
+      hi = mid;
+    else
+      lo = mid + 1u;
+  }
+  uint k = min(lo, pc.emissive_count - 1u);
+  return area_sample(p, n, ng, k, emissive[7 * k + 4].y, u.yz, rays);
 }

@@ -20,7 +20,8 @@ vec3 lights_direct(vec3 p, vec3 n, vec3 ng, inout uint rng, inout float rays) {
   rays += float(pc.punctual_count);
   if ((pc.flags & FLAG_AREA) != 0u) {
     vec2 a = next_2d(rng);
-    e += area_irradiance(p, n, ng, vec3(a, next_float(rng)));
+    float traced = 0.0;  // counted as one ray per sample, as before
+    e += area_irradiance(p, n, ng, vec3(a, next_float(rng)), traced);
     rays += 1.0;
   }
   if ((pc.flags & FLAG_SKY) != 0u) {

@@ -366,7 +366,14 @@ TEST(VulkanBackend, ReportsItsDeviceAndRays) {
   EXPECT_NE(v->describe().find(v->device().name), std::string::npos);
   auto engine = s.engine(EngineParams{}, std::move(backend));
   UpdateStats st = engine->update();
-  EXPECT_EQ(st.direct.rays, engine->texel_count() * 8u);  // 8 area-light samples, no punctual
+  // The area-light shadow rays traced (no punctual lights): 8 per texel that has the light in
+  // front of it, none for the others (the ceiling); the CPU backend counts the same rays up to
+  // the few samples whose point falls behind a texel that sees part of the light.
+  EXPECT_LT(st.direct.rays, engine->texel_count() * 8u);
+  EXPECT_GT(st.direct.rays, engine->texel_count() * 4u);
+  const std::uint64_t cpu_rays = s.engine(EngineParams{})->update().direct.rays;
+  EXPECT_NEAR(static_cast<double>(st.direct.rays), static_cast<double>(cpu_rays),
+              0.02 * static_cast<double>(cpu_rays));
   ASSERT_EQ(st.scatter.size(), 2u);
   EXPECT_EQ(st.scatter[0].rays, engine->texel_count() * 10u);
   EXPECT_GT(st.probes[0].rays, 0u);

@@ -39,11 +39,18 @@ for side in "AB":
                 verify = max(m["verify_max_abs_diff"] for m in ms)
                 rows.setdefault((scene["scene"], p), {}).setdefault(side, []).append(
                     (raw / eng, eng, verify))
+                # the direct pass's rays also through raw rtcOccluded8 in the engine's packets
+                packets = sum(m.get("raw_packet_s_min", 0.0) for m in ms)
+                if packets > 0:
+                    rows.setdefault((scene["scene"], p + "/pkt"), {}).setdefault(side, []).append(
+                        (packets / eng, eng, verify))
 print(f"{'scene':10} {'pass':8} {'A engine/raw':>22} {'B engine/raw':>22} {'engine ms A -> B':>22}")
+print("(direct/pkt: engine / raw rtcOccluded8 on the same rays in the engine's packets of 8;"
+      " '-': a build without that timing)")
 for (scene, p), s in rows.items():
-    f = lambda side: ", ".join(f"{x[0] * 100:.1f} %" for x in s[side])
-    ms = lambda side: sum(x[1] for x in s[side]) / len(s[side]) * 1e3
-    v = max(x[2] for side in "AB" for x in s[side])
+    f = lambda side: ", ".join(f"{x[0] * 100:.1f} %" for x in s[side]) if side in s else "-"
+    ms = lambda side: sum(x[1] for x in s[side]) / len(s[side]) * 1e3 if side in s else float("nan")
+    v = max(x[2] for side in s for x in s[side])
     print(f"{scene:10} {p:8} {f('A'):>22} {f('B'):>22} {ms('A'):9.1f} -> {ms('B'):7.1f}"
           f"  ({(ms('B') / ms('A') - 1) * 100:+.1f} %, verify {v:g})")
 PY

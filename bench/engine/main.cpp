@@ -90,7 +90,7 @@ void report_passes(const std::vector<PassRow>& rows, json& result) {
   result["pass_table"] = table;
   std::printf(
       "rays(eng): what the pass reports; rays(trc): rays actually traced (the direct pass "
-      "counts light samples, not shadow rays).\nMr/s: traced rays per second; eng/raw = "
+      "counts every punctual light's ray, traced or not).\nMr/s: traced rays per second; eng/raw = "
       "engine throughput / raw Embree throughput on the same rays; RS = through RayScene.\n"
       "hit: rays occluded (direct) or hitting within their tmax (probes, scatter); a scatter "
       "miss reads one probe, picked by weight.\nverify: max |regenerated-ray shading - pass "

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <cmath>
 #include <memory>
+#include <utility>
 
 #include "bench_util.h"
 #include "engine_bench.h"
@@ -65,6 +66,9 @@ struct Capture {
   std::vector<LightSample> samples;
   // Gather / scatter: the output entry each ray belongs to (probe texel / surface texel).
   std::vector<std::uint32_t> owner;
+  // Direct pass: the area lights' shadow rays in packets of up to 8 as the engine groups them (a
+  // texel's traced rays, per batch of 16 samples, 8 at a time): first ray and count.
+  std::vector<std::pair<std::size_t, int>> packets;
 };
 
 // Texels in the order the backend's for_each_texel visits them (units in dispatch order).
@@ -90,15 +94,27 @@ Capture capture_direct(const RayScene& rays, const LightSampler& lights, const P
       c.rays.push_back(to_raw(s.shadow));
     }
     if (!area) return;
+    LightSampler::FrontLights front;
+    const bool culled = lights.front_lights(p, nrm, front);
+    if (culled && front.count == 0) return;
     Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
+    int packet_rays = 0, packet_batch = -1;  // the current packet's rays and sample batch
     for (int k = 0; k < n; ++k) {
       float pick = (static_cast<float>(k) + rng.next_float()) / static_cast<float>(n);
       glm::vec2 pos = rng.next_2d();
-      const std::size_t li = lights.pick_triangle(pick);
-      if (!lights.triangle_sample(rays, li, p, nrm, ng, pos, s)) continue;
-      glm::vec3 w = lights.triangle_emitted(s) / lights.pick_pdf()[li];
+      glm::vec3 w;
+      if (!lights.direct_sample(rays, culled ? &front : nullptr, p, nrm, ng, glm::vec3(pick, pos),
+                                s, w))
+        continue;
       std::int32_t index = -1;
       if (s.shadow.tmax > 0.0f) {
+        if (packet_rays == 8 || packet_batch != k / 16) {  // a batch of 16 samples starts anew
+          c.packets.push_back({c.rays.size(), 0});
+          packet_rays = 0;
+          packet_batch = k / 16;
+        }
+        ++packet_rays;
+        ++c.packets.back().second;
         index = static_cast<std::int32_t>(c.rays.size());
         c.rays.push_back(to_raw(s.shadow));
       }
@@ -193,6 +209,45 @@ std::uint64_t trace_raw(RTCScene scene, const Capture& c) {
   return hits.load();
 }
 
+// The direct pass's rays through raw rtcOccluded8, in the engine's packets (Capture::packets).
+std::uint64_t trace_raw_packets(RTCScene scene, const Capture& c) {
+  std::atomic<std::uint64_t> hits{0};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.packets.size(), 32),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      std::uint64_t local = 0;
+                      for (std::size_t p = r.begin(); p < r.end(); ++p) {
+                        const std::size_t first = c.packets[p].first;
+                        const std::size_t end =
+                            first + static_cast<std::size_t>(c.packets[p].second);
+                        alignas(32) int valid[8];
+                        alignas(32) RTCRay8 ray;
+                        for (std::size_t i = 0; i < 8; ++i) {
+                          const RawRay& s = c.rays[first + i < end ? first + i : first];
+                          valid[i] = first + i < end ? -1 : 0;
+                          ray.org_x[i] = s.org.x;
+                          ray.org_y[i] = s.org.y;
+                          ray.org_z[i] = s.org.z;
+                          ray.tnear[i] = s.tmin;
+                          ray.dir_x[i] = s.dir.x;
+                          ray.dir_y[i] = s.dir.y;
+                          ray.dir_z[i] = s.dir.z;
+                          ray.time[i] = 0.0f;
+                          ray.tfar[i] = s.tmax;
+                          ray.mask[i] = 0xFFFFFFFFu;
+                          ray.id[i] = 0;
+                          ray.flags[i] = 0;
+                        }
+                        RTCIntersectContext ctx;
+                        rtcInitIntersectContext(&ctx);
+                        ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+                        rtcOccluded8(valid, scene, &ctx, &ray);
+                        for (std::size_t i = 0; first + i < end; ++i) local += ray.tfar[i] < 0.0f;
+                      }
+                      hits += local;
+                    });
+  return hits.load();
+}
+
 std::uint64_t trace_rayscene(const RayScene& scene, const Capture& c) {
   std::atomic<std::uint64_t> hits{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.rays.size(), 256),
@@ -278,8 +333,9 @@ struct PassMeasure {
   std::uint64_t traced_rays = 0;  // rays actually sent to Embree
   std::uint64_t hits = 0;         // occluded / hit rays (raw and RayScene agree)
   std::vector<double> pipeline_s, rayscene_s, raw_s;
-  double max_abs_diff = 0.0;   // regenerated-ray shading vs the pass's output
-  double max_abs_value = 0.0;  // of the pass's output
+  std::vector<double> raw_packet_s;  // direct: raw rtcOccluded8 in the engine's packets
+  double max_abs_diff = 0.0;         // regenerated-ray shading vs the pass's output
+  double max_abs_value = 0.0;        // of the pass's output
 };
 
 // The largest difference between the pass's output and the shaded regenerated rays.
@@ -370,6 +426,13 @@ class BenchBackend final : public TraceBackend {
       m.rayscene_s.push_back(cpu ? thread_cpu_seconds() - c0 : seconds_since(t0));
       if (raw_hits != scene_hits)
         throw Error(std::string(pass) + ": raw Embree and RayScene disagree on the hits");
+      if (!c.packets.empty()) {
+        t0 = Clock::now();
+        c0 = thread_cpu_seconds();
+        if (trace_raw_packets(scene, c) != raw_hits)
+          throw Error(std::string(pass) + ": raw packets and single rays disagree on the hits");
+        m.raw_packet_s.push_back(cpu ? thread_cpu_seconds() - c0 : seconds_since(t0));
+      }
       m.hits = raw_hits;
     }
     results.push_back(std::move(m));
@@ -399,6 +462,8 @@ json pass_json(const PassMeasure& m) {
           {"pipeline_s", m.pipeline_s},
           {"rayscene_s", m.rayscene_s},
           {"raw_s", m.raw_s},
+          {"raw_packet_s_min", m.raw_packet_s.empty() ? 0.0 : minimum(m.raw_packet_s)},
+          {"raw_packet_s", m.raw_packet_s},
           {"verify_max_abs_diff", m.max_abs_diff},
           {"verify_max_abs_value", m.max_abs_value}};
 }

@@ -312,4 +312,30 @@ void RayScene::intersect8(const Ray* rays, int count, Hit* hits) const {
   }
 }
 
+void RayScene::occluded8(const Ray* rays, int count, bool* blocked) const {
+  alignas(32) int valid[8];
+  alignas(32) RTCRay8 r;
+  for (int i = 0; i < 8; ++i) {
+    const Ray& ray = rays[i < count ? i : 0];
+    valid[i] = i < count ? -1 : 0;
+    r.org_x[i] = ray.origin.x;
+    r.org_y[i] = ray.origin.y;
+    r.org_z[i] = ray.origin.z;
+    r.dir_x[i] = ray.direction.x;
+    r.dir_y[i] = ray.direction.y;
+    r.dir_z[i] = ray.direction.z;
+    r.tnear[i] = ray.tmin;
+    r.tfar[i] = ray.tmax;
+    r.time[i] = 0.0f;
+    r.mask[i] = 0xFFFFFFFFu;
+    r.id[i] = static_cast<unsigned>(i);
+    r.flags[i] = 0;
+  }
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  rtcOccluded8(valid, impl_->scene, &ctx, &r);
+  for (int i = 0; i < count; ++i) blocked[i] = r.tfar[i] < 0.0f;  // -inf on a hit
+}
+
 }  // namespace irradcast

@@ -57,12 +57,10 @@ PassResult VulkanBackend::direct(const PassInput& in, std::vector<glm::vec3>& ou
     PushConstants pc = impl_->constants(in);
     pc.samples = static_cast<std::uint32_t>(in.params.direct_samples);
     const auto items = static_cast<std::uint32_t>(in.unit_texels.size());
-    double sky_rays = 0.0;  // the shader counts them (a map's rays depend on the sample)
-    impl_->run(kDirectPipeline, pc, items, out, in.texels.size(),
-               (pc.flags & kFlagSky) ? &sky_rays : nullptr, &in.unit_texels);
-    return static_cast<std::uint64_t>(in.unit_texels.size()) *
-               (impl_->punctual_count + (impl_->emissive_count > 0 ? pc.samples : 0u)) +
-           static_cast<std::uint64_t>(sky_rays);
+    double traced = 0.0;  // the shader counts the area and sky shadow rays it traced
+    impl_->run(kDirectPipeline, pc, items, out, in.texels.size(), &traced, &in.unit_texels);
+    return static_cast<std::uint64_t>(in.unit_texels.size()) * impl_->punctual_count +
+           static_cast<std::uint64_t>(traced);
   });
 }
 

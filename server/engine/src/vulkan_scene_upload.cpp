@@ -49,7 +49,7 @@ void VulkanBackend::Impl::upload_scene() {
     const EmissiveTriangle& e = tris[k];
     const WorldObject& o = world->objects[e.object];
     const Material& m = world->material(e.object, e.triangle);
-    em.emplace_back(e.p0, 0.0f);
+    em.emplace_back(e.p0, e.reach);  // reach: direct.comp's surely_rejected
     em.emplace_back(e.e1, 0.0f);
     em.emplace_back(e.e2, e.double_sided ? 1.0f : 0.0f);
     em.emplace_back(e.normal, e.area);

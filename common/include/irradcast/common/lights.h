@@ -9,6 +9,7 @@
 #include <glm/glm.hpp>
 
 #include "irradcast/common/ray_scene.h"
+#include "irradcast/common/sampling.h"
 #include "irradcast/common/sky.h"
 #include "irradcast/common/world.h"
 
@@ -81,15 +82,57 @@ class LightSampler {
   // triangle_irradiance before its shadow ray; false: no contribution (no ray).
   bool triangle_sample(const RayScene& rays, std::size_t index, glm::vec3 p, glm::vec3 n,
                        glm::vec3 ng, glm::vec2 u, ShadowSample& s) const;
+
+  // The engine's direct pass picks among the area lights that can light p (normal n) only: every
+  // emissive triangle but those wholly behind p's tangent plane and the one-sided ones p lies
+  // behind (which add exactly 0 at every point), each with its pick probability renormalised
+  // over them. The same expectation as picking among all, no sample drawn in vain, and lower
+  // variance. For scenes with at most kMaxFront emissive triangles (a per-texel list; with more
+  // front_lights returns false and the pass picks among all). shaders/direct.comp mirrors it.
+  static constexpr int kMaxFront = 64;
+  struct FrontLights {
+    int count = 0;
+    float total = 0.0f;              // the sum of their pick probabilities
+    float cdf[kMaxFront];            // cumulative pick probability (not normalised)
+    std::uint32_t index[kMaxFront];  // emissive triangle
+  };
+  bool front_lights(glm::vec3 p, glm::vec3 n, FrontLights& f) const;
+  // One direct-pass sample: u.x picks the light (among *front, or among all when front is null),
+  // (u.y, u.z) place the point; false: no contribution (no ray). Else s's shadow ray and, when
+  // it is unoccluded, `weight` (the emitted irradiance over the pick probability).
+  bool direct_sample(const RayScene& rays, const FrontLights* front, glm::vec3 p, glm::vec3 n,
+                     glm::vec3 ng, glm::vec3 u, ShadowSample& s, glm::vec3& weight) const;
+  // The direct pass's samples first .. first + count - 1 of `samples` at p, stratified in the
+  // pick: sample k's pick is (k + rng) / samples, then two numbers of rng place its point; each
+  // as direct_sample, with lit[k] its result (of s[k] only the shadow ray is set). With front
+  // lights, 4 samples at a time in SIMD lanes: the same operations, so the same bits.
+  void direct_samples(const RayScene& rays, const FrontLights* front, glm::vec3 p, glm::vec3 n,
+                      glm::vec3 ng, Rng& rng, int first, int count, int samples, ShadowSample* s,
+                      glm::vec3* weight, bool* lit) const;
   glm::vec3 triangle_emitted(const ShadowSample& s) const;
   // One punctual light before its shadow ray; false: no contribution (no ray).
   static bool punctual_sample(const RayScene& rays, const WorldLight& l, glm::vec3 p, glm::vec3 n,
                               glm::vec3 ng, ShadowSample& s);
 
  private:
+  // triangle_sample once the triangle is known not to be surely rejected.
+  bool point_sample(const RayScene& rays, std::size_t index, glm::vec3 p, glm::vec3 n, glm::vec3 ng,
+                    glm::vec2 u, ShadowSample& s) const;
+  // Four samples' point_sample and weight in SIMD lanes (the first `lanes` are written).
+  void sample_lanes(const RayScene& rays, glm::vec3 p, glm::vec3 n, glm::vec3 ng,
+                    const std::uint32_t* li, const float* ux, const float* uy, const float* pdf,
+                    int lanes, ShadowSample* s, glm::vec3* weight, bool* lit) const;
+  bool draw_direct(const RayScene& rays, const FrontLights* front, glm::vec3 p, glm::vec3 n,
+                   glm::vec3 ng, glm::vec3 u, ShadowSample& s, glm::vec3& weight) const;
+
   const World* world_;
   std::vector<EmissiveTriangle> triangles_;
-  std::vector<float> cdf_;  // cumulative power, normalised to 1
+  // The triangles for front_lights' test, 4 at a time (structure of arrays), and per group of 4
+  // the bit mask of its one-sided ones.
+  std::vector<float> soa_;
+  std::vector<int> one_sided_;
+  std::vector<float> record_;  // sample_lanes' rows per triangle (lights.cpp's RecordRow)
+  std::vector<float> cdf_;     // cumulative power, normalised to 1
   std::vector<float> pick_pdf_;
   float total_power_ = 0.0f;
   const Sky* sky_ = nullptr;  // the world's scene's sky when enabled

@@ -60,6 +60,8 @@ class RayScene {
   // intersect() of each of the batch's rays, into b.hit: the same hits, in Embree packets of 16
   // where the CPU has AVX-512 (Embree's 16-wide kernels), else one ray at a time.
   void intersect(RayBatch& b) const;
+  // occluded() for up to 8 rays at once (count <= 8), one Embree packet: blocked[i] for ray i.
+  void occluded8(const Ray* rays, int count, bool* blocked) const;
 
   // Offset used to leave a surface: scales with the scene so that it works in millimetres and
   // in kilometres alike.

@@ -91,8 +91,10 @@ class EmbreeBackend final : public TraceBackend {
   // estimates); adds the rays it traced to *traced.
   glm::vec3 sky_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced) const;
   // Texel i's direct irradiance from the area lights: the mean of direct_samples
-  // area_irradiance estimates, stratified in the light pick.
-  glm::vec3 area_direct(const PassInput& in, std::uint32_t i) const;
+  // LightSampler::direct_sample estimates of the lights in front of it, stratified in the light
+  // pick (LightSampler::direct_samples), their shadow rays traced 8 to a packet
+  // (RayScene::occluded8); the shadow rays it traced are added to *traced.
+  glm::vec3 area_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced) const;
 
   const RayScene* rays_;
   const LightSampler* lights_;
