@@ -39,14 +39,14 @@ for side in "AB":
                 verify = max(m["verify_max_abs_diff"] for m in ms)
                 rows.setdefault((scene["scene"], p), {}).setdefault(side, []).append(
                     (raw / eng, eng, verify))
-                # the direct pass's rays also through raw rtcOccluded8 in the engine's packets
+                # the rays also through raw Embree in the engine's packets
                 packets = sum(m.get("raw_packet_s_min", 0.0) for m in ms)
                 if packets > 0:
                     rows.setdefault((scene["scene"], p + "/pkt"), {}).setdefault(side, []).append(
                         (packets / eng, eng, verify))
 print(f"{'scene':10} {'pass':8} {'A engine/raw':>22} {'B engine/raw':>22} {'engine ms A -> B':>22}")
-print("(direct/pkt: engine / raw rtcOccluded8 on the same rays in the engine's packets of 8;"
-      " '-': a build without that timing)")
+print("(direct/pkt, scatter/pkt: engine / raw rtcOccluded8 / rtcIntersect16 on the same rays in"
+      " the engine's packets of 8 / 16; '-': a build without that timing)")
 for (scene, p), s in rows.items():
     f = lambda side: ", ".join(f"{x[0] * 100:.1f} %" for x in s[side]) if side in s else "-"
     ms = lambda side: sum(x[1] for x in s[side]) / len(s[side]) * 1e3 if side in s else float("nan")

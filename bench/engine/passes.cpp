@@ -66,8 +66,9 @@ struct Capture {
   std::vector<LightSample> samples;
   // Gather / scatter: the output entry each ray belongs to (probe texel / surface texel).
   std::vector<std::uint32_t> owner;
-  // Direct pass: the area lights' shadow rays in packets of up to 8 as the engine groups them (a
-  // texel's traced rays, per batch of 16 samples, 8 at a time): first ray and count.
+  // The packets the engine traces (first ray and count). Direct pass: the area lights' shadow
+  // rays in packets of up to 8 (a texel's traced rays, per batch of 16 samples, 8 at a time).
+  // Scatter (where the CPU has AVX-512): a texel's rays 16 at a time.
   std::vector<std::pair<std::size_t, int>> packets;
 };
 
@@ -145,6 +146,7 @@ Capture capture_probes(const PassInput& in) {
 Capture capture_scatter(const RayScene& rays, const PassInput& in) {
   Capture c;
   const int n = in.params.indirect_samples;
+  const bool packets = __builtin_cpu_supports("avx512f");
   c.rays.reserve(in.texels.size() * static_cast<std::size_t>(n));
   for_each_texel_in_order(in, [&](std::uint32_t i) {
     const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
@@ -153,6 +155,10 @@ Capture capture_scatter(const RayScene& rays, const PassInput& in) {
     const float range = scatter_range(in, i);
     Frame frame(nrm);
     for (int s = 0; s < n; ++s) {
+      // The engine's packets where it traces them (RayScene::intersect(RayBatch&)): 16 at a time
+      // within each batch of 32 of a texel's rays.
+      if (packets && s % 16 == 0) c.packets.push_back({c.rays.size(), 0});
+      if (packets) ++c.packets.back().second;
       glm::vec3 dir = frame.to_world(cosine_hemisphere_fast(rng.next_2d()));
       c.rays.push_back({rays.offset(p, ng, dir), 0.0f, dir, range});
       c.owner.push_back(i);
@@ -209,8 +215,50 @@ std::uint64_t trace_raw(RTCScene scene, const Capture& c) {
   return hits.load();
 }
 
+// The scatter pass's rays through raw rtcIntersect16, in the engine's packets (Capture::packets).
+std::uint64_t trace_raw_packets16(RTCScene scene, const Capture& c) {
+  std::atomic<std::uint64_t> hits{0};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.packets.size(), 32),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      std::uint64_t local = 0;
+                      RTCIntersectContext ctx;
+                      rtcInitIntersectContext(&ctx);
+                      for (std::size_t p = r.begin(); p < r.end(); ++p) {
+                        const std::size_t first = c.packets[p].first;
+                        const std::size_t end =
+                            first + static_cast<std::size_t>(c.packets[p].second);
+                        alignas(64) int valid[16];
+                        alignas(64) RTCRayHit16 rh;
+                        for (std::size_t i = 0; i < 16; ++i) {
+                          const RawRay& s = c.rays[first + i < end ? first + i : first];
+                          valid[i] = first + i < end ? -1 : 0;
+                          rh.ray.org_x[i] = s.org.x;
+                          rh.ray.org_y[i] = s.org.y;
+                          rh.ray.org_z[i] = s.org.z;
+                          rh.ray.tnear[i] = s.tmin;
+                          rh.ray.dir_x[i] = s.dir.x;
+                          rh.ray.dir_y[i] = s.dir.y;
+                          rh.ray.dir_z[i] = s.dir.z;
+                          rh.ray.time[i] = 0.0f;
+                          rh.ray.tfar[i] = s.tmax;
+                          rh.ray.mask[i] = 0xFFFFFFFFu;
+                          rh.ray.id[i] = 0;
+                          rh.ray.flags[i] = 0;
+                          rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+                          rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+                        }
+                        rtcIntersect16(valid, scene, &ctx, &rh);
+                        for (std::size_t i = 0; first + i < end; ++i)
+                          local += rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+                      }
+                      hits += local;
+                    });
+  return hits.load();
+}
+
 // The direct pass's rays through raw rtcOccluded8, in the engine's packets (Capture::packets).
 std::uint64_t trace_raw_packets(RTCScene scene, const Capture& c) {
+  if (c.kind != Kind::Occlusion) return trace_raw_packets16(scene, c);
   std::atomic<std::uint64_t> hits{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, c.packets.size(), 32),
                     [&](const tbb::blocked_range<std::size_t>& r) {
@@ -333,9 +381,10 @@ struct PassMeasure {
   std::uint64_t traced_rays = 0;  // rays actually sent to Embree
   std::uint64_t hits = 0;         // occluded / hit rays (raw and RayScene agree)
   std::vector<double> pipeline_s, rayscene_s, raw_s;
-  std::vector<double> raw_packet_s;  // direct: raw rtcOccluded8 in the engine's packets
-  double max_abs_diff = 0.0;         // regenerated-ray shading vs the pass's output
-  double max_abs_value = 0.0;        // of the pass's output
+  // raw Embree in the engine's packets: direct rtcOccluded8, scatter rtcIntersect16 (AVX-512)
+  std::vector<double> raw_packet_s;
+  double max_abs_diff = 0.0;   // regenerated-ray shading vs the pass's output
+  double max_abs_value = 0.0;  // of the pass's output
 };
 
 // The largest difference between the pass's output and the shaded regenerated rays.
