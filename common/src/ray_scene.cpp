@@ -201,6 +201,36 @@ Hit RayScene::intersect(const Ray& ray) const {
 
 namespace {
 
+// Lane l of an Embree ray packet (RTCRay8 / RTCRay16): from o along d over [tmin, tmax].
+template <typename RayN>
+void set_lane(RayN& r, int l, glm::vec3 o, glm::vec3 d, float tmin, float tmax, unsigned id) {
+  r.org_x[l] = o.x;
+  r.org_y[l] = o.y;
+  r.org_z[l] = o.z;
+  r.tnear[l] = tmin;
+  r.dir_x[l] = d.x;
+  r.dir_y[l] = d.y;
+  r.dir_z[l] = d.z;
+  r.time[l] = 0.0f;
+  r.tfar[l] = tmax;
+  r.mask[l] = 0xFFFFFFFFu;
+  r.id[l] = id;
+  r.flags[l] = 0;
+}
+
+// Lane l of a traced ray/hit packet (RTCRayHit8 / RTCRayHit16) as a Hit.
+template <typename RayHitN>
+Hit lane_hit(const RayHitN& rh, int l) {
+  Hit h;
+  if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) return h;
+  h.object = static_cast<int>(rh.hit.geomID[l]);
+  h.triangle = rh.hit.primID[l];
+  h.u = rh.hit.u[l];
+  h.v = rh.hit.v[l];
+  h.t = rh.ray.tfar[l];
+  return h;
+}
+
 // Rays first .. first + 16 of b (those below b.count) as one Embree packet.
 void intersect16(RTCScene scene, RTCIntersectContext& ctx, RayBatch& b, int first) {
   alignas(64) int valid[16];
@@ -208,32 +238,13 @@ void intersect16(RTCScene scene, RTCIntersectContext& ctx, RayBatch& b, int firs
   for (int l = 0; l < 16; ++l) {
     const int i = first + l < b.count ? first + l : first;
     valid[l] = first + l < b.count ? -1 : 0;
-    rh.ray.org_x[l] = b.ox[i];
-    rh.ray.org_y[l] = b.oy[i];
-    rh.ray.org_z[l] = b.oz[i];
-    rh.ray.tnear[l] = 0.0f;
-    rh.ray.dir_x[l] = b.dx[i];
-    rh.ray.dir_y[l] = b.dy[i];
-    rh.ray.dir_z[l] = b.dz[i];
-    rh.ray.time[l] = 0.0f;
-    rh.ray.tfar[l] = b.tmax;
-    rh.ray.mask[l] = 0xFFFFFFFFu;
-    rh.ray.id[l] = 0;
-    rh.ray.flags[l] = 0;
+    set_lane(rh.ray, l, glm::vec3(b.ox[i], b.oy[i], b.oz[i]), glm::vec3(b.dx[i], b.dy[i], b.dz[i]),
+             0.0f, b.tmax, 0u);
     rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
   }
   rtcIntersect16(valid, scene, &ctx, &rh);
-  for (int l = 0; l < 16 && first + l < b.count; ++l) {
-    Hit& h = b.hit[first + l];
-    h = Hit{};
-    if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) continue;
-    h.object = static_cast<int>(rh.hit.geomID[l]);
-    h.triangle = rh.hit.primID[l];
-    h.u = rh.hit.u[l];
-    h.v = rh.hit.v[l];
-    h.t = rh.ray.tfar[l];
-  }
+  for (int l = 0; l < 16 && first + l < b.count; ++l) b.hit[first + l] = lane_hit(rh, l);
 }
 
 }  // namespace
@@ -281,18 +292,7 @@ void RayScene::intersect8(const Ray* rays, int count, Hit* hits) const {
   for (int i = 0; i < 8; ++i) {
     const Ray& r = rays[i < count ? i : 0];
     valid[i] = i < count ? -1 : 0;
-    rh.ray.org_x[i] = r.origin.x;
-    rh.ray.org_y[i] = r.origin.y;
-    rh.ray.org_z[i] = r.origin.z;
-    rh.ray.dir_x[i] = r.direction.x;
-    rh.ray.dir_y[i] = r.direction.y;
-    rh.ray.dir_z[i] = r.direction.z;
-    rh.ray.tnear[i] = r.tmin;
-    rh.ray.tfar[i] = r.tmax;
-    rh.ray.time[i] = 0.0f;
-    rh.ray.mask[i] = 0xFFFFFFFFu;
-    rh.ray.id[i] = static_cast<unsigned>(i);
-    rh.ray.flags[i] = 0;
+    set_lane(rh.ray, i, r.origin, r.direction, r.tmin, r.tmax, static_cast<unsigned>(i));
     rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
   }
@@ -300,16 +300,7 @@ void RayScene::intersect8(const Ray* rays, int count, Hit* hits) const {
   rtcInitIntersectContext(&ctx);
   ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   rtcIntersect8(valid, impl_->scene, &ctx, &rh);
-  for (int i = 0; i < count; ++i) {
-    Hit& h = hits[i];
-    h = Hit{};
-    if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
-    h.object = static_cast<int>(rh.hit.geomID[i]);
-    h.triangle = rh.hit.primID[i];
-    h.u = rh.hit.u[i];
-    h.v = rh.hit.v[i];
-    h.t = rh.ray.tfar[i];
-  }
+  for (int i = 0; i < count; ++i) hits[i] = lane_hit(rh, i);
 }
 
 void RayScene::occluded8(const Ray* rays, int count, bool* blocked) const {
@@ -318,18 +309,7 @@ void RayScene::occluded8(const Ray* rays, int count, bool* blocked) const {
   for (int i = 0; i < 8; ++i) {
     const Ray& ray = rays[i < count ? i : 0];
     valid[i] = i < count ? -1 : 0;
-    r.org_x[i] = ray.origin.x;
-    r.org_y[i] = ray.origin.y;
-    r.org_z[i] = ray.origin.z;
-    r.dir_x[i] = ray.direction.x;
-    r.dir_y[i] = ray.direction.y;
-    r.dir_z[i] = ray.direction.z;
-    r.tnear[i] = ray.tmin;
-    r.tfar[i] = ray.tmax;
-    r.time[i] = 0.0f;
-    r.mask[i] = 0xFFFFFFFFu;
-    r.id[i] = static_cast<unsigned>(i);
-    r.flags[i] = 0;
+    set_lane(r, i, ray.origin, ray.direction, ray.tmin, ray.tmax, static_cast<unsigned>(i));
   }
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);

@@ -146,20 +146,11 @@ void for_each_texel_run(const PassInput& in, Body&& body) {
 template <typename Body>
 std::uint64_t for_each_texel(const PassInput& in, Body&& body) {
   std::atomic<std::uint64_t> rays{0};
-  const std::size_t units = in.unit_offsets.empty() ? 0 : in.unit_offsets.size() - 1;
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, units, 1), [&](const tbb::blocked_range<std::size_t>& ur) {
-        for (std::size_t u = ur.begin(); u < ur.end(); ++u) {
-          tbb::parallel_for(
-              tbb::blocked_range<std::uint32_t>(in.unit_offsets[u], in.unit_offsets[u + 1], 256),
-              [&](const tbb::blocked_range<std::uint32_t>& r) {
-                std::uint64_t local = 0;
-                for (std::uint32_t k = r.begin(); k < r.end(); ++k)
-                  local += body(in.unit_texels[k]);
-                rays += local;
-              });
-        }
-      });
+  for_each_texel_run(in, [&](const std::uint32_t* run, std::size_t size) {
+    std::uint64_t local = 0;
+    for (std::size_t k = 0; k < size; ++k) local += body(run[k]);
+    rays += local;
+  });
   return rays.load();
 }
 
