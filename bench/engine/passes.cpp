@@ -215,6 +215,28 @@ std::uint64_t trace_raw(RTCScene scene, const Capture& c) {
   return hits.load();
 }
 
+// Lanes 0 .. N of a raw Embree packet (RTCRay8 / RTCRay16) from rays first .. end of c (the
+// lanes past end repeat the first ray and are marked invalid).
+template <int N, typename RayN>
+void fill_packet(const Capture& c, std::size_t first, std::size_t end, int* valid, RayN& ray) {
+  for (std::size_t i = 0; i < static_cast<std::size_t>(N); ++i) {
+    const RawRay& s = c.rays[first + i < end ? first + i : first];
+    valid[i] = first + i < end ? -1 : 0;
+    ray.org_x[i] = s.org.x;
+    ray.org_y[i] = s.org.y;
+    ray.org_z[i] = s.org.z;
+    ray.tnear[i] = s.tmin;
+    ray.dir_x[i] = s.dir.x;
+    ray.dir_y[i] = s.dir.y;
+    ray.dir_z[i] = s.dir.z;
+    ray.time[i] = 0.0f;
+    ray.tfar[i] = s.tmax;
+    ray.mask[i] = 0xFFFFFFFFu;
+    ray.id[i] = 0;
+    ray.flags[i] = 0;
+  }
+}
+
 // The scatter pass's rays through raw rtcIntersect16, in the engine's packets (Capture::packets).
 std::uint64_t trace_raw_packets16(RTCScene scene, const Capture& c) {
   std::atomic<std::uint64_t> hits{0};
@@ -229,21 +251,8 @@ std::uint64_t trace_raw_packets16(RTCScene scene, const Capture& c) {
                             first + static_cast<std::size_t>(c.packets[p].second);
                         alignas(64) int valid[16];
                         alignas(64) RTCRayHit16 rh;
-                        for (std::size_t i = 0; i < 16; ++i) {
-                          const RawRay& s = c.rays[first + i < end ? first + i : first];
-                          valid[i] = first + i < end ? -1 : 0;
-                          rh.ray.org_x[i] = s.org.x;
-                          rh.ray.org_y[i] = s.org.y;
-                          rh.ray.org_z[i] = s.org.z;
-                          rh.ray.tnear[i] = s.tmin;
-                          rh.ray.dir_x[i] = s.dir.x;
-                          rh.ray.dir_y[i] = s.dir.y;
-                          rh.ray.dir_z[i] = s.dir.z;
-                          rh.ray.time[i] = 0.0f;
-                          rh.ray.tfar[i] = s.tmax;
-                          rh.ray.mask[i] = 0xFFFFFFFFu;
-                          rh.ray.id[i] = 0;
-                          rh.ray.flags[i] = 0;
+                        fill_packet<16>(c, first, end, valid, rh.ray);
+                        for (int i = 0; i < 16; ++i) {
                           rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
                           rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
                         }
@@ -269,22 +278,7 @@ std::uint64_t trace_raw_packets(RTCScene scene, const Capture& c) {
                             first + static_cast<std::size_t>(c.packets[p].second);
                         alignas(32) int valid[8];
                         alignas(32) RTCRay8 ray;
-                        for (std::size_t i = 0; i < 8; ++i) {
-                          const RawRay& s = c.rays[first + i < end ? first + i : first];
-                          valid[i] = first + i < end ? -1 : 0;
-                          ray.org_x[i] = s.org.x;
-                          ray.org_y[i] = s.org.y;
-                          ray.org_z[i] = s.org.z;
-                          ray.tnear[i] = s.tmin;
-                          ray.dir_x[i] = s.dir.x;
-                          ray.dir_y[i] = s.dir.y;
-                          ray.dir_z[i] = s.dir.z;
-                          ray.time[i] = 0.0f;
-                          ray.tfar[i] = s.tmax;
-                          ray.mask[i] = 0xFFFFFFFFu;
-                          ray.id[i] = 0;
-                          ray.flags[i] = 0;
-                        }
+                        fill_packet<8>(c, first, end, valid, ray);
                         RTCIntersectContext ctx;
                         rtcInitIntersectContext(&ctx);
                         ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
