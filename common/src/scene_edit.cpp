@@ -369,6 +369,61 @@ EditEffect apply_edit(Scene& scene, const SceneEdit& edit) {
   return effect;
 }
 
+SceneEdit state_edit(const Scene& from, const Scene& to) {
+  if (from.nodes.size() != to.nodes.size() || from.lights.size() != to.lights.size() ||
+      from.materials.size() != to.materials.size())
+    throw Error("state edit: the two scenes differ in their nodes, lights or materials");
+  SceneEdit edit;
+  auto add = [&edit](Kind kind, std::size_t i) -> EditOp& {
+    EditOp& op = edit.ops.emplace_back();
+    op.kind = kind;
+    op.target = "#" + std::to_string(i);
+    return op;
+  };
+  for (std::size_t i = 0; i < to.nodes.size(); ++i) {
+    const Node& a = from.nodes[i];
+    const Node& b = to.nodes[i];
+    if (a.local != b.local) add(Kind::SetTransform, i).matrix = b.local;
+    if (a.visible != b.visible) add(b.visible ? Kind::Show : Kind::Hide, i);
+  }
+  for (std::size_t i = 0; i < to.lights.size(); ++i) {
+    const Light& a = from.lights[i];
+    const Light& b = to.lights[i];
+    if (a.color != b.color) add(Kind::LightColor, i).vector = b.color;
+    if (a.intensity != b.intensity) add(Kind::LightIntensity, i).value = b.intensity;
+  }
+  for (std::size_t i = 0; i < to.materials.size(); ++i) {
+    const Material& a = from.materials[i];
+    const Material& b = to.materials[i];
+    if (a.base_color != b.base_color) add(Kind::MaterialAlbedo, i).vector = b.base_color;
+    if (a.emissive != b.emissive || a.emissive_strength != b.emissive_strength) {
+      EditOp& op = add(Kind::MaterialEmission, i);
+      op.vector = b.emissive;
+      op.value = b.emissive_strength;
+    }
+  }
+  const Sky& a = from.sky;
+  const Sky& b = to.sky;
+  const bool same_map = a.map.width == b.map.width && a.map.height == b.map.height &&
+                        a.map.pixels == b.map.pixels && a.source == b.source;
+  if (a.color != b.color || a.strength != b.strength || !same_map) {
+    EditOp op;
+    op.kind = Kind::Sky;
+    op.value = b.strength;
+    op.sky_parts = EditOp::kSkyStrength;
+    if (b.map.width > 0) {
+      op.sky_parts |= EditOp::kSkyFile;
+      op.target = b.source;
+      op.sky_map = std::make_shared<const ImageRGB>(b.map);
+    } else {
+      op.sky_parts |= EditOp::kSkyColor;
+      op.vector = b.color;
+    }
+    edit.ops.push_back(std::move(op));
+  }
+  return edit;
+}
+
 // ---------------------------------------------------------------------------------------------
 // JSON
 

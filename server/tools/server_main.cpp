@@ -33,6 +33,8 @@ struct Options {
   std::string scene = "cornell";
   std::string scene_root;
   std::string sky_dir;
+  std::string state_dir;
+  std::uint32_t journal_compact_after = 1000;
   float detail = 1.0f;
   int threads = 0;
   int tile_size = 32;
@@ -76,6 +78,8 @@ int run(const Options& o, const sigset_t& signals) {
   ho.engine_nice = o.engine_nice;
   ho.max_updates = o.max_updates;
   ho.sky_dir = o.sky_dir;
+  ho.state_dir = o.state_dir;
+  ho.journal_compact_after = o.journal_compact_after;
   EngineHost host(load_lit_scene(o), o.scene, ho);
 
   const ServerOptions so = o.net.server_options(token, "server");
@@ -180,6 +184,14 @@ int main(int argc, char** argv) {
                  "folder that sky edits may name EXR maps in (default: none, file sky edits are "
                  "refused; docs/EDITS.md)")
       ->check(CLI::ExistingDirectory);
+  app.add_option("--state-dir", o.state_dir,
+                 "keep every accepted edit in this folder's journal (fsynced before it is "
+                 "acknowledged) and replay it when started again on the same scene "
+                 "(docs/EDITS.md#durable-edits; default: edits are lost with the process)")
+      ->default_str("none");
+  app.add_option("--journal-compact-after", o.journal_compact_after,
+                 "rewrite the edit journal as one snapshot once it holds this many edits "
+                 "(0 = never)");
   o.net.add_to(app);
   app.add_option("--nats", o.nats,
                  "also publish the scene, its tiles, edits and stats to this NATS server "

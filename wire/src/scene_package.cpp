@@ -471,22 +471,32 @@ UnpackedScene from_proto(const SceneData& d) {
 
 }  // namespace
 
-ScenePackage make_scene_package(const Scene& scene, const Atlas& atlas, std::uint64_t revision) {
-  validate_scene(scene);
-  validate_layout(scene, atlas);
-  const SceneData data = to_proto(scene, atlas, revision);
+namespace {
+// `data` serialized deterministically (the same scene gives the same bytes, so the same hash).
+std::string serialize_deterministic(const SceneData& data) {
   const std::size_t size = data.ByteSizeLong();
   if (size > kMaxSceneDataBytes)
     fail("the scene is too large to send (" + std::to_string(size) + " bytes, limit " +
          std::to_string(kMaxSceneDataBytes) + ")");
   std::string raw(size, '\0');
-  {
-    google::protobuf::io::ArrayOutputStream array(raw.data(), static_cast<int>(size));
-    google::protobuf::io::CodedOutputStream coded(&array);
-    coded.SetSerializationDeterministic(true);
-    data.SerializeWithCachedSizes(&coded);
-    if (coded.HadError()) fail("serialization failed");
-  }
+  google::protobuf::io::ArrayOutputStream array(raw.data(), static_cast<int>(size));
+  google::protobuf::io::CodedOutputStream coded(&array);
+  coded.SetSerializationDeterministic(true);
+  data.SerializeWithCachedSizes(&coded);
+  if (coded.HadError()) fail("serialization failed");
+  return raw;
+}
+}  // namespace
+
+std::string scene_content_hash(const Scene& scene) {
+  validate_scene(scene);
+  return sha256(serialize_deterministic(to_proto(scene, Atlas{}, 0)));
+}
+
+ScenePackage make_scene_package(const Scene& scene, const Atlas& atlas, std::uint64_t revision) {
+  validate_scene(scene);
+  validate_layout(scene, atlas);
+  const std::string raw = serialize_deterministic(to_proto(scene, atlas, revision));
   ZSTD_CCtx* ctx = ZSTD_createCCtx();
   if (!ctx) fail("out of memory (zstd)");
   ZSTD_CCtx_setParameter(ctx, ZSTD_c_compressionLevel, kSceneZstdLevel);

@@ -79,6 +79,7 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
       options_(options),
       prepared_(prepare(std::move(scene), scene_id_, options_)),
       impl_(std::make_unique<Impl>()) {
+  const std::uint64_t replayed = options_.state_dir.empty() ? 0 : replay_journal();
   const PreparedScene& p = prepared_;
   BackendChoice backend = make_backend(options_.backend, p.world(), p.rays(), p.lights());
   backend_ = backend.reason;
@@ -88,8 +89,8 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
   std::vector<std::pair<int, int>> sizes;
   for (const ObjectLightmap& o : p.atlas().objects) sizes.emplace_back(o.width, o.height);
   tiles_ = std::make_unique<TileStore>(sizes, options_.tiles);
-  package_ =
-      std::make_shared<const wire::ScenePackage>(wire::make_scene_package(p.scene(), p.atlas()));
+  package_ = std::make_shared<const wire::ScenePackage>(
+      wire::make_scene_package(p.scene(), p.atlas(), replayed));
   validation_scene_ = p.scene();
   {
     const EngineParams& e = options_.engine;
@@ -110,7 +111,10 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
     backend_name_ = impl_->engine->backend().describe();
     key += "|" + backend_name_;  // backends agree only within noise
     tile_epoch_ = digest64(key);
+    // Replayed edits: the tiles are not those of a host that applied them while it ran.
+    if (replayed > 0) tile_epoch_ = digest64(std::to_string(tile_epoch_) + "|journal");
   }
+  revision_ = submitted_revision_ = stats_.revision = replayed;
   stats_.texels = impl_->engine->texel_count();
   stats_.tiles = tiles_->tile_count();
   log::info("engine", scene_id_ + ": method " + method_name(options_.engine.method) + ", " +
@@ -118,6 +122,39 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
                           std::to_string(impl_->engine->texel_count()) + " texels, " +
                           std::to_string(tiles_->tile_count()) + " tiles, scene package " +
                           std::to_string(package_->bytes.size()) + " bytes");
+}
+
+std::uint64_t EngineHost::replay_journal() {
+  loaded_state_ = prepared_.scene();
+  loaded_state_.meshes.clear();  // the snapshot reads the editable state only
+  loaded_state_.textures.clear();
+  EditJournalOptions jo;
+  jo.dir = options_.state_dir;
+  jo.scene_id = scene_id_;
+  jo.scene_hash = wire::scene_content_hash(prepared_.scene());
+  jo.compact_after = options_.journal_compact_after;
+  journal_ = std::make_unique<EditJournal>(jo);
+  const std::uint64_t revision = journal_->replay_revision();
+  std::vector<SceneEdit> edits;
+  std::vector<std::uint64_t> revisions;
+  for (const JournalEntry& e : journal_->entries()) {
+    if (e.edit.ops.empty()) continue;  // a snapshot of the scene as loaded
+    edits.push_back(e.edit);
+    revisions.push_back(e.revision);
+  }
+  journal_->release_entries();
+  if (edits.empty()) return revision;
+  // Checked again like any edit (the file is input); one that does not apply is skipped, as it
+  // was when the engine applied it live.
+  EditReport report;
+  prepared_.apply(edits, &report);
+  for (std::size_t i = 0; i < report.edits.size(); ++i)
+    if (!report.edits[i].applied)
+      log::error("journal", "edit " + std::to_string(revisions[i]) +
+                                " could not be applied: " + report.edits[i].error);
+  log::info("journal", scene_id_ + ": replayed " + std::to_string(report.applied) + " edits from " +
+                           journal_->path().string() + ", revision " + std::to_string(revision));
+  return revision;
 }
 
 std::string EngineHost::method_summary() const {
@@ -166,9 +203,27 @@ std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
       throw Error("the engine has " + std::to_string(pending_edits_.size()) +
                   " edits waiting; send this one again later");
   }
+  std::uint64_t revision = 0;
+  {
+    std::lock_guard lock(mutex_);
+    revision = submitted_revision_ + 1;
+  }
+  if (journal_) {
+    // On disk before it is accepted: validated first, so the journal holds only edits that
+    // apply; appended and fsynced; only then applied to the validation scene and queued.
+    validate_edit(validation_scene_, loaded);
+    journal_->append(revision, loaded);
+  }
   apply_edit(validation_scene_, loaded);  // validates first: unchanged when it throws
+  if (journal_ && journal_->wants_compaction()) {
+    try {
+      journal_->compact(revision, state_edit(loaded_state_, validation_scene_));
+    } catch (const Error& e) {
+      log::error("journal", std::string("compaction failed (the journal grows on): ") + e.what());
+    }
+  }
   std::lock_guard lock(mutex_);
-  const std::uint64_t revision = ++submitted_revision_;
+  submitted_revision_ = revision;
   pending_edits_.emplace_back(revision, loaded);
   stats_.idle = false;  // refining again from now on: nobody waits for an idle that is stale
   cv_.notify_all();

@@ -80,6 +80,14 @@ void validate_edit(const Scene& scene, const SceneEdit& edit);
 // is unchanged.
 EditEffect apply_edit(Scene& scene, const SceneEdit& edit);
 
+// The edit that takes a scene in the state of `from` to the state of `to`: absolute operations
+// (transform, show or hide, light colour and intensity, albedo, emission, sky) for every node,
+// light and material whose editable state differs, targets by index ("#3"), the sky last. Both
+// must be the same scene (the same counts of nodes, lights and materials: throws
+// irradcast::Error otherwise); only the editable state is read, so `from` may lack meshes and
+// textures. Empty when nothing differs. The edit journal's snapshot (docs/EDITS.md).
+SceneEdit state_edit(const Scene& from, const Scene& to);
+
 // The JSON form (docs/EDITS.md): an object {"ops": [op, ...]} or a single op object, where an op
 // is {"op": "move", "node": "tall_block", "by": [x, y, z]} and so on; a sky op has no target:
 // {"op": "sky", "color": [r, g, b]}, {"op": "sky", "file": "dusk.exr", "strength": 2}, any of

@@ -33,6 +33,12 @@ struct ScenePackage {
 // applied since the scene was loaded (docs/EDITS.md).
 ScenePackage make_scene_package(const Scene& scene, const Atlas& atlas, std::uint64_t revision = 0);
 
+// Identifies a scene as loaded, apart from its lightmap layout and revision: the SHA-256 (32 raw
+// bytes) of its SceneData without layouts, serialized deterministically. The edit journal keys
+// its edits by it (a server started with other texel options keeps its edits). Throws like
+// make_scene_package on invalid scene data.
+std::string scene_content_hash(const Scene& scene);
+
 struct UnpackedScene {
   Scene scene;
   Atlas atlas;

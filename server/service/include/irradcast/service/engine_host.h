@@ -25,6 +25,7 @@
 #include "irradcast/engine/backend_select.h"
 #include "irradcast/engine/engine_params.h"
 #include "irradcast/engine/prepared_scene.h"
+#include "irradcast/service/edit_journal.h"
 #include "irradcast/service/tile_source.h"
 #include "irradcast/service/tile_store.h"
 #include "irradcast/wire/scene_package.h"
@@ -46,6 +47,13 @@ struct EngineHostOptions {
   // The folder sky edits may name map files in (irradcast-server --sky-dir); empty: edits that
   // name a sky file are refused. A name is confined to it like a glTF URI (confined_file).
   std::string sky_dir;
+  // The folder of the durable edit journal (irradcast-server --state-dir; empty: edits live in
+  // memory only). Every accepted edit is on disk there before submit_edit returns, and a host
+  // built on the same scene and folder starts at the journal's revision
+  // (docs/EDITS.md#durable-edits).
+  std::string state_dir;
+  // The journal is rewritten as one snapshot once it holds this many edits (0: never).
+  std::uint32_t journal_compact_after = 1000;
 };
 
 class EngineHost final : public TileSource {
@@ -64,6 +72,8 @@ class EngineHost final : public TileSource {
   // thread applies queued edits before its next update (waking up if it was idle) and then
   // refines the affected texels first. Returns the revision the scene will have once it is
   // applied. Throws irradcast::Error with a clear message on an invalid edit (nothing queued).
+  // With a state folder the edit is appended to the journal and fsynced before this returns
+  // (an I/O failure throws, and refuses every later edit).
   // A sky op that names a file gets its map here, read from options.sky_dir (validate_sky), and
   // carries it to the engine and, with the broadcast, to the viewers; a map in `edit` itself is
   // never used. Any thread.
@@ -119,6 +129,9 @@ class EngineHost final : public TileSource {
     std::vector<SceneEdit> edits;
     std::vector<CameraPose> cameras;
   };
+  // Constructor, with a state folder: opens the journal and applies its edits to the prepared
+  // scene (before the engine exists); returns the journal's revision.
+  std::uint64_t replay_journal();
   void run();
   void do_update();
   void apply_edits();  // engine thread: applies the queued edits
@@ -140,6 +153,10 @@ class EngineHost final : public TileSource {
   // submit_edit: the scene as the accepted edits will leave it (validation_mutex_).
   std::mutex validation_mutex_;
   Scene validation_scene_;
+  // With a state folder: the journal, and the editable state of the scene as loaded (no meshes
+  // or textures) that a compaction's snapshot starts from (validation_mutex_).
+  std::unique_ptr<EditJournal> journal_;
+  Scene loaded_state_;
   static constexpr std::size_t kMaxPendingEdits = 4096;            // accepted, not yet applied
   std::deque<std::pair<std::uint64_t, SceneEdit>> pending_edits_;  // guarded by mutex_
   std::uint64_t revision_ = 0;                                     // applied; guarded by mutex_
