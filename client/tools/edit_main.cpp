@@ -5,7 +5,8 @@
 // 1 on any other error (a bad edit: the server's message is printed). With a failover list
 // (--connect A,B,...) it connects to the first server that answers, and a connection lost
 // between edits moves on to the next; an edit whose answer was cut off is not sent again (edits
-// are not idempotent: a move twice moves twice), the error says so.
+// are not idempotent: a move twice moves twice), the error says so. --export FILE.glb writes the
+// server's current scene, every edit applied, as glTF 2.0 (the control token is needed too).
 #include <CLI/CLI.hpp>
 #include <asio.hpp>
 
@@ -14,6 +15,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <optional>
@@ -26,10 +28,12 @@
 #include "irradcast/client/client_tls.h"
 #include "irradcast/client/host_port.h"
 #include "irradcast/common/error.h"
+#include "irradcast/common/gltf.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/scene_edit.h"
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/frame.h"
+#include "irradcast/wire/scene_package.h"
 #include "tool_main.h"
 
 namespace {
@@ -45,6 +49,7 @@ struct Options {
   std::string script;
   std::vector<std::string> move, rotate, scale, show, hide, light_color, light_intensity, albedo,
       emission;
+  std::string export_path;  // --export FILE.glb|.gltf
   bool no_wait = false;
   int timeout_ms = 10000;
   std::string name = "irradcast-edit";
@@ -143,6 +148,13 @@ std::vector<irradcast::EditStep> steps_of(const Options& o) {
     std::ostringstream text;
     text << f.rdbuf();
     steps = irradcast::parse_edit_script(text.str());
+  }
+  if (!o.export_path.empty()) {
+    if (sources != 0) throw irradcast::Error("give --export or an edit, not both");
+    const std::string ext = std::filesystem::path(o.export_path).extension().string();
+    if (ext != ".glb" && ext != ".gltf")
+      throw irradcast::Error("--export: '" + o.export_path + "' must end in .glb or .gltf");
+    return steps;
   }
   if (sources != 1)
     throw irradcast::Error(
@@ -358,8 +370,53 @@ std::uint64_t send_edit(Session& session, const irradcast::wire::Envelope& e, st
   }
 }
 
+// --export: the current scene package (SceneExportRequest with the token, then SceneRequest),
+// written as glTF 2.0.
+int run_export(const Options& o, const std::string& token) {
+  using namespace irradcast;
+  Session session(o, tools::start_run(o.log_level, o.connect));
+  Connection& c = session.connection();
+  wire::Envelope request;
+  request.mutable_scene_export_request()->set_token(token);
+  request.mutable_scene_export_request()->set_request_id(1);
+  c.send(request);
+  wire::SceneExport answer;
+  for (;;) {
+    wire::Envelope a = c.expect("export answer");
+    if (a.has_scene_export() && a.scene_export().request_id() == 1) {
+      answer = a.scene_export();
+      break;
+    }
+  }
+  if (answer.scene_bytes() > wire::kMaxSceneDataBytes)
+    throw Error("the server offers a scene package of " + std::to_string(answer.scene_bytes()) +
+                " bytes, more than a client takes");
+  wire::SceneAssembler assembler(answer.scene_hash(), answer.scene_bytes());
+  wire::Envelope get;
+  get.mutable_scene_request()->set_offset(0);
+  c.send(get);
+  while (!assembler.complete()) {
+    wire::Envelope a = c.expect("scene chunk");
+    if (a.has_scene_chunk()) assembler.add(a.scene_chunk());
+  }
+  c.close();
+  const wire::UnpackedScene u = wire::open_scene_package(assembler.bytes(), answer.scene_hash());
+  save_gltf(u.scene, o.export_path);
+  std::size_t triangles = 0;
+  for (const Mesh& m : u.scene.meshes) triangles += m.triangles.size();
+  std::printf("exported revision %llu of %s (%zu nodes, %zu triangles) to %s\n",
+              static_cast<unsigned long long>(u.revision), u.scene.name.c_str(),
+              u.scene.nodes.size(), triangles, o.export_path.c_str());
+  if (u.scene.sky.enabled())
+    std::printf(
+        "note: glTF has no sky; give irradcast-bake or irradcast-server the sky again "
+        "(--sky, --sky-strength, --sun)\n");
+  return 0;
+}
+
 int run(const Options& o, const std::vector<irradcast::EditStep>& steps, const std::string& token) {
   using namespace irradcast;
+  if (!o.export_path.empty()) return run_export(o, token);
   Session session(o, tools::start_run(o.log_level, o.connect));
   for (std::size_t i = 0; i < steps.size(); ++i) {
     if (steps[i].after_ms > 0.0) {
@@ -439,6 +496,9 @@ int main(int argc, char** argv) {
   app.add_option("--albedo", o.albedo, "MATERIAL R,G,B: a material's base colour")->expected(2);
   app.add_option("--emission", o.emission, "MATERIAL R,G,B STRENGTH: a material's emission")
       ->expected(3);
+  app.add_option("--export", o.export_path,
+                 "FILE.glb or FILE.gltf: write the server's current scene (every edit applied) "
+                 "as glTF 2.0 instead of editing (needs the token too)");
   app.add_flag("--no-wait", o.no_wait, "return once the server queued each edit");
   app.add_option("--timeout-ms", o.timeout_ms, "how long to wait for each answer")
       ->check(CLI::Range(1, 3600000));

@@ -272,6 +272,7 @@ void Writer::write_meshes(json& root) {
 }
 
 void Writer::write_nodes(json& root) {
+  bool hidden = false;
   const int count = static_cast<int>(s_.nodes.size());
   // glTF needs a forest: every node at most one parent, no cycles. Follow the children lists
   // from the roots, keeping the first parent found for each node.
@@ -323,9 +324,14 @@ void Writer::write_nodes(json& root) {
       out["camera"] = node.camera;
     if (node.light >= 0 && static_cast<std::size_t>(node.light) < s_.lights.size())
       out["extensions"]["KHR_lights_punctual"] = {{"light", node.light}};
+    if (!node.visible) {  // hidden by an edit: the node and its subtree
+      out["extensions"]["KHR_node_visibility"] = {{"visible", false}};
+      hidden = true;
+    }
     nodes.push_back(std::move(out));
   }
   if (!nodes.empty()) root["nodes"] = std::move(nodes);
+  if (hidden) extensions_used_.push_back("KHR_node_visibility");
   json scene = {{"nodes", scene_roots}};
   if (!s_.name.empty()) scene["name"] = s_.name;
   root["scenes"] = json::array({scene});

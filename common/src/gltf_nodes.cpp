@@ -153,6 +153,13 @@ void Loader::link_node(std::size_t i, Scene& scene) const {
       fail(what + " refers to a KHR_lights_punctual light that does not exist");
     node.light = light_map_[l.GetNumberAsInt()];
   }
+  // KHR_node_visibility: a hidden node hides its subtree (Scene::visible_nodes).
+  auto vis = gn.extensions.find("KHR_node_visibility");
+  if (vis != gn.extensions.end() && vis->second.Has("visible")) {
+    const tinygltf::Value& v = vis->second.Get("visible");
+    if (!v.IsBool()) fail(what + " has a KHR_node_visibility \"visible\" that is not a boolean");
+    node.visible = v.Get<bool>();
+  }
   for (int c : gn.children) {
     if (c < 0 || static_cast<std::size_t>(c) >= count)
       fail(what + " has child " + std::to_string(c) + ", which does not exist");

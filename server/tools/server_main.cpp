@@ -43,6 +43,7 @@ struct Options {
   int engine_nice = 10;
   std::uint32_t max_updates = 0;
   std::string nats;  // nats://HOST:PORT: also publish to NATS (docs/DISTRIBUTION.md)
+  bool nats_replace_newer = false;
   irradcast::tools::NetworkOptions net;
   irradcast::tools::EngineOptions engine;
   irradcast::tools::SceneOptions lighting;
@@ -85,8 +86,17 @@ int run(const Options& o, const sigset_t& signals) {
   const ServerOptions so = o.net.server_options(token, "server");
   // With --nats the server serves the NatsOrigin, which publishes what the host makes.
   std::unique_ptr<NatsOrigin> origin;
-  if (!o.nats.empty())
-    origin = std::make_unique<NatsOrigin>(host, NatsOriginOptions{o.nats, token.first});
+  if (!o.nats.empty()) {
+    NatsOriginOptions no;
+    no.url = o.nats;
+    no.control_token = token.first;
+    no.replace_newer = o.nats_replace_newer;
+    origin = std::make_unique<NatsOrigin>(host, no);
+    // Never roll the gateways back: a stream with a newer revision from another origin (one
+    // that ran without this --state-dir) stops this one here, when NATS answers in time.
+    const std::string refusal = origin->check_stream(std::chrono::seconds(10));
+    if (!refusal.empty()) throw Error(refusal);
+  }
   TileSource& source = origin ? static_cast<TileSource&>(*origin) : host;
   Server server(source, so);
   server.start();
@@ -198,6 +208,9 @@ int main(int argc, char** argv) {
                  "(nats://HOST:PORT, JetStream enabled) for irradcast-gateway, and take their "
                  "viewers' cameras and edits (docs/DISTRIBUTION.md)")
       ->default_str("none");
+  app.add_flag("--nats-replace-newer", o.nats_replace_newer,
+               "publish even when the NATS stream holds a newer scene revision from another "
+               "origin (its edits are lost for the gateways; without it such an origin exits)");
   app.add_option("--threads", o.threads, "engine worker threads (0 = all cores)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--tile-size", o.tile_size, "tile edge in texels")->check(CLI::Range(4, 1024));

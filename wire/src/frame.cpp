@@ -131,6 +131,10 @@ const char* message_name(const Envelope& e) {
       return "bye";
     case Envelope::kSceneEdit:
       return "scene_edit";
+    case Envelope::kSceneExportRequest:
+      return "scene_export_request";
+    case Envelope::kSceneExport:
+      return "scene_export";
     case Envelope::MSG_NOT_SET:
       break;
   }

@@ -67,6 +67,9 @@ struct NatsOrigin::Impl {
   nats_link::Subscription camera_sub, edit_sub;
   std::thread worker;
 
+  bool stream_checked = false;  // a stream check got an answer (mutex)
+  std::string refusal;          // why this origin publishes nothing (mutex); "" = it may
+
   // Worker thread only.
   std::uint64_t published_generation = 0;
   const wire::ScenePackage* last_package = nullptr;
@@ -78,6 +81,7 @@ struct NatsOrigin::Impl {
   void run();
   bool round(bool full, const std::vector<std::uint32_t>& tiles, std::deque<AppliedEdit>& eds);
   bool ensure_stream();
+  bool stream_allows(std::uint64_t revision);
   bool publish(const std::string& subject, const google::protobuf::MessageLite& m);
   bool publish_package(const wire::ScenePackage& package, std::uint64_t revision,
                        std::uint64_t epoch);
@@ -132,7 +136,7 @@ void NatsOrigin::Impl::run() {
   while (!stopping) {
     cv.wait_for(lock, std::chrono::milliseconds(100));
     if (stopping) break;
-    if (!conn->connected()) continue;
+    if (!conn->connected() || !refusal.empty()) continue;
     const std::uint64_t generation = conn->generation();
     const bool full = generation != published_generation;
     std::vector<std::uint32_t> tiles;
@@ -184,6 +188,7 @@ bool NatsOrigin::Impl::publish_everything(std::deque<AppliedEdit>& eds) {
   if (!ensure_stream()) return false;
   const auto package = host.package();
   const std::uint64_t revision = host.revision();
+  if (!stream_allows(revision)) return false;
   if (!publish_package(*package, revision, host.tile_epoch())) return false;
   last_package = package.get();
   while (!eds.empty() && eds.front().revision <= revision) {
@@ -218,6 +223,48 @@ bool NatsOrigin::Impl::ensure_stream() {
     return false;
   }
   return true;
+}
+
+// Whether this origin may publish `revision` over what the stream holds. Not when the stream's
+// newest scene state comes from another origin process and is of a newer revision: that origin
+// applied edits this one does not have (started without its --state-dir, or on another machine),
+// and publishing would roll every gateway back (unless options.replace_newer).
+bool NatsOrigin::Impl::stream_allows(std::uint64_t revision) {
+  natsMsg* msg = nullptr;
+  jsErrCode jerr = static_cast<jsErrCode>(0);
+  const natsStatus s = js_GetLastMsg(&msg, conn->js(), subjects.stream.c_str(),
+                                     subjects.state.c_str(), nullptr, &jerr);
+  std::string why;
+  if (s == NATS_OK) {
+    wire::NatsSceneState held;
+    const bool parsed = held.ParseFromArray(natsMsg_GetData(msg), natsMsg_GetDataLength(msg));
+    natsMsg_Destroy(msg);
+    if (parsed && held.origin() != origin && held.revision() > revision) {
+      const std::string what = "the stream " + subjects.stream + " holds revision " +
+                               std::to_string(held.revision()) + " of scene '" + host.scene_id() +
+                               "' from another origin, and this origin is at revision " +
+                               std::to_string(revision);
+      if (!options.replace_newer)
+        why = what +
+              ": not publishing over it (start the origin with the --state-dir that holds its "
+              "edits, or with --nats-replace-newer to roll the gateways back to revision " +
+              std::to_string(revision) + ")";
+      else
+        log::warn("nats", what + ": replacing it (--nats-replace-newer)");
+    }
+  } else if (s != NATS_NOT_FOUND && jerr != JSNoMessageFoundErr) {
+    log::warn("nats", "the stream's scene state: " + nats_link::describe(s));
+    return false;  // checked again next round
+  }
+  {
+    std::lock_guard lock(mutex);
+    stream_checked = true;
+    refusal = why;
+    st.refused_newer_stream = !why.empty();
+  }
+  cv.notify_all();
+  if (!why.empty()) log::error("nats", why);
+  return why.empty();
 }
 
 bool NatsOrigin::Impl::publish(const std::string& subject, const google::protobuf::MessageLite& m) {
@@ -413,6 +460,13 @@ NatsOrigin::NatsOrigin(EngineHost& host, NatsOriginOptions options)
                         " (stream " + im.subjects.stream + ")");
 }
 
+std::string NatsOrigin::check_stream(std::chrono::milliseconds limit) {
+  Impl& im = *impl_;
+  std::unique_lock lock(im.mutex);
+  im.cv.wait_for(lock, limit, [&im] { return im.stream_checked || im.stopping; });
+  return im.refusal;
+}
+
 NatsOrigin::~NatsOrigin() {
   Impl& im = *impl_;
   host_.set_listener(nullptr);
@@ -470,6 +524,10 @@ std::string format_nats_origin_metrics(const NatsOriginStats& s) {
                 "Publish rounds that failed.", d(s.publish_errors));
   append_metric(out, "irradcast_nats_edit_requests_total", "counter",
                 "Scene edits accepted from gateways.", d(s.edit_requests));
+  append_metric(out, "irradcast_nats_refused_newer_stream", "gauge",
+                "1 while the origin publishes nothing: the stream holds a newer revision from "
+                "another origin.",
+                s.refused_newer_stream ? 1.0 : 0.0);
   append_metric(out, "irradcast_nats_edits_refused_total", "counter",
                 "Scene edits from gateways refused (token or validation).", d(s.edits_refused));
   append_metric(out, "irradcast_nats_camera_requests_total", "counter",

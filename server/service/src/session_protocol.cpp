@@ -117,6 +117,9 @@ void SessionProtocol::handle(const wire::Envelope& env) {
     case E::kSceneEdit:
       on_scene_edit(env.scene_edit());
       break;
+    case E::kSceneExportRequest:
+      on_scene_export(env.scene_export_request());
+      break;
     case E::kStatsRequest:
       send_stats();
       break;
@@ -234,15 +237,15 @@ void SessionProtocol::on_camera(const wire::CameraUpdate& c) {
 
 // A scene edit: needs the control token; validated by the host (the scene does not change on a
 // bad edit); acknowledged to the sender with the revision it will make.
-void SessionProtocol::on_scene_edit(const wire::SceneEdit& m) {
+bool SessionProtocol::token_accepted(const std::string& presented) {
   const std::string& token = ctx_.options.control_token;
   if (token.empty()) {
     error(wire::PERMISSION_DENIED,
           "this server takes no edits (start it with --control-token or "
           "--control-token-file)");
-    return;
+    return false;
   }
-  if (!same_secret(m.token(), token)) {
+  if (!same_secret(presented, token)) {
     // Answered after a delay that doubles with each failure of the address; nothing else of
     // this session is handled meanwhile. Too many: the address is refused for a while.
     ++ctx_.counters.token_failures;
@@ -250,9 +253,33 @@ void SessionProtocol::on_scene_edit(const wire::SceneEdit& m) {
     penalty_ = true;
     events_.penalty = delay;
     events_.banned = banned;
-    return;
+    return false;
   }
   ctx_.peers.token_passed(peer_key_);
+  return true;
+}
+
+// An export of the live scene (irradcast-edit --export): with the control token, this session's
+// scene package becomes the current one, which the client then downloads with SceneRequest.
+void SessionProtocol::on_scene_export(const wire::SceneExportRequest& m) {
+  if (!token_accepted(m.token())) return;
+  if (scene_active_) {
+    error(wire::BAD_REQUEST, "an export while the scene package is being sent");
+    return;
+  }
+  package_ = ctx_.host.package();
+  note(log::Level::Info, client_name_ + " exports the scene (" +
+                             std::to_string(package_->bytes.size()) + "-byte package)");
+  wire::Envelope e;
+  wire::SceneExport* x = e.mutable_scene_export();
+  x->set_request_id(m.request_id());
+  x->set_scene_hash(package_->hash);
+  x->set_scene_bytes(package_->bytes.size());
+  send(e);
+}
+
+void SessionProtocol::on_scene_edit(const wire::SceneEdit& m) {
+  if (!token_accepted(m.token())) return;
   std::uint64_t revision = 0;
   try {
     revision = ctx_.host.submit_edit(wire::from_proto(m));

@@ -133,6 +133,10 @@ class SessionProtocol {
   void on_subscribe(const wire::Subscribe& s);
   void on_camera(const wire::CameraUpdate& c);
   void on_scene_edit(const wire::SceneEdit& m);
+  void on_scene_export(const wire::SceneExportRequest& m);
+  // Whether `presented` is the control token; when not, the error (no token configured) or the
+  // delayed answer of a wrong token is under way.
+  bool token_accepted(const std::string& presented);
   void send_stats();
   void queue_changed();
   // A reply or notice; the connection stays open.

@@ -28,6 +28,9 @@ struct NatsOriginOptions {
   // A gateway's cameras are forgotten after this long without a camera request from it.
   std::chrono::milliseconds camera_expiry{10000};
   std::size_t max_queued_edits = 1024;  // applied edits waiting to be published
+  // Publish even when the stream holds a newer revision from another origin process (its edits
+  // are then lost for the gateways). Off: such an origin publishes nothing (docs/DISTRIBUTION.md).
+  bool replace_newer = false;
 };
 
 struct NatsOriginStats {
@@ -43,6 +46,8 @@ struct NatsOriginStats {
   std::uint64_t edit_requests = 0;
   std::uint64_t edits_refused = 0;  // wrong token or invalid edit
   std::uint64_t bad_requests = 0;   // requests that do not parse
+  // The stream holds a newer revision from another origin: this one publishes nothing.
+  bool refused_newer_stream = false;
 };
 
 class NatsOrigin final : public TileSource {
@@ -70,6 +75,11 @@ class NatsOrigin final : public TileSource {
   EngineHostStats stats() const override { return host_.stats(); }
 
   NatsOriginStats nats_stats() const;
+  // Waits until the origin has compared its revision with the stream's (it does on every
+  // (re)connection, before it publishes anything) or `limit` passes. Returns the refusal ("" when
+  // it may publish, or when NATS did not answer in time: it checks again when it connects).
+  // irradcast-server calls it at start and exits with the refusal.
+  std::string check_stream(std::chrono::milliseconds limit);
   // Blocks until everything marked so far is published and acknowledged by JetStream, or the
   // limit passes; returns whether it got there (tests, shutdown).
   bool flush(std::chrono::milliseconds limit);
