@@ -189,6 +189,19 @@ std::vector<Envelope> all_messages() {
     m->set_applied_us(1700000000000001ULL);
     out.push_back(e);
   }
+  {
+    Envelope e;
+    e.mutable_scene_export_request()->set_token("secret");
+    e.mutable_scene_export_request()->set_request_id(9);
+    out.push_back(e);
+  }
+  {
+    Envelope e;
+    e.mutable_scene_export()->set_request_id(9);
+    e.mutable_scene_export()->set_scene_hash(std::string(32, '\x3c'));
+    e.mutable_scene_export()->set_scene_bytes(123456);
+    out.push_back(e);
+  }
   out.push_back(make_error(UNSUPPORTED_VERSION, "protocol version 9 is not supported"));
   out.push_back(make_bye("viewer closed"));
   return out;
