@@ -44,7 +44,8 @@ failed=0
 # expect_refused NAME PATTERN FILE SED_SCRIPT
 expect_refused() {
   local name=$1 pattern=$2 file=$3 script=$4 out
-  rm -rf "$tmp/k8s" && cp -r "$root/deploy/k8s" "$tmp/k8s" && cp "$root/deploy/compose.yaml" "$tmp/"
+  rm -rf "$tmp/k8s" "$tmp/nats" && cp -r "$root/deploy/k8s" "$tmp/k8s" && cp -r "$root/deploy/nats" "$tmp/nats"
+  cp "$root/deploy/compose.yaml" "$tmp/"
   sed -i -e "$script" "$tmp/$file"
   if cmp -s "$tmp/$file" "$root/deploy/$file"; then
     echo "self-test $name: the edit changed nothing" && failed=1 && return

@@ -10,7 +10,9 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <memory>
+#include <sstream>
 #include <string>
 
 #include "irradcast/client/view_client.h"
@@ -51,8 +53,11 @@ inline std::uint16_t free_loopback_port() {
 // nats-server -js on 127.0.0.1, storage in its own temporary folder.
 class NatsProcess {
  public:
-  NatsProcess()
-      : port_(free_loopback_port()),
+  // With `config`: nats-server -c config, its port, storage and monitoring port replaced by
+  // the test's (the config's users and permissions kept).
+  explicit NatsProcess(std::string config = "")
+      : config_(std::move(config)),
+        port_(free_loopback_port()),
         dir_(std::filesystem::temp_directory_path() /
              ("irradcast_nats_" + std::to_string(::getpid()) + "_" + std::to_string(port_))) {
     std::filesystem::create_directories(dir_);
@@ -64,11 +69,33 @@ class NatsProcess {
     std::filesystem::remove_all(dir_, ec);
   }
   std::string url() const { return "nats://127.0.0.1:" + std::to_string(port_); }
+  std::uint16_t port() const { return port_; }
+  std::string output() const { return process_ ? process_->output() : ""; }
   void start() {
-    process_ = std::make_unique<Process>(
-        std::vector<std::string>{nats_server_exe(), "-js", "-sd", dir_.string(), "-p",
-                                 std::to_string(port_), "-a", "127.0.0.1"},
-        dir_.string() + ".log");
+    std::vector<std::string> args{nats_server_exe(), "-p", std::to_string(port_), "-a",
+                                  "127.0.0.1"};
+    if (config_.empty()) {
+      for (const char* a : {"-js", "-sd"}) args.push_back(a);
+      args.push_back(dir_.string());
+    } else {
+      // The configuration with its JetStream store in the test's folder (nats-server refuses
+      // -sd beside a store_dir of the file).
+      std::ifstream in(config_);
+      std::stringstream text;
+      text << in.rdbuf();
+      std::string conf = text.str();
+      const std::string from = "store_dir: \"/data\"";
+      const std::size_t at = conf.find(from);
+      EXPECT_NE(at, std::string::npos) << config_ << " has no " << from;
+      if (at != std::string::npos)
+        conf.replace(at, from.size(), "store_dir: \"" + dir_.string() + "\"");
+      const std::string copy = dir_.string() + ".conf";
+      std::ofstream(copy) << conf;
+      for (const std::string& a :
+           {std::string("-c"), copy, std::string("-m"), std::to_string(free_loopback_port())})
+        args.push_back(a);
+    }
+    process_ = std::make_unique<Process>(args, dir_.string() + ".log");
     EXPECT_TRUE(eventually([&] { return listening(); }, std::chrono::seconds(10)))
         << process_->output();
   }
@@ -86,6 +113,7 @@ class NatsProcess {
     s.connect({asio::ip::make_address("127.0.0.1"), port_}, ec);
     return !ec;
   }
+  std::string config_;
   std::uint16_t port_;
   std::filesystem::path dir_;
   std::unique_ptr<Process> process_;
@@ -93,9 +121,17 @@ class NatsProcess {
 
 // irradcast-server --nats in the process: cornell, small, final after `updates` updates.
 struct NatsOriginNode {
-  NatsOriginNode(const std::string& url, std::uint32_t updates, const std::string& token = "")
+  NatsOriginNode(const std::string& url, std::uint32_t updates, const std::string& token = "",
+                 const NatsCredentials& credentials = {})
       : host(make_cornell_box(), "cornell", small_host(updates)),
-        origin(host, NatsOriginOptions{url, token}),
+        origin(host,
+               [&] {
+                 NatsOriginOptions o;
+                 o.url = url;
+                 o.credentials = credentials;
+                 o.accept_edits = !token.empty();
+                 return o;
+               }()),
         server(origin, [&] {
           ServerOptions o = loopback();
           o.control_token = token;
@@ -121,8 +157,9 @@ struct NatsOriginNode {
 
 // irradcast-gateway in the process.
 struct NatsGatewayNode {
-  explicit NatsGatewayNode(const std::string& url, const std::string& token = "")
-      : gateway(NatsGatewayOptions{url, "cornell", token}) {
+  explicit NatsGatewayNode(const std::string& url, const std::string& token = "",
+                           const NatsCredentials& credentials = {})
+      : gateway(NatsGatewayOptions{url, "cornell", credentials}) {
     EXPECT_TRUE(gateway.wait_ready(std::chrono::seconds(10))) << "no scene from NATS";
     ServerOptions o = loopback();
     o.control_token = token;

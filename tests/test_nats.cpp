@@ -189,30 +189,68 @@ TEST(Nats, AnEditSentThroughAGatewayReachesEveryViewer) {
   EXPECT_EQ(origin.origin.nats_stats().edit_requests, 1u);
 }
 
-TEST(Nats, TheOriginChecksTheTokenOfEditsFromGateways) {
+// The control token never crosses NATS: a gateway's session checks it and forwards the edit
+// without it (a listener on req.edit sees no token); the origin applies edits from NATS only when
+// it takes edits at all, and refuses one that carries a token.
+TEST(Nats, EditsCrossNatsWithoutTheToken) {
   IRRADCAST_NEED_NATS();
   test::NatsProcess nats;
   test::NatsOriginNode origin(nats.url(), 1, kToken);
-  // A gateway whose viewers know its token, which is not the origin's.
-  test::NatsGatewayNode rogue(nats.url(), "another-token-of-16-or-more");
-  try {
-    rogue.gateway.submit_edit(
-        parse_edit_json(R"({"op": "move", "node": "tall_block", "by": [0, 1, 0]})"));
-    ADD_FAILURE() << "the origin took an edit with the wrong token";
-  } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("control token"), std::string::npos) << e.what();
+  test::NatsGatewayNode gw(nats.url(), kToken);
+  natsConnection* spy = nullptr;
+  ASSERT_EQ(natsConnection_ConnectTo(&spy, nats.url().c_str()), NATS_OK);
+  natsSubscription* sub = nullptr;
+  ASSERT_EQ(natsConnection_SubscribeSync(&sub, spy, nats_subjects("cornell").submit.c_str()),
+            NATS_OK);
+  ASSERT_EQ(natsConnection_Flush(spy), NATS_OK);
+  {  // A viewer of the gateway edits with the token.
+    test::RawConnection editor(gw.server->port());
+    ASSERT_TRUE(editor.join("editor"));
+    wire::Envelope e;
+    wire::to_proto(parse_edit_json(R"({"op": "move", "node": "tall_block", "by": [0, 0.01, 0]})"),
+                   e.mutable_scene_edit());
+    e.mutable_scene_edit()->set_token(kToken);
+    editor.send(e);
+    std::optional<wire::Envelope> ack;
+    while ((ack = editor.read(5000ms)) && !ack->has_scene_edit() && !ack->has_error()) {
+    }
+    ASSERT_TRUE(ack && ack->has_scene_edit())
+        << (ack && ack->has_error() ? ack->error().message() : "no answer");
+    EXPECT_EQ(ack->scene_edit().revision(), 1u);
   }
-  // An invalid edit with the right token: the origin's validation message comes back.
-  test::NatsGatewayNode good(nats.url(), kToken);
+  natsMsg* seen = nullptr;
+  ASSERT_EQ(natsSubscription_NextMsg(&seen, sub, 5000), NATS_OK);
+  wire::SceneEdit forwarded;
+  ASSERT_TRUE(forwarded.ParseFromArray(natsMsg_GetData(seen), natsMsg_GetDataLength(seen)));
+  EXPECT_TRUE(forwarded.token().empty());
+  EXPECT_EQ(
+      std::string(natsMsg_GetData(seen), static_cast<std::size_t>(natsMsg_GetDataLength(seen)))
+          .find(kToken),
+      std::string::npos);
+  natsMsg_Destroy(seen);
+  natsSubscription_Destroy(sub);
+  natsConnection_Destroy(spy);
+  EXPECT_TRUE(test::eventually([&] { return origin.host.revision() == 1; }));
+  // An invalid edit: the origin's validation message comes back.
   try {
-    good.gateway.submit_edit(
+    gw.gateway.submit_edit(
         parse_edit_json(R"({"op": "move", "node": "no_such_node", "by": [0, 1, 0]})"));
     ADD_FAILURE() << "the origin took an edit of a node that does not exist";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("no_such_node"), std::string::npos) << e.what();
   }
-  EXPECT_EQ(origin.host.revision(), 0u);
-  EXPECT_EQ(origin.origin.nats_stats().edits_refused, 2u);
+  // An origin without a control token takes no edits from NATS either.
+  test::NatsProcess nats2;
+  test::NatsOriginNode closed(nats2.url(), 1);
+  test::NatsGatewayNode gw2(nats2.url(), kToken);
+  try {
+    gw2.gateway.submit_edit(
+        parse_edit_json(R"({"op": "move", "node": "tall_block", "by": [0, 1, 0]})"));
+    ADD_FAILURE() << "an origin without a token took an edit";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("takes no edits"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(closed.host.revision(), 0u);
 }
 
 TEST(Nats, AGatewayServesWhileNatsIsDownAndCatchesUpAfter) {
@@ -361,10 +399,11 @@ TEST(Nats, MalformedMessagesAndRequestsAreRefused) {
     EXPECT_EQ(r.code(), wire::BAD_REQUEST) << subject;
     natsMsg_Destroy(reply);
   }
-  // An edit without the token straight to the origin's subject is refused.
+  // An edit that carries a token on NATS is refused (gateways forward edits without it).
   wire::SceneEdit edit;
   wire::to_proto(parse_edit_json(R"({"op": "move", "node": "tall_block", "by": [0, 1, 0]})"),
                  &edit);
+  edit.set_token(kToken);
   const std::string bytes = edit.SerializeAsString();
   natsMsg* reply = nullptr;
   ASSERT_EQ(natsConnection_Request(&reply, nc, s.submit.c_str(), bytes.data(),
@@ -372,7 +411,8 @@ TEST(Nats, MalformedMessagesAndRequestsAreRefused) {
             NATS_OK);
   wire::NatsReply r;
   EXPECT_TRUE(r.ParseFromArray(natsMsg_GetData(reply), natsMsg_GetDataLength(reply)));
-  EXPECT_EQ(r.code(), wire::PERMISSION_DENIED);
+  EXPECT_EQ(r.code(), wire::BAD_REQUEST);
+  EXPECT_NE(r.error().find("carries a token"), std::string::npos) << r.error();
   natsMsg_Destroy(reply);
   EXPECT_EQ(origin.host.revision(), 0u);
   // The gateway still serves its viewers the origin's tiles.

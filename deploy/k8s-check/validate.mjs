@@ -155,6 +155,22 @@ for (const file of files) {
   }
 }
 
+// ConfigMaps made by a configMapGenerator of a kustomization this one includes as a resource
+// folder (deploy/nats: nats.conf as nats-config), with their files checked to exist.
+for (const r of kustomization?.resources ?? []) {
+  const sub = path.join(dir, r, "kustomization.yaml");
+  if (!fs.existsSync(sub)) continue;
+  const k = parseAllDocuments(fs.readFileSync(sub, "utf8"))[0]?.toJS() ?? {};
+  for (const g of k.configMapGenerator ?? []) {
+    for (const f of g.files ?? []) {
+      const file = String(f).split("=").pop();
+      if (!fs.existsSync(path.join(dir, r, file)))
+        errors.push(`${r}/kustomization.yaml: configMapGenerator ${g.name}: no file '${file}'`);
+    }
+    objects.push({ file: `${r}/kustomization.yaml`, index: 0, obj: { kind: "ConfigMap", metadata: { name: g.name } } });
+  }
+}
+
 // --- references between the objects ---
 const byKind = (kind) => objects.filter((o) => o.obj.kind === kind);
 const named = (kind, name) => byKind(kind).find((o) => o.obj.metadata.name === name);

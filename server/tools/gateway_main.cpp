@@ -21,12 +21,13 @@
 #include "irradcast/service/metrics_text.h"
 #include "irradcast/service/nats_gateway.h"
 #include "irradcast/service/net_server.h"
+#include "nats_options.h"
 #include "network_options.h"
 
 namespace {
 
 struct Options {
-  std::string nats;
+  irradcast::tools::NatsOptions nats;
   std::string scene = "cornell";
   irradcast::tools::NetworkOptions net;
 };
@@ -62,9 +63,9 @@ int run(const Options& o, const sigset_t& signals) {
   const auto token = o.net.token();
   const ServerOptions so = o.net.server_options(token, "gateway");
   NatsGatewayOptions go;
-  go.url = o.nats;
+  go.url = o.nats.url;
+  go.credentials = o.nats.credentials;
   go.scene_id = o.scene;
-  go.control_token = token.first;
   NatsGateway gateway(go);
   // The tile layout and scene package come from the origin: wait for them.
   for (int waited = 0; !gateway.wait_ready(std::chrono::milliseconds(0)); waited += 200) {
@@ -108,8 +109,8 @@ int main(int argc, char** argv) {
       "as irradcast-server; cameras and (with the control token) edits go to the origin.",
       "irradcast-gateway"};
   app.option_defaults()->always_capture_default();
-  app.add_option("--nats", o.nats, "the NATS server the origin publishes to (nats://HOST:PORT)")
-      ->required();
+  o.nats.add_to(app, "the NATS server the origin publishes to (nats:// or tls://HOST:PORT)");
+  app.get_option("--nats")->required();
   app.add_option("--scene", o.scene, "the scene id the origin serves (its --scene)");
   o.net.add_to(app);
   try {

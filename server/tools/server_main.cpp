@@ -24,6 +24,7 @@
 #include "irradcast/service/metrics_text.h"
 #include "irradcast/service/nats_origin.h"
 #include "irradcast/service/net_server.h"
+#include "nats_options.h"
 #include "network_options.h"
 #include "scene_options.h"
 
@@ -42,7 +43,7 @@ struct Options {
   float tile_refresh = 2.0f;
   int engine_nice = 10;
   std::uint32_t max_updates = 0;
-  std::string nats;  // nats://HOST:PORT: also publish to NATS (docs/DISTRIBUTION.md)
+  irradcast::tools::NatsOptions nats;  // --nats URL: also publish to NATS (docs/DISTRIBUTION.md)
   bool nats_replace_newer = false;
   irradcast::tools::NetworkOptions net;
   irradcast::tools::EngineOptions engine;
@@ -86,10 +87,11 @@ int run(const Options& o, const sigset_t& signals) {
   const ServerOptions so = o.net.server_options(token, "server");
   // With --nats the server serves the NatsOrigin, which publishes what the host makes.
   std::unique_ptr<NatsOrigin> origin;
-  if (!o.nats.empty()) {
+  if (!o.nats.url.empty()) {
     NatsOriginOptions no;
-    no.url = o.nats;
-    no.control_token = token.first;
+    no.url = o.nats.url;
+    no.credentials = o.nats.credentials;
+    no.accept_edits = !token.first.empty();
     no.replace_newer = o.nats_replace_newer;
     origin = std::make_unique<NatsOrigin>(host, no);
     // Never roll the gateways back: a stream with a newer revision from another origin (one
@@ -203,11 +205,10 @@ int main(int argc, char** argv) {
                  "rewrite the edit journal as one snapshot once it holds this many edits "
                  "(0 = never)");
   o.net.add_to(app);
-  app.add_option("--nats", o.nats,
-                 "also publish the scene, its tiles, edits and stats to this NATS server "
-                 "(nats://HOST:PORT, JetStream enabled) for irradcast-gateway, and take their "
-                 "viewers' cameras and edits (docs/DISTRIBUTION.md)")
-      ->default_str("none");
+  o.nats.add_to(app,
+                "also publish the scene, its tiles, edits and stats to this NATS server "
+                "(nats:// or tls://HOST:PORT, JetStream enabled) for irradcast-gateway, and take "
+                "their viewers' cameras and edits (docs/DISTRIBUTION.md)");
   app.add_flag("--nats-replace-newer", o.nats_replace_newer,
                "publish even when the NATS stream holds a newer scene revision from another "
                "origin (its edits are lost for the gateways; without it such an origin exits)");

@@ -373,11 +373,13 @@ void NatsGateway::Impl::send_cameras() {
 NatsGateway::NatsGateway(NatsGatewayOptions options)
     : impl_(std::make_unique<Impl>(std::move(options))) {
   Impl& im = *impl_;
-  im.conn = std::make_unique<nats_link::Connection>(
-      im.options.url, "irradcast-gateway " + im.options.scene_id, [&im] { im.cv.notify_all(); });
+  im.conn = std::make_unique<nats_link::Connection>(im.options.url, im.options.credentials,
+                                                    "irradcast-gateway " + im.options.scene_id,
+                                                    [&im] { im.cv.notify_all(); });
   im.worker = std::thread([&im] { im.run(); });
-  log::info("gateway", "reading scene '" + im.options.scene_id + "' from " + im.options.url +
-                           " (stream " + im.subjects.stream + ")");
+  log::info("gateway", "reading scene '" + im.options.scene_id + "' from " + im.conn->url() + " (" +
+                           im.options.credentials.describe(im.options.url) + ")" + " (stream " +
+                           im.subjects.stream + ")");
 }
 
 NatsGateway::~NatsGateway() {
@@ -443,7 +445,8 @@ std::uint64_t NatsGateway::submit_edit(const SceneEdit& edit) {
     throw Error("the gateway has lost NATS; the edit was not sent to the origin");
   wire::SceneEdit m;
   wire::to_proto(edit, &m);
-  m.set_token(im.options.control_token);
+  // No token: the session checked it, and it never crosses NATS (NATS's permissions decide who
+  // may publish req.edit).
   const std::string bytes = m.SerializeAsString();
   natsMsg* reply = nullptr;
   {

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
+#include <fstream>
 #include <memory>
 
 #include "irradcast/common/error.h"
@@ -146,15 +147,66 @@ void Subscription::close() {
   gate_ = nullptr;
 }
 
-Connection::Connection(const std::string& url, const std::string& name,
-                       std::function<void()> changed)
-    : shared_(new Shared{url, std::move(changed)}) {
+namespace {
+// The first line of `path`, without surrounding white space.
+std::string first_line(const std::string& path, const char* flag) {
+  std::ifstream f(path);
+  std::string line;
+  if (!f || !std::getline(f, line)) throw Error(std::string(flag) + ": cannot read '" + path + "'");
+  const char* space = " \t\r\n";
+  const std::size_t a = line.find_first_not_of(space);
+  if (a == std::string::npos)
+    throw Error(std::string(flag) + ": the first line of '" + path + "' is empty");
+  return line.substr(a, line.find_last_not_of(space) + 1 - a);
+}
+
+// The credentials and TLS of `c` on `opts`.
+natsStatus apply(natsOptions* opts, const std::string& url, const NatsCredentials& c) {
+  natsStatus s = NATS_OK;
+  if (c.tls(url)) s = natsOptions_SetSecure(opts, true);  // no TLS from the server: no connection
+  if (s == NATS_OK && !c.tls_ca.empty())
+    s = natsOptions_LoadCATrustedCertificates(opts, c.tls_ca.c_str());
+  if (s == NATS_OK && !c.tls_cert.empty())
+    s = natsOptions_LoadCertificatesChain(opts, c.tls_cert.c_str(), c.tls_key.c_str());
+  if (s == NATS_OK && !c.user.empty()) {
+    const std::string password = first_line(c.password_file, "--nats-password-file");
+    s = natsOptions_SetUserInfo(opts, c.user.c_str(), password.c_str());
+  }
+  if (s == NATS_OK && !c.creds_file.empty())
+    s = natsOptions_SetUserCredentialsFromFiles(opts, c.creds_file.c_str(), nullptr);
+  if (s == NATS_OK && !c.nkey_file.empty()) {
+    const std::string pub = nkey_public_key(first_line(c.nkey_file, "--nats-nkey"));
+    s = natsOptions_SetNKeyFromSeed(opts, pub.c_str(), c.nkey_file.c_str());
+  }
+  return s;
+}
+}  // namespace
+
+Connection::Connection(const std::string& url, const NatsCredentials& credentials,
+                       const std::string& name, std::function<void()> changed)
+    : shared_(new Shared{redact_nats_url(url), std::move(changed)}) {
   if (url.rfind("nats://", 0) != 0 && url.rfind("tls://", 0) != 0) {
+    const std::string shown = shared_->url;
     delete shared_;
-    throw Error("--nats: '" + url + "' is not a nats://HOST:PORT URL");
+    throw Error("--nats: '" + shown + "' is not a nats:// or tls://HOST:PORT URL");
+  }
+  try {
+    credentials.validate();
+  } catch (...) {
+    delete shared_;
+    throw;
   }
   natsStatus s = natsOptions_Create(&opts_);
   if (s == NATS_OK) s = natsOptions_SetURL(opts_, url.c_str());
+  if (s == NATS_OK) {
+    try {
+      s = apply(opts_, url, credentials);
+    } catch (...) {
+      natsOptions_Destroy(opts_);
+      delete shared_;
+      throw;
+    }
+  }
   if (s == NATS_OK) s = natsOptions_SetName(opts_, name.c_str());
   if (s == NATS_OK) s = natsOptions_SetMaxReconnect(opts_, -1);
   if (s == NATS_OK) s = natsOptions_SetReconnectWait(opts_, 250);
@@ -166,29 +218,32 @@ Connection::Connection(const std::string& url, const std::string& name,
   if (s == NATS_OK) s = natsOptions_SetClosedCB(opts_, on_closed, shared_);
   if (s == NATS_OK) s = natsConnection_Connect(&nc_, opts_);
   if (s == NATS_NOT_YET_CONNECTED)
-    log::warn("nats", "NATS at " + url + " is not there yet; retrying in the background");
+    log::warn("nats", "NATS at " + shared_->url + " is not there yet; retrying in the background");
   else if (s == NATS_OK)
     shared_->up();
   if (s == NATS_OK || s == NATS_NOT_YET_CONNECTED) s = natsConnection_JetStream(&js_, nc_, nullptr);
   if (s != NATS_OK) {
     const std::string why = describe(s);
-    if (nc_) {  // its closed callback deletes shared_
+    const std::string shown = shared_->url;
+    if (nc_) {  // its closed callback drops libnats's reference to shared_
       shared_->closing = true;
       natsConnection_Close(nc_);
       natsConnection_Destroy(nc_);
+      Shared::release(shared_);
     } else {
       delete shared_;
     }
     natsOptions_Destroy(opts_);
-    throw Error("cannot connect to NATS at " + url + ": " + why);
+    throw Error("cannot connect to NATS at " + shown + ": " + why);
   }
 }
 
 Connection::~Connection() {
   shared_->closing = true;
   jsCtx_Destroy(js_);
-  natsConnection_Close(nc_);  // the closed callback deletes shared_
+  natsConnection_Close(nc_);  // the closed callback drops libnats's reference
   natsConnection_Destroy(nc_);
+  Shared::release(shared_);
   natsOptions_Destroy(opts_);
 }
 
@@ -210,8 +265,14 @@ void Connection::on_disconnected(natsConnection*, void* shared) {
   if (c->changed) c->changed();
 }
 
-void Connection::on_closed(natsConnection*, void* shared) {
-  delete static_cast<Shared*>(shared);
+void Connection::on_closed(natsConnection* nc, void* shared) {
+  auto* c = static_cast<Shared*>(shared);
+  // Closed while its owner still wants it: libnats gave up (a server that does not negotiate
+  // the TLS that tls:// or a TLS file requires, refused credentials): say why, once.
+  const char* last = nullptr;
+  if (!c->closing && natsConnection_GetLastError(nc, &last) != NATS_OK && last && *last)
+    log::error("nats", "the connection to " + c->url + " is closed: " + last);
+  Shared::release(c);
 }
 
 }  // namespace nats_link

@@ -15,16 +15,20 @@
 #include <mutex>
 #include <vector>
 
+#include "irradcast/service/nats_credentials.h"
 #include "irradcast/service/tile_source.h"
 
 namespace irradcast::nats_link {
 
 class Connection {
  public:
-  // Starts connecting to `url` (nats://HOST:PORT); returns at once when the server is not there
-  // yet (the client keeps trying). `changed` runs on a libnats thread after every connect,
-  // disconnect and reconnect. Throws irradcast::Error on a bad URL or options.
-  Connection(const std::string& url, const std::string& name, std::function<void()> changed);
+  // Starts connecting to `url` (nats:// or tls://HOST:PORT) with `credentials` (user and
+  // password, credentials file or NKey; TLS required for tls:// or any TLS file); returns at once
+  // when the server is not there yet (the client keeps trying). `changed` runs on a libnats
+  // thread after every connect, disconnect and reconnect. Throws irradcast::Error on a bad URL or
+  // options. The URL is logged only redacted (redact_nats_url).
+  Connection(const std::string& url, const NatsCredentials& credentials, const std::string& name,
+             std::function<void()> changed);
   ~Connection();
   Connection(const Connection&) = delete;
   Connection& operator=(const Connection&) = delete;
@@ -34,18 +38,24 @@ class Connection {
   bool connected() const { return shared_->connected; }
   // Counts the times the connection was established (0: never yet).
   std::uint64_t generation() const { return shared_->generation; }
-  const std::string& url() const { return shared_->url; }
+  const std::string& url() const { return shared_->url; }  // redacted
 
  private:
   // What libnats's callbacks see. They run on its own thread, also after the connection is
-  // closed, so this lives until the closed callback (the last one) deletes it.
+  // closed; and libnats may close the connection on its own (TLS not offered, credentials
+  // refused) while the owner still reads it. So two references hold it, the owner's and
+  // libnats's (dropped by the closed callback, the last one), and the last to go deletes it.
   struct Shared {
     std::string url;
     std::function<void()> changed;
     std::atomic<bool> connected{false};
     std::atomic<bool> closing{false};  // the owner is going: tell it nothing more
     std::atomic<std::uint64_t> generation{0};
+    std::atomic<int> refs{2};
     void up();
+    static void release(Shared* s) {
+      if (s->refs.fetch_sub(1) == 1) delete s;
+    }
   };
   static void on_connected(natsConnection* nc, void* shared);
   static void on_disconnected(natsConnection* nc, void* shared);

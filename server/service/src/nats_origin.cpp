@@ -408,7 +408,8 @@ void NatsOrigin::Impl::on_cameras(natsConnection* nc, natsMsg* msg) {
   natsMsg_Destroy(msg);
 }
 
-// A scene edit from a gateway: the control token, then the host's validation, as a session.
+// A scene edit from a gateway (its session checked the control token; NATS's permissions decide
+// who may publish here), then the host's validation, as a session.
 void NatsOrigin::Impl::on_submit(natsConnection* nc, natsMsg* msg) {
   Impl& im = *this;
   wire::SceneEdit m;
@@ -417,12 +418,16 @@ void NatsOrigin::Impl::on_submit(natsConnection* nc, natsMsg* msg) {
     im.count(&NatsOriginStats::bad_requests);
     r.set_error("scene edit: the request does not parse");
     r.set_code(wire::BAD_REQUEST);
-  } else if (im.options.control_token.empty() ||
-             !same_secret(m.token(), im.options.control_token)) {
+  } else if (!im.options.accept_edits) {
     im.count(&NatsOriginStats::edits_refused);
-    r.set_error(im.options.control_token.empty() ? "the origin takes no edits"
-                                                 : "scene edits need the control token");
+    r.set_error(
+        "the origin takes no edits (start it with --control-token or --control-token-file)");
     r.set_code(wire::PERMISSION_DENIED);
+  } else if (!m.token().empty()) {
+    // A control token on NATS is a misconfigured or foreign sender: refused, never compared.
+    im.count(&NatsOriginStats::edits_refused);
+    r.set_error("an edit on NATS carries a token: gateways forward edits without it");
+    r.set_code(wire::BAD_REQUEST);
   } else {
     im.count(&NatsOriginStats::edit_requests);
     try {
@@ -441,8 +446,9 @@ NatsOrigin::NatsOrigin(EngineHost& host, NatsOriginOptions options)
     : host_(host), impl_(std::make_unique<Impl>(host, std::move(options))) {
   Impl& im = *impl_;
   im.dirty.assign(host.tiles().tile_count(), 0);  // the first round publishes every tile
-  im.conn = std::make_unique<nats_link::Connection>(
-      im.options.url, "irradcast-origin " + host.scene_id(), [&im] { im.cv.notify_all(); });
+  im.conn = std::make_unique<nats_link::Connection>(im.options.url, im.options.credentials,
+                                                    "irradcast-origin " + host.scene_id(),
+                                                    [&im] { im.cv.notify_all(); });
   natsStatus s =
       im.camera_sub.subscribe(im.conn->nc(), im.subjects.cameras,
                               [&im](natsConnection* nc, natsMsg* msg) { im.on_cameras(nc, msg); });
@@ -451,13 +457,16 @@ NatsOrigin::NatsOrigin(EngineHost& host, NatsOriginOptions options)
                               [&im](natsConnection* nc, natsMsg* msg) { im.on_submit(nc, msg); });
   if (s != NATS_OK) {
     im.camera_sub.close();
-    throw Error("NATS subscriptions of the origin: " + nats_link::describe(s));
+    throw Error("NATS at " + im.conn->url() + ": the origin cannot subscribe (" +
+                nats_link::describe(s) +
+                "; TLS required and not offered, or refused credentials?)");
   }
   host.set_listener([&im](const std::vector<std::uint32_t>& tiles) { im.on_tiles(tiles); });
   host.set_edit_listener([&im](const AppliedEdit& applied) { im.on_edit(applied); });
   im.worker = std::thread([&im] { im.run(); });
-  log::info("nats", "publishing scene '" + host.scene_id() + "' to " + im.options.url +
-                        " (stream " + im.subjects.stream + ")");
+  log::info("nats", "publishing scene '" + host.scene_id() + "' to " + im.conn->url() + " (" +
+                        im.options.credentials.describe(im.options.url) + ")" + " (stream " +
+                        im.subjects.stream + ")");
 }
 
 std::string NatsOrigin::check_stream(std::chrono::milliseconds limit) {

@@ -5,9 +5,9 @@
 // reconnects, reads it from the start (an ordered consumer) and has the current state without
 // asking the origin; tile versions are the origin's, so viewers resume across gateways and the
 // origin. Viewers' cameras go to the origin (all of this gateway's, every 250 ms while they
-// change and every 2 s regardless) and edits (with the control token) through NATS requests.
-// When NATS or the origin goes away the gateway keeps serving what it has; on reconnection it
-// reads the stream again and installs what is newer.
+// change and every 2 s regardless) and edits (accepted by a session with the control token,
+// forwarded without it) through NATS requests. When NATS or the origin goes away the gateway keeps
+// serving what it has; on reconnection it reads the stream again and installs what is newer.
 #pragma once
 
 #include <chrono>
@@ -15,16 +15,15 @@
 #include <memory>
 #include <string>
 
+#include "irradcast/service/nats_credentials.h"
 #include "irradcast/service/tile_source.h"
 
 namespace irradcast {
 
 struct NatsGatewayOptions {
-  std::string url;                   // nats://HOST:PORT
-  std::string scene_id = "cornell";  // the origin's --scene
-  // Sent with every edit (the origin checks it); the Server's control token, which the
-  // sessions check first.
-  std::string control_token;
+  std::string url;                                  // nats:// or tls://HOST:PORT
+  std::string scene_id = "cornell";                 // the origin's --scene
+  NatsCredentials credentials;                      // who the gateway is to NATS, and TLS
   std::chrono::milliseconds request_timeout{3000};  // an edit's answer from the origin
   std::chrono::milliseconds camera_every{250};
 };

@@ -3,12 +3,12 @@
 // stream (nats_subjects.h): the scene package (in chunks) and its state, every tile version's
 // RGB9E5 payload (the one the tile store encoded), every applied edit, and the engine's stats
 // once a second. It answers the gateways' requests: their viewers' cameras (for visible-first
-// refinement after edits) and scene edits (with the control token, checked here as a session
-// checks it). Publishing runs on its own thread and never blocks the engine: the engine's
-// listeners only mark tiles dirty (a tile marked again before it went out is published once, at
-// its latest version: counted as coalesced) and queue edits (bounded, oldest dropped). On every
-// (re)connection the whole current state is published again, so a NATS server that lost its
-// storage is refilled.
+// refinement after edits) and scene edits (which a gateway's session accepted with the control
+// token; the token itself never crosses NATS). Publishing runs on its own thread and never blocks
+// the engine: the engine's listeners only mark tiles dirty (a tile marked again before it went out
+// is published once, at its latest version: counted as coalesced) and queue edits (bounded, oldest
+// dropped). On every (re)connection the whole current state is published again, so a NATS server
+// that lost its storage is refilled.
 #pragma once
 
 #include <chrono>
@@ -17,13 +17,18 @@
 #include <string>
 
 #include "irradcast/service/engine_host.h"
+#include "irradcast/service/nats_credentials.h"
 #include "irradcast/service/tile_source.h"
 
 namespace irradcast {
 
 struct NatsOriginOptions {
-  std::string url;            // nats://HOST:PORT
-  std::string control_token;  // edits from gateways need it (empty: they are refused)
+  std::string url;              // nats:// or tls://HOST:PORT
+  NatsCredentials credentials;  // who the origin is to NATS, and TLS
+  // Take the edits gateways forward on req.edit (the origin has a control token: its own
+  // viewers may edit too). The token never crosses NATS: a gateway checks it, and NATS's
+  // permissions decide who may publish req.edit (deploy/nats/nats.conf: the gateway user).
+  bool accept_edits = false;
   std::chrono::milliseconds stats_every{1000};
   // A gateway's cameras are forgotten after this long without a camera request from it.
   std::chrono::milliseconds camera_expiry{10000};
