@@ -485,7 +485,8 @@ TEST(NatsPrograms, TheGatewayProgramServesWhatTheOriginProgramComputes) {
       test::run_cli(IRRADCAST_GATEWAY_EXE, "--nats http://127.0.0.1:1 --port 0");
   EXPECT_EQ(bad.status, 1);
   EXPECT_NE(bad.output.find("irradcast-gateway: error: --nats: 'http://127.0.0.1:1' is not a "
-                            "nats://HOST:PORT URL"),
+                            "nats:// or tls://HOST:PORT "
+                            "URL"),
             std::string::npos)
       << bad.output;
 }

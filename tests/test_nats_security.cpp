@@ -10,6 +10,7 @@
 
 #include <cstdlib>
 #include <fstream>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -277,6 +278,117 @@ TEST(NatsSecurity, TlsIsNeverDowngraded) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("tls://127.0.0.1"), std::string::npos) << e.what();
   }
+}
+
+}  // namespace
+}  // namespace irradcast
+
+namespace irradcast {
+namespace {
+
+// What NATS's permissions cannot stop on an open NATS (or with a stolen credential) is bounded
+// by the programs themselves: an origin notices its stream deleted or purged and publishes it
+// again; a gateway refuses a tile version the origin cannot have made; an origin holds the
+// cameras of at most max_gateways gateways.
+TEST(NatsHardening, AnOriginRepublishesADeletedOrPurgedStream) {
+  IRRADCAST_NEED_NATS();
+  test::NatsProcess nats;
+  test::NatsOriginNode origin(nats.url(), 1);
+  ASSERT_TRUE(origin.settle());
+  const NatsSubjects subj = nats_subjects("cornell");
+  natsConnection* nc = nullptr;
+  ASSERT_EQ(natsConnection_ConnectTo(&nc, nats.url().c_str()), NATS_OK);
+  jsCtx* js = nullptr;
+  ASSERT_EQ(natsConnection_JetStream(&js, nc, nullptr), NATS_OK);
+  jsErrCode jerr = static_cast<jsErrCode>(0);
+  for (const bool purge : {false, true}) {
+    const std::uint64_t losses = origin.origin.nats_stats().stream_losses;
+    ASSERT_EQ(purge ? js_PurgeStream(js, subj.stream.c_str(), nullptr, &jerr)
+                    : js_DeleteStream(js, subj.stream.c_str(), nullptr, &jerr),
+              NATS_OK);
+    EXPECT_TRUE(test::eventually([&] {
+      return origin.origin.nats_stats().stream_losses > losses &&
+             origin.origin.flush(std::chrono::milliseconds(500));
+    })) << (purge ? "purge" : "delete");
+    // A gateway that starts now gets the whole scene from the stream.
+    test::NatsGatewayNode late(nats.url());
+    ViewClient v(test::client_of(*late.server, "late"));
+    v.connect();
+    EXPECT_TRUE(test::converge(v, origin.host.tiles())) << (purge ? "purge" : "delete");
+    v.close();
+  }
+  jsCtx_Destroy(js);
+  natsConnection_Destroy(nc);
+}
+
+TEST(NatsHardening, AGatewayRefusesATileVersionTheOriginCannotHaveMade) {
+  IRRADCAST_NEED_NATS();
+  test::NatsProcess nats;
+  test::NatsOriginNode origin(nats.url(), 2);
+  ASSERT_TRUE(origin.settle());
+  test::NatsGatewayNode gw(nats.url());
+  ASSERT_TRUE(test::eventually([&] { return gw.gateway.stats().updates >= 2; }));
+  const std::uint64_t bad = gw.gateway.nats_stats().bad_messages;
+  natsConnection* nc = nullptr;
+  ASSERT_EQ(natsConnection_ConnectTo(&nc, nats.url().c_str()), NATS_OK);
+  jsCtx* js = nullptr;
+  ASSERT_EQ(natsConnection_JetStream(&js, nc, nullptr), NATS_OK);
+  const TileStore::Snapshot real = origin.host.tiles().snapshot(0, wire::TILE_RGB9E5_ZSTD);
+  ASSERT_GT(real.version, 0u);
+  wire::NatsTile forged;
+  forged.set_origin(1);
+  forged.set_index(0);
+  forged.set_version(std::uint64_t{1} << 62);
+  forged.set_time_us(real.time_us);
+  forged.set_payload(*real.payload);  // a valid tile, at a version no origin reaches
+  EXPECT_EQ(js_publish(js, nats_subjects("cornell").tile(0), forged.SerializeAsString()), NATS_OK);
+  EXPECT_TRUE(test::eventually([&] { return gw.gateway.nats_stats().bad_messages > bad; }));
+  EXPECT_EQ(gw.gateway.tiles().version(0), real.version);
+  jsCtx_Destroy(js);
+  natsConnection_Destroy(nc);
+}
+
+TEST(NatsHardening, AnOriginHoldsTheCamerasOfAtMostMaxGatewaysGateways) {
+  IRRADCAST_NEED_NATS();
+  test::NatsProcess nats;
+  EngineHost host(make_cornell_box(), "cornell", test::quick_host(1));
+  NatsOriginOptions o;
+  o.url = nats.url();
+  o.max_gateways = 2;
+  NatsOrigin origin(host, o);
+  ASSERT_TRUE(test::eventually([&] { return origin.nats_stats().connected; }));
+  natsConnection* nc = nullptr;
+  ASSERT_EQ(natsConnection_ConnectTo(&nc, nats.url().c_str()), NATS_OK);
+  // The origin's answer to a camera request from `gateway` (nullopt: none yet).
+  auto ask = [&](std::uint64_t gateway) -> std::optional<wire::NatsReply> {
+    wire::NatsCameras m;
+    m.set_gateway(gateway);
+    wire::CameraUpdate* c = m.add_cameras();
+    c->mutable_eye()->set_z(3.0f);
+    c->mutable_forward()->set_z(-1.0f);
+    c->mutable_up()->set_y(1.0f);
+    c->set_yfov(0.8f);
+    const std::string bytes = m.SerializeAsString();
+    natsMsg* reply = nullptr;
+    if (natsConnection_Request(&reply, nc, nats_subjects("cornell").cameras.c_str(), bytes.data(),
+                               static_cast<int>(bytes.size()), 2000) != NATS_OK)
+      return std::nullopt;
+    wire::NatsReply r;
+    r.ParseFromArray(natsMsg_GetData(reply), natsMsg_GetDataLength(reply));
+    natsMsg_Destroy(reply);
+    return r;
+  };
+  // Until the origin's subscription is in place, requests find no responder.
+  std::optional<wire::NatsReply> first;
+  ASSERT_TRUE(test::eventually([&] { return (first = ask(11)).has_value(); }));
+  EXPECT_EQ(first->code(), wire::ERROR_UNSPECIFIED);
+  EXPECT_EQ(ask(12).value_or(wire::NatsReply{}).code(), wire::ERROR_UNSPECIFIED);
+  const wire::NatsReply third = ask(13).value_or(wire::NatsReply{});
+  EXPECT_EQ(third.code(), wire::REFUSED);
+  EXPECT_NE(third.error().find("2 gateways already"), std::string::npos) << third.error();
+  EXPECT_EQ(ask(11).value_or(wire::NatsReply{}).code(), wire::ERROR_UNSPECIFIED);  // held: goes on
+  EXPECT_EQ(origin.nats_stats().gateways_refused, 1u);
+  natsConnection_Destroy(nc);
 }
 
 }  // namespace

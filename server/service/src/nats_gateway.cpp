@@ -26,6 +26,9 @@ using Clock = std::chrono::steady_clock;
 constexpr std::uint32_t kMaxChunks = 1u << 14;      // 8 GiB of package at 512 KiB
 constexpr std::size_t kMaxEarlyTiles = 1u << 20;    // tiles before the first state
 constexpr std::size_t kMaxEarlyBytes = 256u << 20;  // their payloads
+// How far a tile's version may lead the origin's engine updates (its stats lag by up to a
+// second's updates).
+constexpr std::uint64_t kMaxVersionLead = 1000;
 constexpr std::uint32_t kMaxLightmaps = 1u << 20;
 constexpr std::size_t kMaxCameras = 4096;
 constexpr auto kCameraKeepalive = std::chrono::seconds(2);
@@ -236,8 +239,17 @@ void NatsGateway::Impl::apply_state(const wire::NatsSceneState& s,
 
 void NatsGateway::Impl::on_tile(wire::NatsTile t) {
   {
-    std::lock_guard lock(mutex);
+    std::unique_lock lock(mutex);
     ++st.tiles_received;
+    // A tile's version grows by at most one per engine update, and the origin's stats say how
+    // many updates it ran: a version far beyond that was not made by it (a forged tile would
+    // otherwise stay ahead of every real version for good).
+    if (engine.updates > 0 && t.version() > engine.updates + kMaxVersionLead) {
+      lock.unlock();
+      return bad("tile " + std::to_string(t.index()) + " at version " +
+                 std::to_string(t.version()) + ", beyond what the origin's " +
+                 std::to_string(engine.updates) + " updates can have made");
+    }
     st.lag_seconds = static_cast<double>(now_us() - std::min(now_us(), t.time_us())) * 1e-6;
     if (!store) {
       // Kept until the layout is known, bounded in count and bytes (the rest come again with the

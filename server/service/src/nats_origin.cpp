@@ -75,6 +75,7 @@ struct NatsOrigin::Impl {
   const wire::ScenePackage* last_package = nullptr;
   std::optional<AppliedEdit> last_edit;  // the newest edit published
   Clock::time_point next_stats{};
+  Clock::time_point next_check{};
 
   void on_tiles(const std::vector<std::uint32_t>& tiles);
   void on_edit(const AppliedEdit& applied);
@@ -82,6 +83,7 @@ struct NatsOrigin::Impl {
   bool round(bool full, const std::vector<std::uint32_t>& tiles, std::deque<AppliedEdit>& eds);
   bool ensure_stream();
   bool stream_allows(std::uint64_t revision);
+  bool stream_intact();
   bool publish(const std::string& subject, const google::protobuf::MessageLite& m);
   bool publish_package(const wire::ScenePackage& package, std::uint64_t revision,
                        std::uint64_t epoch);
@@ -162,6 +164,22 @@ void NatsOrigin::Impl::run() {
 bool NatsOrigin::Impl::round(bool full, const std::vector<std::uint32_t>& tiles,
                              std::deque<AppliedEdit>& eds) {
   bool ok = true;
+  if (!full && Clock::now() >= next_check) {
+    next_check = Clock::now() + options.stats_every;
+    if (!stream_intact()) {
+      // Put back what this round would have published: everything goes out again next round.
+      count(&NatsOriginStats::stream_losses);
+      std::lock_guard lock(mutex);
+      for (std::uint32_t t : tiles)
+        if (!dirty[t]) {
+          dirty[t] = 1;
+          dirty_list.push_back(t);
+        }
+      for (auto it = eds.rbegin(); it != eds.rend(); ++it) edits.push_front(std::move(*it));
+      eds.clear();
+      return false;
+    }
+  }
   if (full) ok = publish_everything(eds);
   if (ok) ok = publish_edits(eds);
   for (std::size_t i = 0; ok && i < tiles.size(); ++i) ok = publish_tile(tiles[i]);
@@ -223,6 +241,33 @@ bool NatsOrigin::Impl::ensure_stream() {
     return false;
   }
   return true;
+}
+
+// Whether the stream still holds this origin's scene state (checked once a second, between
+// rounds whose publishes JetStream acknowledged): not after an operator deleted or purged the
+// stream, or another origin published over it. Then everything is published again (the stream
+// created anew; another origin's newer revision is respected: stream_allows).
+bool NatsOrigin::Impl::stream_intact() {
+  natsMsg* msg = nullptr;
+  jsErrCode jerr = static_cast<jsErrCode>(0);
+  jsOptions quick;
+  jsOptions_Init(&quick);
+  quick.Wait = 2000;
+  const natsStatus s = js_GetLastMsg(&msg, conn->js(), subjects.stream.c_str(),
+                                     subjects.state.c_str(), &quick, &jerr);
+  std::string why;
+  if (s == NATS_OK) {
+    wire::NatsSceneState held;
+    const bool parsed = held.ParseFromArray(natsMsg_GetData(msg), natsMsg_GetDataLength(msg));
+    natsMsg_Destroy(msg);
+    if (!parsed || held.origin() != origin) why = "holds another origin's scene state";
+  } else if (s == NATS_NOT_FOUND || jerr == JSStreamNotFoundErr || jerr == JSNoMessageFoundErr) {
+    why = "lost its scene state (deleted or purged)";
+  } else {
+    return true;  // no answer now: nothing to conclude
+  }
+  log::warn("nats", "the stream " + subjects.stream + " " + why + "; publishing everything again");
+  return false;
 }
 
 // Whether this origin may publish `revision` over what the stream holds. Not when the stream's
@@ -386,10 +431,22 @@ void NatsOrigin::Impl::on_cameras(natsConnection* nc, natsMsg* msg) {
   Impl& im = *this;
   wire::NatsCameras m;
   wire::NatsReply r;
-  if (!m.ParseFromString(nats_link::data_of(msg)) || m.gateway() == 0) {
+  const bool parsed = m.ParseFromString(nats_link::data_of(msg)) && m.gateway() != 0;
+  std::size_t held = 0;  // gateways held, when this one would be one too many
+  if (parsed) {
+    std::lock_guard lock(im.camera_mutex);
+    if (!im.gateways.contains(m.gateway()) && im.gateways.size() >= im.options.max_gateways)
+      held = im.gateways.size();
+  }
+  if (!parsed) {
     im.count(&NatsOriginStats::bad_requests);
     r.set_error("cameras: the request does not parse");
     r.set_code(wire::BAD_REQUEST);
+  } else if (held > 0) {
+    im.count(&NatsOriginStats::gateways_refused);
+    r.set_error("cameras: the origin holds the cameras of " + std::to_string(held) +
+                " gateways already");
+    r.set_code(wire::REFUSED);
   } else {
     im.count(&NatsOriginStats::camera_requests);
     std::lock_guard lock(im.camera_mutex);
@@ -533,6 +590,12 @@ std::string format_nats_origin_metrics(const NatsOriginStats& s) {
                 "Publish rounds that failed.", d(s.publish_errors));
   append_metric(out, "irradcast_nats_edit_requests_total", "counter",
                 "Scene edits accepted from gateways.", d(s.edit_requests));
+  append_metric(out, "irradcast_nats_stream_losses_total", "counter",
+                "Times the stream was found deleted, purged or rewritten (then republished).",
+                d(s.stream_losses));
+  append_metric(out, "irradcast_nats_gateways_refused_total", "counter",
+                "Camera requests refused: the origin holds max_gateways gateways already.",
+                d(s.gateways_refused));
   append_metric(out, "irradcast_nats_refused_newer_stream", "gauge",
                 "1 while the origin publishes nothing: the stream holds a newer revision from "
                 "another origin.",

@@ -33,6 +33,9 @@ struct NatsOriginOptions {
   // A gateway's cameras are forgotten after this long without a camera request from it.
   std::chrono::milliseconds camera_expiry{10000};
   std::size_t max_queued_edits = 1024;  // applied edits waiting to be published
+  // Gateways whose cameras the origin holds at once (each at most 4096 cameras, forgotten
+  // camera_expiry after its last request); a camera request from one more is refused.
+  std::size_t max_gateways = 64;
   // Publish even when the stream holds a newer revision from another origin process (its edits
   // are then lost for the gateways). Off: such an origin publishes nothing (docs/DISTRIBUTION.md).
   bool replace_newer = false;
@@ -49,8 +52,10 @@ struct NatsOriginStats {
   std::uint64_t publish_errors = 0;
   std::uint64_t camera_requests = 0;
   std::uint64_t edit_requests = 0;
-  std::uint64_t edits_refused = 0;  // wrong token or invalid edit
-  std::uint64_t bad_requests = 0;   // requests that do not parse
+  std::uint64_t edits_refused = 0;     // wrong token or invalid edit
+  std::uint64_t bad_requests = 0;      // requests that do not parse
+  std::uint64_t gateways_refused = 0;  // camera requests from a gateway beyond max_gateways
+  std::uint64_t stream_losses = 0;     // the stream was found deleted, purged or rewritten
   // The stream holds a newer revision from another origin: this one publishes nothing.
   bool refused_newer_stream = false;
 };
