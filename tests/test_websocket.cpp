@@ -8,8 +8,10 @@
 
 #include "irradcast/client/client_session.h"
 #include "irradcast/common/builtin.h"
+#include "irradcast/common/error.h"
 #include "irradcast/service/engine_host.h"
 #include "irradcast/service/net_server.h"
+#include "irradcast/service/web_origin.h"
 #include "irradcast/web/assets.h"
 #include "service_fixture.h"
 #include "tls_cert.h"
@@ -336,4 +338,53 @@ TEST(WebSocket, AFragmentedMessageIsOneFrameAndShutdownIsAnnounced) {
   ASSERT_TRUE(error);
   EXPECT_EQ(error->code(), wire::SERVER_SHUTDOWN);
   EXPECT_EQ(ws.ws.remote_close_code(), 1000);
+}
+
+namespace {
+// A WebSocket upgrade of /ws with these extra header lines; the reply's status line.
+std::string upgrade_status(std::uint16_t port, const std::string& host, const std::string& extra) {
+  const std::string request = "GET /ws HTTP/1.1\r\nHost: " + host +
+                              "\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                              "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+                              "Sec-WebSocket-Version: 13\r\n" +
+                              extra + "\r\n";
+  return status_line(test::http_exchange(port, request, nullptr, true));
+}
+}  // namespace
+
+// Cross-site WebSocket hijacking: a page of another site, in the browser of someone who can
+// reach the server, must not open /ws (and download the scene through them). Pages of the
+// server's own host, clients that send no Origin (not browsers), and origins given with
+// --allowed-origin may.
+TEST(WebSocket, OnlyPagesOfTheServersOwnOriginOrAllowedOnesOpenTheWebSocket) {
+  EngineHost host(make_cornell_box(), "cornell", test::quick_host(1));
+  ServerOptions o = web_loopback();
+  o.allowed_origins = {"https://viewer.example.org"};
+  Server server(host, o);
+  server.start();
+  const std::uint16_t port = server.http_port();
+  const std::string self = "127.0.0.1:" + std::to_string(port);
+  const std::string switching = "HTTP/1.1 101 Switching Protocols";
+  const std::string forbidden = "HTTP/1.1 403 Forbidden";
+  EXPECT_EQ(upgrade_status(port, self, ""), switching);
+  EXPECT_EQ(upgrade_status(port, self, "Origin: http://" + self + "\r\n"), switching);
+  EXPECT_EQ(upgrade_status(port, self, "Origin: HTTPS://" + self + "/\r\n"), switching);
+  EXPECT_EQ(upgrade_status(port, self, "Origin: https://viewer.example.org\r\n"), switching);
+  for (const char* origin : {"http://evil.example", "http://127.0.0.1:1", "null",
+                             "https://viewer.example.org.evil", "http://viewer.example.org"})
+    EXPECT_EQ(upgrade_status(port, self, std::string("Origin: ") + origin + "\r\n"), forbidden)
+        << origin;
+  // Pages on the default ports.
+  EXPECT_TRUE(origin_allowed("http://example.com", "example.com:80", {}));
+  EXPECT_TRUE(origin_allowed("https://example.com:443", "example.com", {}));
+  EXPECT_FALSE(origin_allowed("https://example.com:8443", "example.com", {}));
+  EXPECT_FALSE(origin_allowed("http://example.com", "", {}));
+  EXPECT_TRUE(origin_allowed("null", "x", {"null"}));
+  // --allowed-origin values are checked.
+  for (const char* bad : {"evil.example", "ftp://x", "http://", "http://a/path", "http://u@h"})
+    EXPECT_THROW(check_origin(bad), Error) << bad;
+  EXPECT_NO_THROW(check_origin("https://viewer.example.org:8443"));
+  const ServerStats ss = server.stats();
+  EXPECT_EQ(ss.websocket_sessions, 4u);
+  server.stop();
 }

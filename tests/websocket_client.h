@@ -91,13 +91,15 @@ struct WsConnection {
 };
 
 // Writes `request` to 127.0.0.1:port and reads until the server closes (at most 5 s).
+// With `head_only`, until the end of the reply's header (an upgrade's connection stays open).
 inline std::string http_exchange(std::uint16_t port, const std::string& request,
-                                 asio::ssl::context* tls = nullptr) {
+                                 asio::ssl::context* tls = nullptr, bool head_only = false) {
   RawConnection c(port, tls);
   c.write(request);
   std::string out;
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-  while (!c.eof && std::chrono::steady_clock::now() < deadline) {
+  while (!c.eof && std::chrono::steady_clock::now() < deadline &&
+         !(head_only && out.find("\r\n\r\n") != std::string::npos)) {
     const auto [result, n] = read_some_before(c.io, c.stream, asio::buffer(c.buf), deadline, [&] {
       std::error_code ignored;
       c.stream.socket().cancel(ignored);

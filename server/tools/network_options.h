@@ -12,6 +12,7 @@
 #include <memory>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include <pthread.h>
 
@@ -19,6 +20,7 @@
 #include "irradcast/common/log.h"
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/net_server.h"
+#include "irradcast/service/web_origin.h"
 
 namespace irradcast::tools {
 
@@ -35,6 +37,7 @@ struct NetworkOptions {
   std::string control_token;
   std::string control_token_file;
   std::string tls_cert, tls_key;
+  std::vector<std::string> allowed_origins;  // --allowed-origin
   std::uint32_t max_clients = ServerOptions().max_clients;
   std::uint32_t max_clients_per_peer = ServerOptions().max_clients_per_peer;
 
@@ -53,6 +56,11 @@ struct NetworkOptions {
                    "not given)")
         ->check(CLI::Range(0, 65535))
         ->default_str("off");
+    app.add_option("--allowed-origin", allowed_origins,
+                   "a page origin (scheme://host[:port]) whose scripts may open the web port's "
+                   "WebSocket besides pages of this server's own host (repeat or "
+                   "comma-separate; docs/OPERATIONS.md)")
+        ->delimiter(',');
     app.add_option("--metrics-port", metrics_port,
                    "serve Prometheus metrics at http://ADDR:PORT/metrics (0 = any free port; off "
                    "when not given)")
@@ -122,6 +130,8 @@ struct NetworkOptions {
     so.io_threads = io_threads;
     so.idle_timeout = std::chrono::seconds(idle_timeout_s);
     so.control_token = token.first;
+    for (const std::string& origin : allowed_origins) check_origin(origin);
+    so.allowed_origins = allowed_origins;
     so.tls_cert = tls_cert;
     so.tls_key = tls_key;
     so.max_clients = max_clients;

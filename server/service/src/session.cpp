@@ -3,6 +3,7 @@
 #include "session.h"
 
 #include "irradcast/common/log.h"
+#include "irradcast/service/web_origin.h"
 #include "web_site.h"
 
 namespace irradcast {
@@ -43,6 +44,9 @@ void Session::make_websocket() {
   wire::WsServerConnection::Handlers h;
   h.ws_path = "/ws";
   h.http = serve_web;
+  h.allow_origin = [this](const std::string& origin, const std::string& host) {
+    return origin_allowed(origin, host, server_.context.options.allowed_origins);
+  };
   h.binary = [this](std::string payload) {
     const auto n = static_cast<std::uint32_t>(payload.size());
     const char length[wire::kFrameHeaderBytes] = {

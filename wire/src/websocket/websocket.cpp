@@ -82,6 +82,7 @@ struct WsServerConnection::Impl {
   bool open = false, http = false, shut = false;
   End end = End::None;
   std::string end_message;
+  std::string refused_origin;  // the Origin of an upgrade refused by allow_origin
 
   void finish(End e, std::string why) {
     if (end != End::None) return;
@@ -115,8 +116,18 @@ void WsServerConnection::Impl::on_http() {
 }
 
 bool WsServerConnection::Impl::on_validate() {
-  if (con->get_resource() == handlers.ws_path) return true;
-  con->set_status(ws::http::status_code::not_found);
+  if (con->get_resource() != handlers.ws_path) {
+    con->set_status(ws::http::status_code::not_found);
+    return false;
+  }
+  const std::string origin = con->get_request_header("Origin");
+  if (origin.empty() || !handlers.allow_origin ||
+      handlers.allow_origin(origin, con->get_request_header("Host")))
+    return true;
+  // A page of another site in a visitor's browser: it must not read this server's scene.
+  refused_origin = origin.substr(0, 200);
+  con->set_status(ws::http::status_code::forbidden);
+  con->set_body("a WebSocket from a page of another origin is not allowed here\n");
   return false;
 }
 
@@ -156,8 +167,12 @@ WsServerConnection::WsServerConnection(Handlers handlers, std::size_t max_messag
       [&im](ws::connection_hdl, ServerEndpoint::message_ptr m) { im.on_message(std::move(m)); });
   im.endpoint.set_close_handler([&im](ws::connection_hdl) { im.on_close(); });
   im.endpoint.set_fail_handler([&im](ws::connection_hdl) {
-    im.finish(End::Handshake,
-              "not a valid HTTP request or WebSocket upgrade: " + im.con->get_ec().message());
+    if (!im.refused_origin.empty())
+      im.finish(End::Handshake, "a WebSocket upgrade from the page origin '" + im.refused_origin +
+                                    "', not this server's (--allowed-origin)");
+    else
+      im.finish(End::Handshake,
+                "not a valid HTTP request or WebSocket upgrade: " + im.con->get_ec().message());
   });
   im.con = im.endpoint.get_connection();
   capture_output(im.con, im.out);

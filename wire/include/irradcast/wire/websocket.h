@@ -54,6 +54,9 @@ class WsServerConnection {
     std::function<HttpReply(const std::string& method, const std::string& target)> http;
     // One complete binary message.
     std::function<void(std::string payload)> binary;
+    // Whether an upgrade that carries an Origin header (browsers send one) may open, given the
+    // request's Host header; unset: any. A refused upgrade gets 403 and ends as Handshake.
+    std::function<bool(const std::string& origin, const std::string& host)> allow_origin;
   };
 
   WsServerConnection(Handlers handlers, std::size_t max_message);

@@ -13,6 +13,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "irradcast/service/tile_source.h"
 
@@ -37,6 +38,9 @@ struct ServerOptions {
   // this server takes no edits (every SceneEdit gets Error PERMISSION_DENIED). At least
   // kMinTokenLength characters.
   std::string control_token;
+  // The web port: pages of these origins (scheme://host[:port]) may open /ws besides the
+  // server's own host (--allowed-origin; docs/OPERATIONS.md "The web port").
+  std::vector<std::string> allowed_origins;
 
   // Hostile clients (docs/OPERATIONS.md).
   // TLS on the protocol port: PEM certificate chain and private key (both or neither).
