@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <openssl/ssl.h>
+#include <openssl/x509.h>
 #include <asio.hpp>
 
 #include <filesystem>
@@ -19,6 +21,7 @@
 #include "irradcast/service/metrics_text.h"
 #include "irradcast/service/net_server.h"
 #include "irradcast/wire/transport.h"
+#include "process.h"
 #include "service_fixture.h"
 #include "tls_cert.h"
 
@@ -140,4 +143,122 @@ TEST(Tls, TheWholeServiceOverTls) {
       "--port 0 --tls-cert " + files.cert + " --tls-key " + (dir / "missing.pem").string());
   EXPECT_EQ(s.status, 1) << s.output;
   EXPECT_NE(s.output.find("missing.pem"), std::string::npos) << s.output;
+}
+
+namespace {
+
+// The serial number of the certificate the server on `port` presents (0 on failure).
+long peer_serial(std::uint16_t port, const std::string& ca) {
+  asio::io_context io;
+  auto ctx = wire::make_client_tls(ca);
+  asio::ssl::stream<asio::ip::tcp::socket> s(io, *ctx);
+  std::error_code ec;
+  s.lowest_layer().connect({asio::ip::make_address("127.0.0.1"), port}, ec);
+  if (!ec) s.handshake(asio::ssl::stream_base::client, ec);
+  if (ec) {
+    ADD_FAILURE() << "TLS to port " << port << ": " << wire::describe_tls_error(ec);
+    return 0;
+  }
+  X509* x = SSL_get_peer_certificate(s.native_handle());
+  const long serial = x ? ASN1_INTEGER_get(X509_get_serialNumber(x)) : 0;
+  X509_free(x);
+  s.shutdown(ec);
+  return serial;
+}
+
+void copy_over(const std::string& from, const std::string& to) {
+  fs::copy_file(from, to, fs::copy_options::overwrite_existing);
+}
+
+}  // namespace
+
+// Certificates run out: one that has expired, or is not valid yet, is refused at start with the
+// date; SIGHUP (Server::reload_tls) gives new connections the new certificate while open ones
+// keep theirs, and a bad file keeps the current certificate.
+TEST(Tls, ExpiredCertificatesAreRefusedAndAReloadReachesNewConnectionsOnly) {
+  Progress::set_enabled(false);
+  const fs::path dir = fs::path(::testing::TempDir()) / "tls_reload";
+  fs::remove_all(dir);
+  for (const char* d : {"a", "b", "old", "young"}) fs::create_directories(dir / d);
+  const test::TlsFiles a = test::make_tls_files((dir / "a").string(), 2);
+  const test::TlsFiles b = test::make_tls_files((dir / "b").string(), 9);
+  const test::TlsFiles old = test::make_tls_files((dir / "old").string(), 3, -7200, -60);
+  const test::TlsFiles young = test::make_tls_files((dir / "young").string(), 4, 3600, 7200);
+  EngineHost host(make_cornell_box(), "cornell", test::quick_host(1));
+  auto options = [&](const test::TlsFiles& f) {
+    ServerOptions o = test::loopback();
+    o.tls_cert = f.cert;
+    o.tls_key = f.key;
+    return o;
+  };
+  try {
+    Server s(host, options(old));
+    ADD_FAILURE() << "an expired certificate was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("expired on"), std::string::npos) << e.what();
+  }
+  try {
+    Server s(host, options(young));
+    ADD_FAILURE() << "a certificate not valid yet was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("not valid before"), std::string::npos) << e.what();
+  }
+
+  const test::TlsFiles live{"", (dir / "cert.pem").string(), (dir / "key.pem").string(), ""};
+  copy_over(a.cert, live.cert);
+  copy_over(a.key, live.key);
+  // (Each certificate is checked against its own CA: the two test CAs share a name.)
+  Server server(host, options(live));
+  server.start();
+  EXPECT_EQ(peer_serial(server.port(), a.ca), 2);
+  auto client_tls = wire::make_client_tls(a.ca);
+  test::RawConnection open(server.port(), client_tls.get());
+  ASSERT_TRUE(open.join("kept"));
+
+  copy_over(b.cert, live.cert);
+  copy_over(b.key, live.key);
+  EXPECT_TRUE(server.reload_tls());
+  EXPECT_EQ(peer_serial(server.port(), b.ca), 9);
+  // The connection made before the reload goes on.
+  wire::Envelope ping;
+  ping.mutable_ping()->set_nonce(77);
+  open.send(ping);
+  bool pong = false;
+  while (auto e = open.read(5000ms))
+    if (e->has_pong()) {
+      pong = e->pong().nonce() == 77;
+      break;
+    }
+  EXPECT_TRUE(pong);
+
+  std::ofstream(live.cert) << "not a certificate\n";
+  EXPECT_FALSE(server.reload_tls());
+  EXPECT_EQ(peer_serial(server.port(), b.ca), 9);
+  server.stop();
+}
+
+// irradcast-server: SIGHUP reloads (a log line, the process goes on), and a certificate that
+// expires within 14 days is a warning with its date at start.
+TEST(Tls, SighupReloadsTheCertificateOfARunningServer) {
+  const fs::path dir = fs::path(::testing::TempDir()) / "tls_sighup";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const test::TlsFiles f = test::make_tls_files(dir.string(), 5, -3600, 3 * 86400);
+  test::Process server(test::command(IRRADCAST_SERVER_EXE,
+                                     "--scene cornell --bind 127.0.0.1 --port 0 --threads 1 "
+                                     "--texels-per-scene 32 --max-updates 1 --io-threads 1 "
+                                     "--tls-cert " +
+                                         f.cert + " --tls-key " + f.key),
+                       dir / "server.log");
+  ASSERT_TRUE(
+      test::eventually([&] { return server.output().find("listening") != std::string::npos; }, 30s))
+      << server.output();
+  EXPECT_NE(server.output().find("expires in under 14 days"), std::string::npos) << server.output();
+  server.signal(SIGHUP);
+  EXPECT_TRUE(test::eventually([&] {
+    return server.output().find("TLS: reloaded the certificate") != std::string::npos;
+  })) << server.output();
+  EXPECT_TRUE(server.running());
+  server.signal(SIGINT);
+  EXPECT_TRUE(server.wait_for(10s));
 }

@@ -38,13 +38,14 @@ inline void add_ext(X509* cert, X509* issuer, int nid, const char* value) {
 }
 
 // Signed by issuer_key (self-signed when issuer is null).
+// Valid from `from_s` to `until_s` seconds from now.
 inline Cert make_cert(EVP_PKEY* key, const char* cn, X509* issuer, EVP_PKEY* issuer_key, bool ca,
-                      long serial) {
+                      long serial, long from_s = -3600, long until_s = 3600L * 24 * 30) {
   Cert cert(X509_new(), X509_free);
   X509_set_version(cert.get(), 2);
   ASN1_INTEGER_set(X509_get_serialNumber(cert.get()), serial);
-  X509_gmtime_adj(X509_getm_notBefore(cert.get()), -3600);
-  X509_gmtime_adj(X509_getm_notAfter(cert.get()), 3600L * 24 * 7);
+  X509_gmtime_adj(X509_getm_notBefore(cert.get()), from_s);
+  X509_gmtime_adj(X509_getm_notAfter(cert.get()), until_s);
   X509_set_pubkey(cert.get(), key);
   X509_NAME* name = X509_get_subject_name(cert.get());
   X509_NAME_add_entry_by_txt(name, "CN", MBSTRING_ASC, reinterpret_cast<const unsigned char*>(cn),
@@ -84,12 +85,16 @@ struct TlsFiles {
   std::string ca, cert, key, other_ca;
 };
 
-// Writes the files into dir (which must exist).
-inline TlsFiles make_tls_files(const std::string& dir) {
+// Writes the files into dir (which must exist): a CA, a server certificate for 127.0.0.1 and
+// localhost with `serial`, valid from `from_s` to `until_s` seconds from now (30 days by default),
+// its key, and another CA.
+inline TlsFiles make_tls_files(const std::string& dir, long serial = 2, long from_s = -3600,
+                               long until_s = 3600L * 24 * 30) {
   using namespace tls_detail;
   Key ca_key = make_key(), server_key = make_key(), other_key = make_key();
   Cert ca = make_cert(ca_key.get(), "irradcast test CA", nullptr, nullptr, true, 1);
-  Cert server = make_cert(server_key.get(), "localhost", ca.get(), ca_key.get(), false, 2);
+  Cert server = make_cert(server_key.get(), "localhost", ca.get(), ca_key.get(), false, serial,
+                          from_s, until_s);
   Cert other = make_cert(other_key.get(), "irradcast other CA", nullptr, nullptr, true, 3);
   TlsFiles f{dir + "/ca.pem", dir + "/cert.pem", dir + "/key.pem", dir + "/other_ca.pem"};
   write_pem(f.ca, ca.get());

@@ -69,7 +69,8 @@ int run(const Options& o, const sigset_t& signals) {
   NatsGateway gateway(go);
   // The tile layout and scene package come from the origin: wait for them.
   for (int waited = 0; !gateway.wait_ready(std::chrono::milliseconds(0)); waited += 200) {
-    if (take_signal(signals, std::chrono::milliseconds(200))) return 0;
+    const int sig = take_signal(signals, std::chrono::milliseconds(200));
+    if (sig == SIGINT || sig == SIGTERM) return 0;  // (SIGHUP: nothing served yet to reload)
     if (waited > 0 && waited % 5000 == 0)
       log::info("gateway", "waiting for scene '" + o.scene + "' from the origin (NATS " +
                                (gateway.nats_stats().connected ? "connected" : "not connected") +
@@ -84,7 +85,8 @@ int run(const Options& o, const sigset_t& signals) {
       });
   int sig = 0;
   auto next = std::chrono::steady_clock::now() + std::chrono::seconds(o.net.status_every_s);
-  while ((sig = take_signal(signals, std::chrono::milliseconds(100))) == 0) {
+  while ((sig = take_signal(signals, std::chrono::milliseconds(100))) == 0 || sig == SIGHUP) {
+    if (sig == SIGHUP) irradcast::tools::reload_tls("gateway", server, metrics.get());
     if (o.net.status_every_s <= 0 || std::chrono::steady_clock::now() < next) continue;
     next += std::chrono::seconds(o.net.status_every_s);
     status_line(server, gateway);

@@ -166,14 +166,24 @@ struct NetworkOptions {
   }
 };
 
-// The rest of a service program's main() after its options are parsed: blocks SIGINT and
-// SIGTERM in every thread (threads inherit the mask; `run` waits for them), ignores SIGPIPE, and
+// SIGHUP: --tls-cert and --tls-key loaded again for new connections on every port (a bad file
+// keeps the current certificate; both are logged).
+inline void reload_tls(const char* component, Server& server, MetricsEndpoint* metrics) {
+  log::info(component, "received SIGHUP: reloading the TLS certificate");
+  server.reload_tls();
+  if (metrics) metrics->reload_tls();
+}
+
+// The rest of a service program's main() after its options are parsed: blocks SIGINT, SIGTERM
+// and SIGHUP in every thread (threads inherit the mask; `run` waits for them: SIGHUP reloads the
+// TLS certificate, reload_tls below), ignores SIGPIPE, and
 // turns errors into "TOOL: error: ..." and exit status 1 (2 for internal errors).
 inline int run_service(const char* tool, const std::function<int(const sigset_t&)>& run) {
   sigset_t signals;
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   std::signal(SIGPIPE, SIG_IGN);
   try {

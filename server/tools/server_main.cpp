@@ -134,7 +134,8 @@ int run(const Options& o, const sigset_t& signals) {
     }
   });
   int sig = 0;
-  sigwait(&signals, &sig);
+  while (sigwait(&signals, &sig) == 0 && sig == SIGHUP)
+    tools::reload_tls("server", server, metrics.get());
   log::info("server",
             std::string("received ") + (sig == SIGINT ? "SIGINT" : "SIGTERM") + ", shutting down");
   done = true;

@@ -3,9 +3,11 @@
 #include <openssl/err.h>
 #include <openssl/ssl.h>
 
+#include <ctime>
 #include <fstream>
 
 #include "irradcast/common/error.h"
+#include "irradcast/common/log.h"
 
 namespace irradcast::wire {
 
@@ -26,6 +28,22 @@ void require_readable(const std::string& file, const char* what) {
   if (file.empty()) throw Error(std::string(what) + ": no file given");
   std::ifstream f(file);
   if (!f) throw Error(std::string(what) + ": cannot read '" + file + "'");
+}
+
+// "2026-12-04 15:10:00 UTC" for an ASN.1 time.
+std::string utc_text(const ASN1_TIME* t) {
+  std::tm tm{};
+  if (!t || ASN1_TIME_to_tm(t, &tm) != 1) return "an unreadable date";
+  char out[32];
+  std::strftime(out, sizeof out, "%Y-%m-%d %H:%M:%S UTC", &tm);
+  return out;
+}
+
+// Seconds from now to `t` (negative: in the past).
+double seconds_to(const ASN1_TIME* t) {
+  int days = 0, secs = 0;
+  if (!t || ASN1_TIME_diff(&days, &secs, nullptr, t) != 1) return 0.0;
+  return days * 86400.0 + secs;
 }
 
 }  // namespace
@@ -50,7 +68,63 @@ std::shared_ptr<asio::ssl::context> make_server_tls(const std::string& cert_file
   if (SSL_CTX_check_private_key(ctx->native_handle()) != 1)
     throw Error("--tls-key: '" + key_file + "' does not match the certificate in '" + cert_file +
                 "'");
+  const X509* x = SSL_CTX_get0_certificate(ctx->native_handle());
+  if (x && seconds_to(X509_get0_notAfter(x)) <= 0.0)
+    throw Error("--tls-cert: the certificate in '" + cert_file + "' expired on " +
+                utc_text(X509_get0_notAfter(x)) + ": renew it");
+  if (x && seconds_to(X509_get0_notBefore(x)) > 0.0)
+    throw Error("--tls-cert: the certificate in '" + cert_file + "' is not valid before " +
+                utc_text(X509_get0_notBefore(x)) + " (is this machine's clock right?)");
   return ctx;
+}
+
+CertificateInfo certificate_info(asio::ssl::context& ctx) {
+  CertificateInfo info;
+  const X509* x = SSL_CTX_get0_certificate(ctx.native_handle());
+  if (!x) return info;
+  char subject[256] = {};
+  X509_NAME_oneline(X509_get_subject_name(x), subject, sizeof subject);
+  info.subject = subject;
+  info.not_after = utc_text(X509_get0_notAfter(x));
+  info.days_left = seconds_to(X509_get0_notAfter(x)) / 86400.0;
+  return info;
+}
+
+ServerTls::ServerTls(std::string cert_file, std::string key_file, std::string component)
+    : cert_file_(std::move(cert_file)),
+      key_file_(std::move(key_file)),
+      component_(std::move(component)) {
+  loaded_.push_back(make_server_tls(cert_file_, key_file_));
+  current_ = loaded_.back().get();
+  log_loaded(*loaded_.back(), "using");
+}
+
+bool ServerTls::reload() {
+  std::shared_ptr<asio::ssl::context> next;
+  try {
+    next = make_server_tls(cert_file_, key_file_);
+  } catch (const Error& e) {
+    log::error(component_,
+               std::string("TLS reload refused, keeping the current certificate: ") + e.what());
+    return false;
+  }
+  std::lock_guard lock(mutex_);
+  loaded_.push_back(next);
+  current_ = next.get();
+  log_loaded(*next, "reloaded");
+  return true;
+}
+
+void ServerTls::log_loaded(asio::ssl::context& ctx, const char* verb) {
+  const CertificateInfo info = certificate_info(ctx);
+  const std::string line = std::string("TLS: ") + verb + " the certificate " + info.subject +
+                           " of '" + cert_file_ + "', valid until " + info.not_after + " (" +
+                           std::to_string(static_cast<long>(info.days_left)) + " days)";
+  if (info.days_left < kWarnDays)
+    log::warn(component_, line + ": it expires in under " +
+                              std::to_string(static_cast<int>(kWarnDays)) + " days, renew it");
+  else
+    log::info(component_, line);
 }
 
 std::shared_ptr<asio::ssl::context> make_client_tls(const std::string& ca_file) {

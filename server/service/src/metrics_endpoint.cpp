@@ -167,12 +167,13 @@ struct MetricsEndpoint::Impl {
         max_open(options.max_connections) {
     if (options.tls_cert.empty() != options.tls_key.empty())
       throw Error("metrics: TLS needs both a certificate and a key");
-    if (!options.tls_cert.empty()) tls = wire::make_server_tls(options.tls_cert, options.tls_key);
+    if (!options.tls_cert.empty())
+      tls = std::make_unique<wire::ServerTls>(options.tls_cert, options.tls_key, "metrics");
   }
 
   BodyFunction body;
   MetricsEndpointOptions options;
-  std::shared_ptr<asio::ssl::context> tls;  // null: plain HTTP
+  std::unique_ptr<wire::ServerTls> tls;  // null: plain HTTP
   asio::io_context io;
   tcp::acceptor acceptor;
   asio::steady_timer accept_retry;
@@ -212,7 +213,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
 
   Connection(MetricsEndpoint::Impl* ep, tcp::socket socket)
       : ep_(ep),
-        stream_(std::move(socket), ep->tls.get()),
+        stream_(std::move(socket), ep->tls ? ep->tls->current() : nullptr),
         timer_(ep->io),
         parser_(ep->options.max_request_bytes),
         accepted_(Clock::now()) {}
@@ -525,6 +526,10 @@ std::uint16_t MetricsEndpoint::port() const {
   std::error_code ec;
   const auto ep = impl_->acceptor.local_endpoint(ec);
   return ec ? impl_->options.port : ep.port();
+}
+
+bool MetricsEndpoint::reload_tls() {
+  return impl_->tls && impl_->tls->reload();
 }
 
 std::string MetricsEndpoint::url() const {

@@ -57,7 +57,7 @@ struct Server::Impl {
   ServerCounters counters;
   // Peers by address key; sessions count themselves in and out (admit, release).
   PeerTable peers;
-  std::shared_ptr<asio::ssl::context> tls;  // null: plain TCP
+  std::unique_ptr<wire::ServerTls> tls;  // null: plain TCP
   asio::io_context io;
   tcp::acceptor acceptor;
   tcp::acceptor http_acceptor;      // the web port (ServerOptions::http_port); closed without one
@@ -283,8 +283,17 @@ Server::Server(TileSource& host, ServerOptions options)
                 " (e.g. head -c 18 /dev/urandom | base64)");
   if (o.tls_cert.empty() != o.tls_key.empty())
     throw Error("TLS needs both --tls-cert and --tls-key");
-  if (!o.tls_cert.empty()) im.tls = wire::make_server_tls(o.tls_cert, o.tls_key);
+  if (!o.tls_cert.empty())
+    im.tls = std::make_unique<wire::ServerTls>(o.tls_cert, o.tls_key, "server");
   im.session_server.tls = im.tls.get();
+}
+
+bool Server::reload_tls() {
+  if (!impl_->tls) {
+    log::info("server", "no TLS certificate to reload (no --tls-cert)");
+    return false;
+  }
+  return impl_->tls->reload();
 }
 
 Server::~Server() {

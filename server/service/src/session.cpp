@@ -26,7 +26,7 @@ Session::Session(SessionServer& server, tcp::socket socket, std::string peer_key
                  bool web)
     : server_(server),
       strand_(socket.get_executor()),
-      stream_(std::move(socket), server_.tls),
+      stream_(std::move(socket), server_.tls ? server_.tls->current() : nullptr),
       idle_timer_(strand_),
       rate_timer_(strand_),
       close_timer_(strand_),

@@ -33,7 +33,7 @@ class Session;
 // What the server lends its sessions; outlives them.
 struct SessionServer {
   SessionContext context;
-  asio::ssl::context* tls = nullptr;  // null: plain TCP
+  const wire::ServerTls* tls = nullptr;  // null: plain TCP; a session takes its current context
   // A closed session leaves the server's set.
   std::function<void(const std::shared_ptr<Session>&)> remove;
 };

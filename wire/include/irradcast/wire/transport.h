@@ -12,18 +12,52 @@
 #include <asio.hpp>
 #include <asio/ssl.hpp>
 
+#include <atomic>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace irradcast::wire {
 
 // A server's TLS: certificate chain and private key, PEM files. Throws irradcast::Error naming
 // the file and OpenSSL's reason when one cannot be read or the key does not match the
-// certificate. TLS 1.2 or newer.
+// certificate, and naming the date when the certificate has expired or is not valid yet. TLS 1.2
+// or newer.
 std::shared_ptr<asio::ssl::context> make_server_tls(const std::string& cert_file,
                                                     const std::string& key_file);
+
+// The certificate a server context presents: its subject, when it expires (UTC, "2026-12-04
+// 15:10:00 UTC") and in how many days (negative: expired).
+struct CertificateInfo {
+  std::string subject;
+  std::string not_after;
+  double days_left = 0.0;
+};
+CertificateInfo certificate_info(asio::ssl::context& ctx);
+
+// A server's TLS that can be reloaded (SIGHUP) while it serves: new connections get the context
+// of the last successful load; connections made with an older one keep it (every context loaded
+// is kept for the life of this object: a reload is an operator's act, a few kB each).
+class ServerTls {
+ public:
+  static constexpr double kWarnDays = 14.0;  // expires sooner: a warning at load
+  // Loads (make_server_tls) and logs the certificate's expiry (a warning within kWarnDays).
+  ServerTls(std::string cert_file, std::string key_file, std::string component);
+  asio::ssl::context* current() const { return current_.load(); }
+  // Loads the files again. True: new connections get the new certificate (logged). False: the
+  // files are bad (the reason logged as an error) and the current certificate stays.
+  bool reload();
+
+ private:
+  void log_loaded(asio::ssl::context& ctx, const char* verb);
+  std::string cert_file_, key_file_, component_;
+  std::mutex mutex_;
+  std::vector<std::shared_ptr<asio::ssl::context>> loaded_;  // the current one last
+  std::atomic<asio::ssl::context*> current_{nullptr};
+};
 
 // A client's TLS: the server's certificate must chain to a CA in ca_file (PEM), or to the
 // system's trusted CAs when ca_file is empty. Throws irradcast::Error if ca_file cannot be read.

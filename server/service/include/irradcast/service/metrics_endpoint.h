@@ -74,6 +74,9 @@ class MetricsEndpoint {
   void start();
   // Closes every connection and joins the thread. Idempotent; the endpoint does not restart.
   void stop();
+  // Loads its TLS certificate and key again (SIGHUP): new connections get them (false without
+  // TLS or when a file is bad, which is logged; the current certificate stays).
+  bool reload_tls();
   std::uint16_t port() const;
   // The address to scrape, e.g. "http://127.0.0.1:9450/metrics" ("https://" with TLS).
   std::string url() const;

@@ -143,6 +143,10 @@ class Server {
   // Tells every client (Error SERVER_SHUTDOWN), closes every connection, joins the threads.
   // Idempotent.
   void stop();
+  // Loads --tls-cert/--tls-key again (SIGHUP): new connections on both ports get the new
+  // certificate, open ones keep theirs. False (logged) without TLS, or when a file is bad: the
+  // current certificate stays.
+  bool reload_tls();
   std::uint16_t port() const;
   // The web port; 0 when ServerOptions::http_port is not set.
   std::uint16_t http_port() const;
