@@ -388,3 +388,53 @@ TEST(WebSocket, OnlyPagesOfTheServersOwnOriginOrAllowedOnesOpenTheWebSocket) {
   EXPECT_EQ(ss.websocket_sessions, 4u);
   server.stop();
 }
+
+namespace {
+// A masked client frame (mask 0) of `payload_bytes` announced, with `sent` of them: `first` is
+// FIN and the opcode.
+std::string big_frame(unsigned char first, std::uint64_t announced, std::size_t sent) {
+  std::string f(1, static_cast<char>(first));
+  f += static_cast<char>(0x80 | 127);
+  for (int i = 7; i >= 0; --i) f += static_cast<char>((announced >> (8 * i)) & 0xff);
+  f += std::string(4, '\0');
+  return f + std::string(sent, 'p');
+}
+}  // namespace
+
+// Unfinished WebSocket messages count in the server's budget of incomplete frames, as TCP frames
+// do (the WebSocket library buffers them itself): one large frame half sent, or a message
+// fragmented into complete frames without FIN; 6 sessions each holding 512 KiB under a 1 MiB
+// budget: most are closed with FRAME_TOO_LARGE, and the total held stays bounded.
+TEST(WebSocket, UnfinishedMessagesCountInTheBudgetOfIncompleteFrames) {
+  for (const bool fragmented : {false, true}) {
+    EngineHost host(make_cornell_box(), "cornell", test::quick_host(1));
+    ServerOptions o = web_loopback();
+    o.max_partial_bytes = 1u << 20;
+    Server server(host, o);
+    server.start();
+    std::vector<std::unique_ptr<WsConnection>> clients;
+    for (int i = 0; i < 6; ++i) {
+      clients.push_back(std::make_unique<WsConnection>(server.http_port()));
+      ASSERT_TRUE(clients.back()->opened());
+      ASSERT_TRUE(clients.back()->join());
+      if (fragmented)
+        for (int k = 0; k < 4; ++k)  // binary, then continuations, none final
+          clients.back()->write_raw(big_frame(k == 0 ? 0x02 : 0x00, 128u << 10, 128u << 10));
+      else
+        clients.back()->write_raw(big_frame(0x82, 4u << 20, 512u << 10));
+    }
+    int refused = 0;
+    for (auto& c : clients) {
+      auto e = c->read(1500ms);
+      if (e && e->has_error()) {
+        EXPECT_EQ(e->error().code(), wire::FRAME_TOO_LARGE);
+        ++refused;
+      }
+    }
+    EXPECT_GE(refused, 4) << (fragmented ? "fragmented" : "one frame");
+    EXPECT_LE(server.stats().partial_bytes, (1u << 20) + (512u << 10));
+    clients.clear();
+    server.stop();
+    EXPECT_EQ(server.stats().partial_bytes, 0u);
+  }
+}

@@ -237,7 +237,7 @@ void Session::drain() {
   }
   act();
   if (protocol_.closed() || protocol_.closing()) return;
-  if (!protocol_.account_partial()) {
+  if (!protocol_.account_partial(ws_ ? ws_->partial_message_bytes() : 0)) {
     act();
     return;
   }

@@ -81,8 +81,8 @@ bool SessionProtocol::next_frame(wire::Envelope& env) {
 // A session holding more than 64 KiB of one incomplete frame while the total is over the cap is
 // closed; below 64 KiB (any frame that spans two reads) is always allowed, so well-behaved
 // clients never meet the cap.
-bool SessionProtocol::account_partial() {
-  const auto held = static_cast<std::int64_t>(decoder_.buffered());
+bool SessionProtocol::account_partial(std::size_t transport_held) {
+  const auto held = static_cast<std::int64_t>(decoder_.buffered() + transport_held);
   const std::int64_t total = ctx_.counters.partial_bytes += held - partial_counted_;
   partial_counted_ = held;
   if (held > (64 << 10) && total > static_cast<std::int64_t>(ctx_.options.max_partial_bytes)) {

@@ -89,7 +89,9 @@ class SessionProtocol {
   void handle(const wire::Envelope& env);
   // Adds the incomplete frame held to the server's total; false: too much held, the session
   // failed (FRAME_TOO_LARGE).
-  bool account_partial();
+  // `transport_held`: bytes of an incomplete message the transport holds below the frame
+  // decoder (the WebSocket layer's unfinished message), counted with the decoder's.
+  bool account_partial(std::size_t transport_held = 0);
   // Reading waits: a wrong token's answer is delayed, or the replies pile up.
   bool paused() const;
 

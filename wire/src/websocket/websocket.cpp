@@ -74,7 +74,67 @@ std::string frame_of(ws::frame::opcode::value op, std::string_view payload) {
 
 // ---- server ----
 
+// Follows the frames a client sends, header by header (RFC 6455 5.2), to tell how many payload
+// bytes of an unfinished data message the library holds; it does not check them (the library
+// does, and ends the connection on a bad one).
+class MessageTracker {
+ public:
+  // Every byte the peer sends: first its HTTP request (up to the blank line that ends it), then
+  // frames.
+  void feed(const char* data, std::size_t n) {
+    std::size_t i = 0;
+    while (!frames_ && i < n) {  // the upgrade request ends at the first blank line
+      tail_ = (tail_ << 8) | static_cast<unsigned char>(data[i++]);
+      if ((tail_ & 0xffffffffu) == 0x0d0a0d0au) frames_ = true;
+    }
+    while (i < n) {
+      if (payload_left_ > 0) {
+        const std::size_t take =
+            static_cast<std::size_t>(std::min<std::uint64_t>(payload_left_, n - i));
+        if (data_frame_) held_ += take;
+        payload_left_ -= take;
+        i += take;
+        if (payload_left_ == 0) end_frame();
+        continue;
+      }
+      head_[head_size_++] = static_cast<unsigned char>(data[i++]);
+      if (head_size_ < 2) continue;
+      const unsigned len7 = head_[1] & 0x7f;
+      const std::size_t need = 2 +
+                               (len7 == 126   ? 2
+                                : len7 == 127 ? 8
+                                              : 0) +
+                               ((head_[1] & 0x80) ? 4 : 0);
+      if (head_size_ < need) continue;
+      std::uint64_t len = len7;
+      if (len7 >= 126) {
+        len = 0;
+        for (std::size_t k = 2; k < (len7 == 126 ? 4u : 10u); ++k) len = (len << 8) | head_[k];
+      }
+      fin_ = (head_[0] & 0x80) != 0;
+      data_frame_ = (head_[0] & 0x0f) < 0x8;
+      head_size_ = 0;
+      payload_left_ = len;
+      if (len == 0) end_frame();
+    }
+  }
+  std::size_t held() const { return held_; }
+
+ private:
+  void end_frame() {
+    if (data_frame_ && fin_) held_ = 0;  // the message is complete: delivered and released
+  }
+  bool frames_ = false;
+  std::uint32_t tail_ = 0;
+  unsigned char head_[14] = {};
+  std::size_t head_size_ = 0;
+  std::uint64_t payload_left_ = 0;
+  bool fin_ = false, data_frame_ = false;
+  std::size_t held_ = 0;
+};
+
 struct WsServerConnection::Impl {
+  MessageTracker tracker;
   Handlers handlers;
   ServerEndpoint endpoint;
   ServerEndpoint::connection_ptr con;
@@ -200,12 +260,17 @@ WsServerConnection::~WsServerConnection() {
 
 void WsServerConnection::receive(const char* data, std::size_t n) {
   if (impl_->end != End::None) return;
+  impl_->tracker.feed(data, n);
   feed(impl_->con, data, n);
   if (impl_->shut) impl_->finish(End::Closed, "the connection ended");
 }
 
 void WsServerConnection::set_max_message(std::size_t bytes) {
   impl_->con->set_max_message_size(bytes);
+}
+
+std::size_t WsServerConnection::partial_message_bytes() const {
+  return impl_->end == End::None ? impl_->tracker.held() : 0;
 }
 
 bool WsServerConnection::is_open() const {

@@ -71,6 +71,10 @@ class WsServerConnection {
   void set_max_message(std::size_t bytes);
 
   bool is_open() const;  // the WebSocket is established
+  // Payload bytes of the message being received that the library holds (frames without FIN so
+  // far, and the received part of the current frame): what the peer makes the server hold for an
+  // incomplete message, counted in the server's budget of incomplete frames.
+  std::size_t partial_message_bytes() const;
   End end() const;
   const std::string& end_message() const;  // one line on why, for End != None
   // The code a close frame should carry for the end so far (Normal when None).
