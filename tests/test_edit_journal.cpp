@@ -256,6 +256,35 @@ TEST(EditJournal, AHostStartedAgainAfterCompactionHasItsEdits) {
   EXPECT_EQ(j.entries()[1].revision, 5u);
 }
 
+// Two scales by 0.001 are each a valid edit, but together they make a transform that one
+// absolute op may not set (its determinant is below the edits' bound): a snapshot of it would not
+// replay, so that compaction is skipped and the edits stay in the journal as they came.
+TEST(EditJournal, ASnapshotThatWouldNotReplayIsNotWritten) {
+  const fs::path dir = fresh_dir("singular");
+  EngineHostOptions o = test::quick_host(1);
+  o.state_dir = dir.string();
+  o.journal_compact_after = 1;
+  const char* scale = R"({"op": "scale", "node": "tall_block", "by": 0.001})";
+  std::string hash;
+  {
+    EngineHost host(make_cornell_box(), "cornell", o);
+    host.submit_edit(json_edit(scale));  // compacted: a snapshot of one scale replays
+    host.submit_edit(json_edit(scale));  // not compacted
+    host.step();
+    EXPECT_EQ(host.revision(), 2u);
+    hash = host.package()->hash;
+  }
+  {
+    EditJournal j(options(dir, wire::scene_content_hash(make_cornell_box())));
+    ASSERT_EQ(j.entries().size(), 2u);
+    EXPECT_TRUE(j.entries()[0].snapshot);
+    EXPECT_FALSE(j.entries()[1].snapshot);
+  }
+  EngineHost again(make_cornell_box(), "cornell", o);
+  EXPECT_EQ(again.revision(), 2u);
+  EXPECT_EQ(again.package()->hash, hash);
+}
+
 TEST(EditJournal, AHostOnAnotherSceneIsRefused) {
   const fs::path dir = fresh_dir("host_other");
   EngineHostOptions o = test::quick_host(1);

@@ -374,6 +374,17 @@ TEST(WebSocket, OnlyPagesOfTheServersOwnOriginOrAllowedOnesOpenTheWebSocket) {
                              "https://viewer.example.org.evil", "http://viewer.example.org"})
     EXPECT_EQ(upgrade_status(port, self, std::string("Origin: ") + origin + "\r\n"), forbidden)
         << origin;
+  // RFC 6455 only, and nothing after the request's blank line.
+  const std::string key = "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n";
+  const std::string head = "GET /ws HTTP/1.1\r\nHost: " + self +
+                           "\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n" + key;
+  // (Without a version websocketpp refuses by itself, with a 4xx or 5xx of its choosing.)
+  const std::string draft = status_line(test::http_exchange(port, head + "\r\n", nullptr, true));
+  EXPECT_TRUE(draft.rfind("HTTP/1.1 4", 0) == 0 || draft.rfind("HTTP/1.1 5", 0) == 0) << draft;
+  EXPECT_EQ(status_line(test::http_exchange(
+                port, head + "Sec-WebSocket-Version: 13\r\nContent-Length: 10\r\n\r\n0123456789",
+                nullptr, true)),
+            "HTTP/1.1 400 Bad Request");
   // Pages on the default ports.
   EXPECT_TRUE(origin_allowed("http://example.com", "example.com:80", {}));
   EXPECT_TRUE(origin_allowed("https://example.com:443", "example.com", {}));

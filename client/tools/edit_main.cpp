@@ -380,8 +380,14 @@ int run_export(const Options& o, const std::string& token) {
   request.mutable_scene_export_request()->set_token(token);
   request.mutable_scene_export_request()->set_request_id(1);
   c.send(request);
+  // Other frames (edit broadcasts, pings) may come meanwhile, but not for longer than the
+  // timeout altogether.
+  const auto deadline = Clock::now() + std::chrono::milliseconds(o.timeout_ms);
   wire::SceneExport answer;
   for (;;) {
+    if (Clock::now() > deadline)
+      throw Error("no export answer from the server within " + std::to_string(o.timeout_ms) +
+                  " ms");
     wire::Envelope a = c.expect("export answer");
     if (a.has_scene_export() && a.scene_export().request_id() == 1) {
       answer = a.scene_export();

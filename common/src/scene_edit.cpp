@@ -282,6 +282,12 @@ EditOp::Kind parse_edit_kind(std::string_view name) {
   throw Error("unknown edit operation '" + std::string(name) + "' (expected one of " + all + ")");
 }
 
+void validate_edit_ops(const Scene& scene, const SceneEdit& edit) {
+  for (std::size_t i = 0; i < edit.ops.size(); ++i)
+    check_op(scene, edit.ops[i],
+             "edit op " + std::to_string(i + 1) + " (" + edit_kind_name(edit.ops[i].kind) + ")");
+}
+
 void validate_edit(const Scene& scene, const SceneEdit& edit) {
   if (edit.ops.empty()) throw Error("scene edit: no operations");
   // Each op on its own, then the transforms it leads to: the ops of an edit compose (13 scales
@@ -413,7 +419,7 @@ SceneEdit state_edit(const Scene& from, const Scene& to) {
     op.sky_parts = EditOp::kSkyStrength;
     if (b.map.width > 0) {
       op.sky_parts |= EditOp::kSkyFile;
-      op.target = b.source;
+      op.target = b.source.empty() ? "sky map" : b.source;  // a file op names its map
       op.sky_map = std::make_shared<const ImageRGB>(b.map);
     } else {
       op.sky_parts |= EditOp::kSkyColor;

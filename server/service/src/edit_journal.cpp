@@ -159,10 +159,12 @@ EditJournal::EditJournal(EditJournalOptions options)
     : options_(std::move(options)), path_(options_.dir / kFileName) {
   if (options_.scene_hash.size() != 32) throw Error("edit journal: the scene hash is not SHA-256");
   std::error_code ec;
-  std::filesystem::create_directory(options_.dir, ec);
+  const bool created = std::filesystem::create_directory(options_.dir, ec);
   if (ec || !std::filesystem::is_directory(options_.dir))
     throw Error("--state-dir " + options_.dir.string() + ": not a folder the server can use" +
                 (ec ? " (" + ec.message() + ")" : std::string()));
+  // A new folder survives a power cut only once its parent's entry is on disk.
+  if (created) sync_dir(std::filesystem::absolute(options_.dir).parent_path());
   lock_fd_ = ::open((options_.dir / "lock").c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
   if (lock_fd_ < 0)
     throw Error("--state-dir " + options_.dir.string() +
@@ -197,7 +199,9 @@ void EditJournal::create_new() {
 
 void EditJournal::write_fresh(const std::string& records) {
   const std::filesystem::path tmp = options_.dir / (std::string(kFileName) + ".tmp");
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+  // Opened for appending: once renamed, this descriptor is the journal, so nothing can fail
+  // between the rename and the next append but the folder's fsync.
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_APPEND | O_CLOEXEC, 0600);
   if (fd < 0) throw Error("edit journal: cannot create " + tmp.string() + ": " + errno_text());
   wire::JournalRecord header;
   header.mutable_header()->set_format(kFormat);
@@ -206,19 +210,24 @@ void EditJournal::write_fresh(const std::string& records) {
   const std::string bytes = std::string(kMagic, sizeof kMagic) + frame(header) + records;
   try {
     write_durably(fd, bytes, "edit journal " + tmp.string());
+    if (::rename(tmp.c_str(), path_.c_str()) != 0)
+      throw Error("edit journal: cannot rename " + tmp.string() + ": " + errno_text());
   } catch (...) {
     ::close(fd);
+    throw;  // the journal in use is unchanged
+  }
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = fd;
+  file_bytes_ = bytes.size();
+  try {
+    sync_dir(options_.dir);
+  } catch (const Error& e) {
+    // The rename may not survive a power cut (the old journal would come back without what is
+    // appended from now on): no edit is acknowledged any more.
+    failed_ = true;
+    failure_ = e.what();
     throw;
   }
-  ::close(fd);
-  if (::rename(tmp.c_str(), path_.c_str()) != 0)
-    throw Error("edit journal: cannot rename " + tmp.string() + ": " + errno_text());
-  sync_dir(options_.dir);
-  const int next = ::open(path_.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC);
-  if (next < 0) throw Error("edit journal: cannot open " + path_.string() + ": " + errno_text());
-  if (fd_ >= 0) ::close(fd_);
-  fd_ = next;
-  file_bytes_ = bytes.size();
 }
 
 void EditJournal::read_existing() {
@@ -316,6 +325,9 @@ void EditJournal::append(std::uint64_t revision, const SceneEdit& edit) {
   try {
     write_durably(fd_, bytes, "edit journal " + path_.string());
   } catch (const Error& e) {
+    // Best effort: the record may have reached the disk although its fsync failed, and the
+    // client is told the edit was refused, so it must not come back at the next start.
+    if (::ftruncate(fd_, static_cast<off_t>(file_bytes_)) == 0) ::fdatasync(fd_);
     failed_ = true;
     failure_ = e.what();
     log::error("journal", failure_ + ": refusing every edit from now on");
@@ -327,7 +339,9 @@ void EditJournal::append(std::uint64_t revision, const SceneEdit& edit) {
 }
 
 bool EditJournal::wants_compaction() const {
-  return options_.compact_after > 0 && records_ >= options_.compact_after;
+  // By count, and by size: replay holds every record's sky maps in memory at once.
+  return records_ > 0 && ((options_.compact_after > 0 && records_ >= options_.compact_after) ||
+                          file_bytes_ >= kCompactBytes);
 }
 
 void EditJournal::compact(std::uint64_t revision, const SceneEdit& snapshot) {

@@ -217,9 +217,13 @@ std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
   apply_edit(validation_scene_, loaded);  // validates first: unchanged when it throws
   if (journal_ && journal_->wants_compaction()) {
     try {
-      journal_->compact(revision, state_edit(loaded_state_, validation_scene_));
+      // The snapshot must replay: its absolute ops are checked like any edit's (a transform
+      // that edits made singular cannot be set in one op; then the journal grows on).
+      const SceneEdit snapshot = state_edit(loaded_state_, validation_scene_);
+      if (!snapshot.ops.empty()) validate_edit_ops(loaded_state_, snapshot);
+      journal_->compact(revision, snapshot);
     } catch (const Error& e) {
-      log::error("journal", std::string("compaction failed (the journal grows on): ") + e.what());
+      log::error("journal", std::string("not compacted (the journal grows on): ") + e.what());
     }
   }
   std::lock_guard lock(mutex_);

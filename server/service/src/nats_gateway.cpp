@@ -84,6 +84,9 @@ struct NatsGateway::Impl {
   std::uint64_t revision = 0, epoch = 0, origin = 0;
   std::string backend;
   EngineHostStats engine;
+  // The origin's engine updates from the stats read since the stream was last (re)subscribed
+  // (0: none yet): tiles replayed before the newest stats are not held to stale ones.
+  std::uint64_t updates_seen = 0;
   NatsGatewayStats st;
   std::map<std::uint64_t, CameraPose> cameras;
   bool cameras_changed = false;
@@ -244,11 +247,13 @@ void NatsGateway::Impl::on_tile(wire::NatsTile t) {
     // A tile's version grows by at most one per engine update, and the origin's stats say how
     // many updates it ran: a version far beyond that was not made by it (a forged tile would
     // otherwise stay ahead of every real version for good).
-    if (engine.updates > 0 && t.version() > engine.updates + kMaxVersionLead) {
+    if (updates_seen > 0 && t.version() > updates_seen &&
+        t.version() - updates_seen > kMaxVersionLead) {
+      const std::uint64_t seen = updates_seen;
       lock.unlock();
       return bad("tile " + std::to_string(t.index()) + " at version " +
                  std::to_string(t.version()) + ", beyond what the origin's " +
-                 std::to_string(engine.updates) + " updates can have made");
+                 std::to_string(seen) + " updates can have made");
     }
     st.lag_seconds = static_cast<double>(now_us() - std::min(now_us(), t.time_us())) * 1e-6;
     if (!store) {
@@ -306,6 +311,7 @@ void NatsGateway::Impl::on_stats(const std::string& data) {
   if (!s.ParseFromString(data)) return bad("the stats do not parse");
   std::lock_guard lock(mutex);
   engine = engine_stats_from(s);
+  updates_seen = engine.updates;
 }
 
 void NatsGateway::Impl::run() {
@@ -336,6 +342,10 @@ void NatsGateway::Impl::run() {
 }
 
 void NatsGateway::Impl::subscribe() {
+  {
+    std::lock_guard lock(mutex);
+    updates_seen = 0;  // the replay brings its stats after the tiles published before them
+  }
   jsSubOptions so;
   jsSubOptions_Init(&so);
   so.Stream = subjects.stream.c_str();

@@ -432,17 +432,18 @@ void NatsOrigin::Impl::on_cameras(natsConnection* nc, natsMsg* msg) {
   wire::NatsCameras m;
   wire::NatsReply r;
   const bool parsed = m.ParseFromString(nats_link::data_of(msg)) && m.gateway() != 0;
-  std::size_t held = 0;  // gateways held, when this one would be one too many
+  bool full = false;  // this gateway would be one too many
+  std::size_t held = 0;
   if (parsed) {
     std::lock_guard lock(im.camera_mutex);
-    if (!im.gateways.contains(m.gateway()) && im.gateways.size() >= im.options.max_gateways)
-      held = im.gateways.size();
+    held = im.gateways.size();
+    full = !im.gateways.contains(m.gateway()) && held >= im.options.max_gateways;
   }
   if (!parsed) {
     im.count(&NatsOriginStats::bad_requests);
     r.set_error("cameras: the request does not parse");
     r.set_code(wire::BAD_REQUEST);
-  } else if (held > 0) {
+  } else if (full) {
     im.count(&NatsOriginStats::gateways_refused);
     r.set_error("cameras: the origin holds the cameras of " + std::to_string(held) +
                 " gateways already");
@@ -475,6 +476,17 @@ void NatsOrigin::Impl::on_submit(natsConnection* nc, natsMsg* msg) {
     im.count(&NatsOriginStats::bad_requests);
     r.set_error("scene edit: the request does not parse");
     r.set_code(wire::BAD_REQUEST);
+  } else if (const std::string refusal =
+                 [&] {
+                   std::lock_guard lock(im.mutex);
+                   return im.refusal;
+                 }();
+             !refusal.empty()) {
+    // This origin publishes nothing (a newer revision from another origin is in the stream):
+    // an edit applied here would reach no gateway's viewers.
+    im.count(&NatsOriginStats::edits_refused);
+    r.set_error("this origin does not publish: " + refusal);
+    r.set_code(wire::REFUSED);
   } else if (!im.options.accept_edits) {
     im.count(&NatsOriginStats::edits_refused);
     r.set_error(

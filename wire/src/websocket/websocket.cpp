@@ -180,6 +180,15 @@ bool WsServerConnection::Impl::on_validate() {
     con->set_status(ws::http::status_code::not_found);
     return false;
   }
+  // RFC 6455 only (websocketpp also speaks the drafts, whose framing has no message cap), and no
+  // body after the request: the message tracker follows frames from the blank line on.
+  const std::string length = con->get_request_header("Content-Length");
+  if (con->get_request_header("Sec-WebSocket-Version") != "13" ||
+      !con->get_request_header("Transfer-Encoding").empty() || (!length.empty() && length != "0")) {
+    con->set_status(ws::http::status_code::bad_request);
+    con->set_body("a WebSocket upgrade needs Sec-WebSocket-Version: 13 and no body\n");
+    return false;
+  }
   const std::string origin = con->get_request_header("Origin");
   if (origin.empty() || !handlers.allow_origin ||
       handlers.allow_origin(origin, con->get_request_header("Host")))

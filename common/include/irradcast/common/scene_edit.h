@@ -76,6 +76,10 @@ EditOp::Kind parse_edit_kind(std::string_view name);
 // world transforms below a moved node finite, their objects' vertices within +-1e18 in world
 // space and their triangle areas finite.
 void validate_edit(const Scene& scene, const SceneEdit& edit);
+// The checks of validate_edit that look at each op on its own (targets, numbers, matrices, sky
+// parts), not the transforms they lead to: `scene` needs its nodes, lights and materials only.
+// The edit journal checks a snapshot with it before it writes it.
+void validate_edit_ops(const Scene& scene, const SceneEdit& edit);
 // Validates, then applies every operation in order. On an invalid edit it throws and the scene
 // is unchanged.
 EditEffect apply_edit(Scene& scene, const SceneEdit& edit);

@@ -41,6 +41,9 @@ class EditJournal {
   // Largest record accepted (a sky map of 4096 x 2048 floats is 96 MiB before zstd).
   static constexpr std::uint32_t kMaxRecordBytes = 128u << 20;
   static constexpr const char* kFileName = "edits.journal";
+  // A journal this large is compacted whatever its count (sky maps make records large, and
+  // replay decodes them all before it applies them).
+  static constexpr std::uint64_t kCompactBytes = 256u << 20;
 
   // Opens DIR/edits.journal (creating DIR and the file with its header if missing), locks it
   // against a second server, and reads it: entries() are then the edits to replay, in order.
@@ -69,12 +72,14 @@ class EditJournal {
   // failure; the journal then refuses every later append (the file's state is unknown after a
   // failed fsync), so no edit is acknowledged that would not survive.
   void append(std::uint64_t revision, const SceneEdit& edit);
-  // Whether the journal holds compact_after edit records since its last snapshot.
+  // Whether the journal holds compact_after edit records since its last snapshot, or
+  // kCompactBytes.
   bool wants_compaction() const;
   // Writes a new journal holding the header and `snapshot` (the state of `revision`, the last
   // appended one) to a temporary file, fsyncs it, renames it over the journal and fsyncs the
   // folder: a crash at any point leaves either the old journal or the new one. Throws
-  // irradcast::Error on failure (the old journal stays in use).
+  // irradcast::Error on failure: the old journal stays in use, unless only the folder's fsync
+  // after the rename failed, which fails the journal like a failed append.
   void compact(std::uint64_t revision, const SceneEdit& snapshot);
 
   std::uint64_t records() const { return records_; }        // edit records since the snapshot
