@@ -145,10 +145,20 @@ bool join_session(Connection& c, const std::string& name, wire::Welcome& welcome
 struct RawConnection {
   using Clock = std::chrono::steady_clock;
 
-  explicit RawConnection(std::uint16_t port, asio::ssl::context* tls = nullptr)
+  // preamble: bytes written before anything else, the TLS handshake included (a proxy's PROXY
+  // protocol header); from: the local address to connect from (another 127.x.y.z is another
+  // peer).
+  explicit RawConnection(std::uint16_t port, asio::ssl::context* tls = nullptr,
+                         const std::string& preamble = {}, const std::string& from = {})
       : stream(io.get_executor(), tls) {
+    if (!from.empty()) {
+      stream.socket().open(asio::ip::tcp::v4());
+      stream.socket().bind(asio::ip::tcp::endpoint(asio::ip::make_address(from), 0));
+    }
     stream.socket().connect(asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), port),
                             connect_error);
+    if (!connect_error && !preamble.empty())
+      asio::write(stream.socket(), asio::buffer(preamble), connect_error);
     if (!connect_error && tls) {
       stream.expect_server_name("127.0.0.1");
       stream.handshake(asio::ssl::stream_base::client, connect_error);

@@ -17,9 +17,14 @@ struct WsConnection {
   using Clock = std::chrono::steady_clock;
 
   // Connects to 127.0.0.1:port and asks for a WebSocket at `target`; opened() says if it came.
+  // headers: more headers in the upgrade request (X-Forwarded-For); preamble and from: as for
+  // RawConnection.
   explicit WsConnection(std::uint16_t port, asio::ssl::context* tls = nullptr,
-                        const std::string& target = "/ws")
-      : raw(port, tls), ws("127.0.0.1:" + std::to_string(port), target) {
+                        const std::string& target = "/ws",
+                        const std::vector<std::pair<std::string, std::string>>& headers = {},
+                        const std::string& preamble = {}, const std::string& from = {})
+      : raw(port, tls, preamble, from),
+        ws("127.0.0.1:" + std::to_string(port), target, 64u << 20, headers) {
     flush();
     const auto deadline = Clock::now() + std::chrono::seconds(5);
     while (!got_open_ && !ws.closed() && !raw.eof && Clock::now() < deadline) pump(deadline);

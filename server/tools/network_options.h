@@ -38,6 +38,8 @@ struct NetworkOptions {
   std::string control_token_file;
   std::string tls_cert, tls_key;
   std::vector<std::string> allowed_origins;  // --allowed-origin
+  std::vector<std::string> trusted_proxies;  // --trusted-proxy
+  std::string forwarded_header = "x-forwarded-for";
   std::uint32_t max_clients = ServerOptions().max_clients;
   std::uint32_t max_clients_per_peer = ServerOptions().max_clients_per_peer;
 
@@ -61,6 +63,26 @@ struct NetworkOptions {
                    "WebSocket besides pages of this server's own host (repeat or "
                    "comma-separate; docs/OPERATIONS.md)")
         ->delimiter(',');
+    app.add_option("--trusted-proxy", trusted_proxies,
+                   "reverse proxies or load balancers (CIDR[,CIDR...], e.g. 10.0.0.0/8) whose "
+                   "PROXY protocol v2 header, and on the web port whose --forwarded-header, name "
+                   "the client each connection is limited and banned under (docs/OPERATIONS.md "
+                   "\"Behind a proxy\"); what other peers send is ignored")
+        ->delimiter(',')
+        ->check(CLI::Validator(
+            [](std::string& cidr) {
+              try {
+                check_trusted_proxies({cidr});
+                return std::string();
+              } catch (const Error& e) {
+                return std::string(e.what());
+              }
+            },
+            "CIDR"));
+    app.add_option("--forwarded-header", forwarded_header,
+                   "the header the trusted proxies append their clients' addresses to, on the "
+                   "web port (the other one is ignored: a client could write it)")
+        ->check(CLI::IsMember({"x-forwarded-for", "forwarded"}, CLI::ignore_case));
     app.add_option("--metrics-port", metrics_port,
                    "serve Prometheus metrics at http://ADDR:PORT/metrics (0 = any free port; off "
                    "when not given)")
@@ -132,6 +154,14 @@ struct NetworkOptions {
     so.control_token = token.first;
     for (const std::string& origin : allowed_origins) check_origin(origin);
     so.allowed_origins = allowed_origins;
+    so.trusted_proxies = trusted_proxies;
+    so.forwarded_header = forwarded_header == "forwarded" ? ForwardedHeader::Forwarded
+                                                          : ForwardedHeader::XForwardedFor;
+    if (!trusted_proxies.empty())
+      log::info(tag, "trusted proxies: " + std::to_string(trusted_proxies.size()) +
+                         " networks; clients' addresses from PROXY headers and " +
+                         (so.forwarded_header == ForwardedHeader::Forwarded ? "Forwarded"
+                                                                            : "X-Forwarded-For"));
     so.tls_cert = tls_cert;
     so.tls_key = tls_key;
     so.max_clients = max_clients;

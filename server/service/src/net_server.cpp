@@ -17,6 +17,7 @@
 #include <thread>
 #include <vector>
 
+#include "client_address.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/service/thread_priority.h"
@@ -41,6 +42,7 @@ struct Server::Impl {
       : host(h),
         options(std::move(o)),
         peers(options),
+        proxies(options.trusted_proxies),
         acceptor(io),
         http_acceptor(io),
         accept_timer(io),
@@ -50,13 +52,14 @@ struct Server::Impl {
                            std::min(options.max_frame,
                                     options.max_hello_frame + 32 * host.tiles().tile_count()),
                            &tile_frames},
-            nullptr, [this](const std::shared_ptr<Session>& s) { remove(s); }} {}
+            nullptr, &proxies, [this](const std::shared_ptr<Session>& s) { remove(s); }} {}
 
   TileSource& host;
   ServerOptions options;
   ServerCounters counters;
   // Peers by address key; sessions count themselves in and out (admit, release).
   PeerTable peers;
+  TrustedProxies proxies;                // --trusted-proxy
   std::unique_ptr<wire::ServerTls> tls;  // null: plain TCP
   asio::io_context io;
   tcp::acceptor acceptor;
@@ -104,27 +107,16 @@ struct Server::Impl {
 
 namespace {
 
-// The address a peer is counted under: an IPv4 address (IPv4-mapped IPv6 included), or the /64
-// of an IPv6 address (one subscriber's network gets one).
-std::string peer_key_of(const tcp::socket& socket) {
-  std::error_code ec;
-  const tcp::endpoint ep = socket.remote_endpoint(ec);
-  if (ec) return "?";
-  asio::ip::address a = ep.address();
-  if (a.is_v6() && a.to_v6().is_v4_mapped())
-    a = asio::ip::make_address_v4(asio::ip::v4_mapped, a.to_v6());
-  if (a.is_v4()) return a.to_string();
-  asio::ip::address_v6::bytes_type b = a.to_v6().to_bytes();
-  std::fill(b.begin() + 8, b.end(), 0);
-  return asio::ip::address_v6(b).to_string() + "/64";
-}
-
 bool out_of_descriptors(const std::error_code& ec) {
   return ec == asio::error::no_descriptors || ec.value() == ENFILE ||
          ec == asio::error::no_buffer_space || ec == asio::error::no_memory;
 }
 
 }  // namespace
+
+void check_trusted_proxies(const std::vector<std::string>& cidrs) {
+  TrustedProxies{cidrs};
+}
 
 // Closes a connection that is not admitted: one Error REFUSED frame, best effort (never blocks: the
 // socket is non-blocking and the frame is small), then close.
@@ -174,42 +166,45 @@ void Server::Impl::on_accept(std::error_code ec, tcp::socket socket, bool web) {
 }
 
 // A new connection: a session if the peer table admits it, a refusal otherwise.
+// A trusted proxy's connection is admitted without the per-address limit; the session learns its
+// client's address (PROXY header, X-Forwarded-For) and is counted under it then.
 void Server::Impl::admit(tcp::socket socket, bool web) {
-  const std::string key = peer_key_of(socket);
-  switch (peers.admit(key, [this]() -> std::size_t {
-    std::lock_guard sl(sessions_mutex);
-    return sessions.size();
-  })) {
+  std::error_code ec;
+  const tcp::endpoint peer = socket.remote_endpoint(ec);
+  const std::string key = ec ? std::string("?") : peer_key_of(peer.address());
+  const bool trusted = !ec && proxies.contains(peer.address());
+  const PeerTable::Admission admission = peers.admit(
+      key,
+      [this]() -> std::size_t {
+        std::lock_guard sl(sessions_mutex);
+        return sessions.size();
+      },
+      trusted);
+  switch (admission) {
     case PeerTable::Admission::Ok: {
       std::error_code ignored;
       if (options.socket_send_buffer > 0)
         socket.set_option(asio::socket_base::send_buffer_size(options.socket_send_buffer), ignored);
-      auto s =
-          std::make_shared<Session>(session_server, std::move(socket), key, next_session++, web);
+      auto s = std::make_shared<Session>(session_server, std::move(socket), key, next_session++,
+                                         web, trusted);
       {
         std::lock_guard lock(sessions_mutex);
         sessions.insert(s);
       }
       s->start();
-      break;
+      return;
     }
     case PeerTable::Admission::Full:
       ++counters.clients_refused;
-      refuse(socket, "the server is full", web);
       break;
     case PeerTable::Admission::PeerLimit:
       ++counters.peer_refused;
-      refuse(socket,
-             "too many connections from this address (" +
-                 std::to_string(options.max_clients_per_peer) +
-                 "; the server's --max-clients-per-peer)",
-             web);
       break;
     case PeerTable::Admission::Banned:
       ++counters.banned_refused;
-      refuse(socket, "this address is refused for a while (wrong control tokens)", web);
       break;
   }
+  refuse(socket, peers.refusal(admission), web);
 }
 
 // Out of file descriptors (or kernel memory): the pending connection stays in the backlog.

@@ -8,7 +8,8 @@
 namespace irradcast {
 
 PeerTable::Admission PeerTable::admit(const std::string& key,
-                                      const std::function<std::size_t()>& sessions) {
+                                      const std::function<std::size_t()>& sessions,
+                                      bool trusted_proxy) {
   const auto now = Clock::now();
   std::lock_guard lock(mutex_);
   // Forget peers with no session, no recent failure and no ban (bounded by the sessions and
@@ -20,12 +21,48 @@ PeerTable::Admission PeerTable::admit(const std::string& key,
     });
   Peer& p = peers_[key];
   p.last_seen = now;
-  if (p.banned_until > now) return Admission::Banned;
-  if (options_.max_clients_per_peer > 0 && p.sessions >= options_.max_clients_per_peer)
-    return Admission::PeerLimit;
+  if (!trusted_proxy) {
+    if (p.banned_until > now) return Admission::Banned;
+    if (options_.max_clients_per_peer > 0 && p.sessions >= options_.max_clients_per_peer)
+      return Admission::PeerLimit;
+  }
   if (sessions() >= options_.max_clients) return Admission::Full;
   ++p.sessions;
   return Admission::Ok;
+}
+
+PeerTable::Admission PeerTable::move(const std::string& from, const std::string& to) {
+  if (from == to) return Admission::Ok;
+  const auto now = Clock::now();
+  std::lock_guard lock(mutex_);
+  Peer& p = peers_[to];
+  p.last_seen = now;
+  if (p.banned_until > now) return Admission::Banned;
+  if (options_.max_clients_per_peer > 0 && p.sessions >= options_.max_clients_per_peer)
+    return Admission::PeerLimit;
+  ++p.sessions;
+  auto it = peers_.find(from);
+  if (it != peers_.end() && it->second.sessions > 0) {
+    --it->second.sessions;
+    it->second.last_seen = now;
+  }
+  return Admission::Ok;
+}
+
+std::string PeerTable::refusal(Admission admission) const {
+  switch (admission) {
+    case Admission::Ok:
+      return "";
+    case Admission::Full:
+      return "the server is full";
+    case Admission::PeerLimit:
+      return "too many connections from this address (" +
+             std::to_string(options_.max_clients_per_peer) +
+             "; the server's --max-clients-per-peer)";
+    case Admission::Banned:
+      return "this address is refused for a while (wrong control tokens)";
+  }
+  return "";
 }
 
 void PeerTable::release(const std::string& key) {

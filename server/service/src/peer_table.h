@@ -26,7 +26,15 @@ class PeerTable {
 
   // A new connection from `key`; counts it in when admitted. `sessions` tells how many sessions
   // the server has (it is asked with the table locked, after the peer's own checks).
-  Admission admit(const std::string& key, const std::function<std::size_t()>& sessions);
+  // trusted_proxy: the peer carries other clients' connections (--trusted-proxy): neither its
+  // limit nor a ban applies to it, only the server's.
+  Admission admit(const std::string& key, const std::function<std::size_t()>& sessions,
+                  bool trusted_proxy = false);
+  // A session admitted under `from` (a trusted proxy) turns out to be a client at `to`: counted
+  // under `to` from now on when `to` is under its limit and not banned (else it stays `from`'s).
+  Admission move(const std::string& from, const std::string& to);
+  // What a refused connection is told (Error REFUSED, or the web port's HTTP reply).
+  std::string refusal(Admission admission) const;
   // A session of `key` ended.
   void release(const std::string& key);
   // A wrong token from this peer: the delay before the answer, and whether the peer is now

@@ -23,7 +23,7 @@ std::string peer_name(tcp::socket& socket) {
 }  // namespace
 
 Session::Session(SessionServer& server, tcp::socket socket, std::string peer_key, std::uint64_t id,
-                 bool web)
+                 bool web, bool proxied)
     : server_(server),
       strand_(socket.get_executor()),
       stream_(std::move(socket), server_.tls ? server_.tls->current() : nullptr),
@@ -33,7 +33,9 @@ Session::Session(SessionServer& server, tcp::socket socket, std::string peer_key
       hello_timer_(strand_),
       penalty_timer_(strand_),
       stall_timer_(strand_),
-      protocol_(server_.context, id, std::move(peer_key), peer_name(stream_.socket())) {
+      protocol_(server_.context, id, std::move(peer_key), peer_name(stream_.socket())),
+      proxied_(proxied && server_.proxies) {
+  if (proxied_) proxy_reader_ = std::make_unique<ProxyHeaderReader>();
   if (web) make_websocket();
 }
 
@@ -46,6 +48,9 @@ void Session::make_websocket() {
   h.http = serve_web;
   h.allow_origin = [this](const std::string& origin, const std::string& host) {
     return origin_allowed(origin, host, server_.context.options.allowed_origins);
+  };
+  h.request = [this](const std::function<std::string(const std::string&)>& header) {
+    return screen_request(header);
   };
   h.binary = [this](std::string payload) {
     const auto n = static_cast<std::uint32_t>(payload.size());
@@ -119,19 +124,86 @@ void Session::start() {
   asio::post(strand_, [self = shared_from_this()] {
     self->arm_idle_timer();
     self->arm_hello_timer();
-    self->stream_.async_handshake(asio::ssl::stream_base::server,
-                                  asio::bind_executor(self->strand_, [self](std::error_code ec) {
-                                    if (self->protocol_.closed()) return;
-                                    if (ec) {
-                                      self->protocol_.note(
-                                          log::Level::Info,
-                                          "TLS handshake failed: " + wire::describe_tls_error(ec));
-                                      self->close(CloseReason::Tls);
-                                      return;
-                                    }
-                                    self->read();
-                                  }));
+    if (self->proxy_reader_)
+      self->read_proxy_header();
+    else
+      self->handshake();
   });
+}
+
+// The raw bytes of a trusted proxy's connection up to the end of its PROXY header, if it sends
+// one (within the hello timeout); what follows the header goes back to the stream.
+void Session::read_proxy_header() {
+  stream_.socket().async_read_some(
+      asio::buffer(buffer_),
+      asio::bind_executor(strand_, [self = shared_from_this()](std::error_code ec, std::size_t n) {
+        if (self->protocol_.closed()) return;
+        if (ec) {
+          self->close(CloseReason::Disconnect);
+          return;
+        }
+        self->server_.context.counters.bytes_received += n;
+        ProxyHeaderReader& reader = *self->proxy_reader_;
+        switch (reader.feed(self->buffer_.data(), n)) {
+          case ProxyHeaderReader::State::More:
+            self->read_proxy_header();
+            return;
+          case ProxyHeaderReader::State::Bad:
+            self->protocol_.note(log::Level::Info, "closed: " + reader.error());
+            self->close(CloseReason::BadFrame);
+            return;
+          case ProxyHeaderReader::State::Done:
+            if (reader.source()) self->learn_client(*reader.source());
+            break;
+          case ProxyHeaderReader::State::None:
+            break;
+        }
+        self->stream_.unread(reader.take_rest());
+        self->proxy_reader_.reset();
+        self->handshake();
+      }));
+}
+
+void Session::learn_client(const asio::ip::address& client) {
+  proxied_ = server_.proxies->contains(client);
+  refusal_ = protocol_.move_peer(peer_key_of(client),
+                                 client.to_string() + " via " + peer_name(stream_.socket()));
+}
+
+// The web port's requests: the client a trusted proxy names in its forwarded header, and the
+// refusal of a client the server does not admit.
+std::optional<wire::HttpReply> Session::screen_request(
+    const std::function<std::string(const std::string&)>& header) {
+  if (refusal_.empty() && proxied_) {
+    const ForwardedHeader which = server_.context.options.forwarded_header;
+    const std::string value =
+        header(which == ForwardedHeader::Forwarded ? "Forwarded" : "X-Forwarded-For");
+    if (const auto client = forwarded_client(value, which, *server_.proxies)) learn_client(*client);
+  }
+  if (refusal_.empty()) return std::nullopt;
+  protocol_.note(log::Level::Info, "refused: " + refusal_);
+  return wire::HttpReply{503, {{"Content-Type", "text/plain; charset=utf-8"}}, refusal_ + "\n"};
+}
+
+void Session::handshake() {
+  stream_.async_handshake(
+      asio::ssl::stream_base::server,
+      asio::bind_executor(strand_, [self = shared_from_this()](std::error_code ec) {
+        if (self->protocol_.closed()) return;
+        if (ec) {
+          self->protocol_.note(log::Level::Info,
+                               "TLS handshake failed: " + wire::describe_tls_error(ec));
+          self->close(CloseReason::Tls);
+          return;
+        }
+        if (!self->refusal_.empty() && !self->ws_) {  // refused behind a PROXY header
+          self->protocol_.note(log::Level::Info, "refused: " + self->refusal_);
+          self->protocol_.refuse(self->refusal_);
+          self->act();
+          return;
+        }
+        self->read();
+      }));
 }
 
 void Session::tiles_changed(std::shared_ptr<const std::vector<std::uint32_t>> tiles) {

@@ -19,9 +19,11 @@
 #include <cstddef>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "client_address.h"
 #include "irradcast/wire/transport.h"
 #include "irradcast/wire/websocket.h"
 #include "session_protocol.h"
@@ -33,7 +35,8 @@ class Session;
 // What the server lends its sessions; outlives them.
 struct SessionServer {
   SessionContext context;
-  const wire::ServerTls* tls = nullptr;  // null: plain TCP; a session takes its current context
+  const wire::ServerTls* tls = nullptr;     // null: plain TCP; a session takes its current context
+  const TrustedProxies* proxies = nullptr;  // --trusted-proxy (null: none)
   // A closed session leaves the server's set.
   std::function<void(const std::shared_ptr<Session>&)> remove;
 };
@@ -43,8 +46,10 @@ class Session : public std::enable_shared_from_this<Session> {
   // The socket was accepted on a strand of the server's io_context, which becomes the session's
   // strand. peer_key: the address the server counts this session under (PeerTable::admit).
   // web: the connection came to the web port (HTTP, then a WebSocket at /ws).
+  // proxied: the peer is a trusted proxy (--trusted-proxy), whose PROXY protocol header (either
+  // port) and X-Forwarded-For (the web port) name the client the session is counted under.
   Session(SessionServer& server, asio::ip::tcp::socket socket, std::string peer_key,
-          std::uint64_t id, bool web = false);
+          std::uint64_t id, bool web = false, bool proxied = false);
 
   void start();
   // Engine thread: tiles that got new versions.
@@ -58,6 +63,14 @@ class Session : public std::enable_shared_from_this<Session> {
   std::size_t queue_depth() const { return protocol_.queue_depth(); }
 
  private:
+  // A trusted proxy's PROXY protocol header, then the TLS handshake and the protocol.
+  void read_proxy_header();
+  void handshake();
+  // The client behind the trusted proxy: the session is counted under it (else refusal_ says
+  // why not, and the session is refused once it can be told).
+  void learn_client(const asio::ip::address& client);
+  std::optional<wire::HttpReply> screen_request(
+      const std::function<std::string(const std::string&)>& header);
   void arm_hello_timer();
   void arm_idle_timer();
   void arm_stall_timer();
@@ -87,8 +100,13 @@ class Session : public std::enable_shared_from_this<Session> {
       stall_timer_;
   std::array<char, 64 * 1024> buffer_{};
   SessionProtocol protocol_;
-  std::unique_ptr<wire::WsServerConnection> ws_;  // the web port's connections only
-  std::string ws_header_;                         // the WebSocket frame header of the write
+  // The nearest peer whose word counts (the TCP peer, or the PROXY header's source) is a
+  // trusted proxy.
+  bool proxied_ = false;
+  std::unique_ptr<ProxyHeaderReader> proxy_reader_;  // until the PROXY header is read
+  std::string refusal_;                              // the client behind the proxy is refused: why
+  std::unique_ptr<wire::WsServerConnection> ws_;     // the web port's connections only
+  std::string ws_header_;                            // the WebSocket frame header of the write
   bool ws_close_sent_ = false, ws_counted_ = false;
   bool writing_ = false;
   bool reading_started_ = false, read_pending_ = false;

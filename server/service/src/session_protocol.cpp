@@ -461,6 +461,23 @@ SessionWrite SessionProtocol::next_tile(Clock::time_point now) {
   return {SessionWrite::Kind::Tile, std::move(held_frame_)};
 }
 
+std::string SessionProtocol::move_peer(const std::string& key, const std::string& peer) {
+  const PeerTable::Admission admission = ctx_.peers.move(peer_key_, key);
+  switch (admission) {
+    case PeerTable::Admission::Ok:
+      peer_key_ = key;
+      peer_ = peer;
+      break;
+    case PeerTable::Admission::Banned:
+      ++ctx_.counters.banned_refused;
+      break;
+    default:
+      ++ctx_.counters.peer_refused;
+      break;
+  }
+  return ctx_.peers.refusal(admission);
+}
+
 void SessionProtocol::close(CloseReason reason) {
   if (closed_) return;
   closed_ = true;

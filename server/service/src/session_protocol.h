@@ -109,6 +109,15 @@ class SessionProtocol {
   // large): the same Error and close as a bad frame on TCP.
   void transport_failed(wire::ErrorCode code, const std::string& message) { fail(code, message); }
 
+  // The client's own address, learnt from a trusted proxy (a PROXY header, X-Forwarded-For): the
+  // session is counted, limited and banned under `key` from now on, and logged as `peer`. Empty
+  // when admitted; else why not (counted like a refused connection; the session stays as it
+  // was, for the caller to close).
+  std::string move_peer(const std::string& key, const std::string& peer);
+
+  // The client may not have a session (move_peer's refusal): Error REFUSED, then close.
+  void refuse(const std::string& message) { fail(wire::REFUSED, message, CloseReason::Disconnect); }
+
   // Output: what to write next; `now` drives the tile byte-rate cap.
   SessionWrite next_write(Clock::time_point now);
   SessionEvents take_events() { return std::exchange(events_, SessionEvents{}); }

@@ -143,6 +143,19 @@ struct WsServerConnection::Impl {
   End end = End::None;
   std::string end_message;
   std::string refused_origin;  // the Origin of an upgrade refused by allow_origin
+  std::string refused;         // the reason of a request refused by the request handler
+
+  // The request handler's answer (Handlers::request), nullopt to go on.
+  std::optional<HttpReply> screen() {
+    if (!handlers.request) return std::nullopt;
+    return handlers.request(
+        [this](const std::string& name) { return con->get_request_header(name); });
+  }
+  void set_reply(const HttpReply& reply) {
+    con->set_status(static_cast<ws::http::status_code::value>(reply.status));
+    for (const auto& [name, value] : reply.headers) con->replace_header(name, value);
+    con->set_body(reply.body);
+  }
 
   void finish(End e, std::string why) {
     if (end != End::None) return;
@@ -160,7 +173,9 @@ void WsServerConnection::Impl::on_http() {
   const std::string& method = con->get_request().get_method();
   const std::string& target = con->get_resource();
   HttpReply reply;
-  if (target == handlers.ws_path && method == "GET") {
+  if (auto refusal = screen()) {
+    reply = std::move(*refusal);
+  } else if (target == handlers.ws_path && method == "GET") {
     reply.status = 426;
     reply.headers = {{"Content-Type", "text/plain; charset=utf-8"},
                      {"Upgrade", "websocket"},
@@ -170,9 +185,7 @@ void WsServerConnection::Impl::on_http() {
   } else {
     reply = handlers.http(method, target);
   }
-  con->set_status(static_cast<ws::http::status_code::value>(reply.status));
-  for (const auto& [name, value] : reply.headers) con->replace_header(name, value);
-  con->set_body(reply.body);
+  set_reply(reply);
 }
 
 bool WsServerConnection::Impl::on_validate() {
@@ -187,6 +200,12 @@ bool WsServerConnection::Impl::on_validate() {
       !con->get_request_header("Transfer-Encoding").empty() || (!length.empty() && length != "0")) {
     con->set_status(ws::http::status_code::bad_request);
     con->set_body("a WebSocket upgrade needs Sec-WebSocket-Version: 13 and no body\n");
+    return false;
+  }
+  if (auto refusal = screen()) {
+    refused = refusal->body.substr(0, 200);
+    while (!refused.empty() && refused.back() == '\n') refused.pop_back();
+    set_reply(*refusal);
     return false;
   }
   const std::string origin = con->get_request_header("Origin");
@@ -236,7 +255,9 @@ WsServerConnection::WsServerConnection(Handlers handlers, std::size_t max_messag
       [&im](ws::connection_hdl, ServerEndpoint::message_ptr m) { im.on_message(std::move(m)); });
   im.endpoint.set_close_handler([&im](ws::connection_hdl) { im.on_close(); });
   im.endpoint.set_fail_handler([&im](ws::connection_hdl) {
-    if (!im.refused_origin.empty())
+    if (!im.refused.empty())
+      im.finish(End::Handshake, "a WebSocket upgrade refused: " + im.refused);
+    else if (!im.refused_origin.empty())
       im.finish(End::Handshake, "a WebSocket upgrade from the page origin '" + im.refused_origin +
                                     "', not this server's (--allowed-origin)");
     else
@@ -339,8 +360,9 @@ struct WsClientConnection::Impl {
   std::vector<std::pair<bool, std::string>> messages;
 };
 
-WsClientConnection::WsClientConnection(const std::string& host, const std::string& target,
-                                       std::size_t max_message)
+WsClientConnection::WsClientConnection(
+    const std::string& host, const std::string& target, std::size_t max_message,
+    const std::vector<std::pair<std::string, std::string>>& headers)
     : impl_(std::make_unique<Impl>()) {
   Impl& im = *impl_;
   quiet(im.endpoint);
@@ -361,6 +383,7 @@ WsClientConnection::WsClientConnection(const std::string& host, const std::strin
   std::error_code ec;
   im.con = im.endpoint.get_connection("ws://" + host + target, ec);
   if (ec) throw std::runtime_error("WebSocket client: " + ec.message());
+  for (const auto& [name, value] : headers) im.con->append_header(name, value);
   capture_output(im.con, im.out);
   im.con->set_shutdown_handler([&im](ws::connection_hdl) {
     im.closed = true;

@@ -93,10 +93,26 @@ class Stream {
   // name, or an IP address for a certificate with an IP subjectAltName). No-op without TLS.
   void expect_server_name(const std::string& host);
 
+  // Bytes read from the socket before the stream took over (behind a PROXY protocol header):
+  // the TLS handshake reads them first, or without TLS the next read returns them.
+  void unread(std::string bytes) { early_ = std::move(bytes); }
+
   // The TLS handshake; completes at once without TLS.
   template <class Handler>
   void async_handshake(asio::ssl::stream_base::handshake_type type, Handler&& handler) {
-    if (tls_) {
+    if (tls_ && !early_.empty()) {
+      // A client's first flight (its ClientHello) is all the handshake can have been sent
+      // before the server answered it, so the handshake uses every early byte.
+      auto ex = asio::get_associated_executor(handler, socket_.get_executor());
+      tls_->async_handshake(
+          type, asio::buffer(early_),
+          asio::bind_executor(ex, [this, h = std::forward<Handler>(handler)](
+                                      std::error_code ec, std::size_t used) mutable {
+            early_.erase(0, used);
+            if (!ec && !early_.empty()) ec = asio::error::invalid_argument;
+            h(ec);
+          }));
+    } else if (tls_) {
       tls_->async_handshake(type, std::forward<Handler>(handler));
     } else {
       // On the handler's own executor (a session's strand), as the TLS handshake would be.
@@ -113,7 +129,13 @@ class Stream {
 
   template <class Buffers, class Handler>
   void async_read_some(const Buffers& buffers, Handler&& handler) {
-    if (tls_)
+    if (!tls_ && !early_.empty()) {
+      const std::size_t n = asio::buffer_copy(buffers, asio::buffer(early_));
+      early_.erase(0, n);
+      auto ex = asio::get_associated_executor(handler, socket_.get_executor());
+      asio::post(ex,
+                 [h = std::forward<Handler>(handler), n]() mutable { h(std::error_code(), n); });
+    } else if (tls_)
       tls_->async_read_some(buffers, std::forward<Handler>(handler));
     else
       socket_.async_read_some(buffers, std::forward<Handler>(handler));
@@ -145,6 +167,7 @@ class Stream {
  private:
   asio::ip::tcp::socket socket_;
   std::optional<asio::ssl::stream<asio::ip::tcp::socket&>> tls_;
+  std::string early_;  // unread()
 };
 
 // One line for a TLS failure: OpenSSL's reason where there is one ("certificate verify failed",

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -57,6 +58,12 @@ class WsServerConnection {
     // Whether an upgrade that carries an Origin header (browsers send one) may open, given the
     // request's Host header; unset: any. A refused upgrade gets 403 and ends as Handshake.
     std::function<bool(const std::string& origin, const std::string& host)> allow_origin;
+    // Every request first, with a look-up of its headers (by name, any case; repeated headers
+    // joined by ", "): a reply refuses it (a plain request and an upgrade alike; the upgrade
+    // ends as Handshake). Unset: none is refused here.
+    std::function<std::optional<HttpReply>(
+        const std::function<std::string(const std::string& name)>& header)>
+        request;
   };
 
   WsServerConnection(Handlers handlers, std::size_t max_message);
@@ -101,8 +108,10 @@ class WsServerConnection {
 // binary messages both ways (masked, as RFC 6455 requires of clients).
 class WsClientConnection {
  public:
+  // `headers` go into the upgrade request besides the WebSocket's own.
   WsClientConnection(const std::string& host, const std::string& target,
-                     std::size_t max_message = 64u << 20);
+                     std::size_t max_message = 64u << 20,
+                     const std::vector<std::pair<std::string, std::string>>& headers = {});
   ~WsClientConnection();
   WsClientConnection(const WsClientConnection&) = delete;
   WsClientConnection& operator=(const WsClientConnection&) = delete;

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "irradcast/service/forwarded_header.h"
 #include "irradcast/service/tile_source.h"
 
 namespace irradcast {
@@ -41,6 +42,13 @@ struct ServerOptions {
   // The web port: pages of these origins (scheme://host[:port]) may open /ws besides the
   // server's own host (--allowed-origin; docs/OPERATIONS.md "The web port").
   std::vector<std::string> allowed_origins;
+  // Reverse proxies and load balancers (CIDRs: "10.0.0.0/8", "192.0.2.7", "fd00::/8") whose word
+  // on who their clients are is taken (--trusted-proxy; docs/OPERATIONS.md "Behind a proxy"): a
+  // PROXY protocol v2 header on either port, and on the web port `forwarded_header`. A session
+  // is then counted, limited and banned under its client's address; a trusted peer itself has no
+  // per-address limit. Empty: every peer is its own client.
+  std::vector<std::string> trusted_proxies;
+  ForwardedHeader forwarded_header = ForwardedHeader::XForwardedFor;
 
   // Hostile clients (docs/OPERATIONS.md).
   // TLS on the protocol port: PEM certificate chain and private key (both or neither).
@@ -98,6 +106,10 @@ inline constexpr std::size_t kCloseReasons = 13;
 // "unexpected_message", "slow_client", "shutdown", "internal", "hello_timeout",
 // "token_failures", "tls".
 const char* close_reason_name(CloseReason reason);
+
+// Throws irradcast::Error naming an entry of ServerOptions::trusted_proxies that is not an IPv4 or
+// IPv6 network (the Server's constructor throws the same).
+void check_trusted_proxies(const std::vector<std::string>& cidrs);
 
 // Raises this process's soft limit of open files to its hard limit (each client holds one);
 // returns the limit now in force.
