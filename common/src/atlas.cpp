@@ -36,7 +36,7 @@ Atlas build_atlas(const World& world, const AtlasOptions& options) {
                       for (std::size_t oi = r.begin(); oi < r.end(); ++oi) {
                         const WorldObject& wo = world.objects[oi];
                         ObjectLightmap& lm = atlas.objects[oi];
-                        if (wo.triangles().empty()) continue;
+                        if (wo.triangles().empty() || wo.dynamic) continue;
                         if (options.use_file_uv1 && !wo.source->uv1.empty() &&
                             atlas_detail::build_from_file_uv1(world, oi, options, density, lm))
                           continue;

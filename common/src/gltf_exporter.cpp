@@ -328,6 +328,7 @@ void Writer::write_nodes(json& root) {
       out["extensions"]["KHR_node_visibility"] = {{"visible", false}};
       hidden = true;
     }
+    if (node.dynamic) out["extras"]["irradcast"] = {{"dynamic", true}};
     nodes.push_back(std::move(out));
   }
   if (!nodes.empty()) root["nodes"] = std::move(nodes);

@@ -160,6 +160,15 @@ void Loader::link_node(std::size_t i, Scene& scene) const {
     if (!v.IsBool()) fail(what + " has a KHR_node_visibility \"visible\" that is not a boolean");
     node.visible = v.Get<bool>();
   }
+  // "extras": {"irradcast": {"dynamic": true}}: the node and its subtree are dynamic.
+  if (gn.extras.IsObject() && gn.extras.Has("irradcast")) {
+    const tinygltf::Value& ours = gn.extras.Get("irradcast");
+    if (ours.IsObject() && ours.Has("dynamic")) {
+      const tinygltf::Value& d = ours.Get("dynamic");
+      if (!d.IsBool()) fail(what + " has an extras.irradcast.dynamic that is not a boolean");
+      node.dynamic = d.Get<bool>();
+    }
+  }
   for (int c : gn.children) {
     if (c < 0 || static_cast<std::size_t>(c) >= count)
       fail(what + " has child " + std::to_string(c) + ", which does not exist");

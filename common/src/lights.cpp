@@ -113,7 +113,7 @@ Lanes3 div3(const Lanes3& a, __m128 d) {
 LightSampler::LightSampler(const World& world) : world_(&world) {
   std::vector<float> power;
   for (const WorldObject& o : world.objects) {
-    if (!o.visible) continue;
+    if (!o.in_static_scene()) continue;
     const auto& tris = o.triangles();
     for (std::uint32_t t = 0; t < tris.size(); ++t) {
       const Material& m = world.material(o.object, t);

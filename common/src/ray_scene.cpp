@@ -127,6 +127,10 @@ RayScene::RayScene(const World& world, bool editable)
   }
   impl_->filters.resize(world.objects.size());
   for (const WorldObject& o : world.objects) {
+    if (o.dynamic) {  // not in the static scene: not even a disabled geometry (its BVH is
+      impl_->geometries.push_back(nullptr);  // the scene's without the object)
+      continue;
+    }
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     if (editable) rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_HIGH);
     auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
@@ -153,7 +157,8 @@ RayScene::RayScene(const World& world, bool editable)
 
 RayScene::~RayScene() {
   if (!impl_) return;
-  for (RTCGeometry g : impl_->geometries) rtcReleaseGeometry(g);
+  for (RTCGeometry g : impl_->geometries)
+    if (g) rtcReleaseGeometry(g);
   if (impl_->scene) rtcReleaseScene(impl_->scene);
 }
 
@@ -168,6 +173,7 @@ void RayScene::update(const std::vector<int>& objects) {
       throw Error("ray scene: no object " + std::to_string(index) + " to update");
     const WorldObject& o = world_->objects[static_cast<std::size_t>(index)];
     RTCGeometry geom = impl_->geometries[static_cast<std::size_t>(index)];
+    if (!geom) continue;  // dynamic: not in this scene
     auto* vb = static_cast<float*>(rtcGetGeometryBufferData(geom, RTC_BUFFER_TYPE_VERTEX, 0));
     if (!vb) throw Error("ray scene: object " + std::to_string(index) + " has no vertex buffer");
     std::memcpy(vb, o.positions.data(), o.positions.size() * sizeof(glm::vec3));

@@ -116,6 +116,22 @@ std::vector<bool> Scene::visible_nodes() const {
   return visible;
 }
 
+std::vector<bool> Scene::dynamic_nodes() const {
+  std::vector<bool> dynamic(nodes.size(), false);
+  std::vector<bool> done(nodes.size(), false);
+  std::vector<std::pair<int, bool>> stack;
+  for (int r : roots) stack.emplace_back(r, false);
+  while (!stack.empty()) {
+    auto [n, parent] = stack.back();
+    stack.pop_back();
+    if (done[n]) continue;
+    done[n] = true;
+    dynamic[n] = parent || nodes[n].dynamic;
+    for (int c : nodes[n].children) stack.emplace_back(c, dynamic[n]);
+  }
+  return dynamic;
+}
+
 std::vector<Object> Scene::objects() const {
   std::vector<Object> out;
   // Only nodes reachable from the roots are part of the scene.

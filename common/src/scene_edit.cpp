@@ -288,6 +288,16 @@ void validate_edit_ops(const Scene& scene, const SceneEdit& edit) {
              "edit op " + std::to_string(i + 1) + " (" + edit_kind_name(edit.ops[i].kind) + ")");
 }
 
+bool edit_changes_static_scene(const Scene& scene, const SceneEdit& edit) {
+  const std::vector<bool> dynamic = scene.dynamic_nodes();
+  for (const EditOp& op : edit.ops) {
+    if (target_of(op.kind) != Target::Node) return true;
+    const int n = find(scene.nodes, op.target);
+    if (n < 0 || !dynamic[static_cast<std::size_t>(n)]) return true;
+  }
+  return false;
+}
+
 void validate_edit(const Scene& scene, const SceneEdit& edit) {
   if (edit.ops.empty()) throw Error("scene edit: no operations");
   // Each op on its own, then the transforms it leads to: the ops of an edit compose (13 scales

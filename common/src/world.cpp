@@ -65,9 +65,10 @@ void place_object(WorldObject& wo, const glm::mat4& m) {
 void place_lights(World& w, const Scene& scene, const std::vector<glm::mat4>& mats,
                   const std::vector<bool>& visible) {
   w.lights.clear();
+  const std::vector<bool> dynamic = scene.dynamic_nodes();
   for (int i = 0; i < static_cast<int>(scene.nodes.size()); ++i) {
     const Node& node = scene.nodes[i];
-    if (node.light < 0 || !visible[i]) continue;
+    if (node.light < 0 || !visible[i] || dynamic[i]) continue;
     const Light& l = scene.lights[node.light];
     const glm::mat4& m = mats[i];
     WorldLight wl;
@@ -88,7 +89,8 @@ void place_lights(World& w, const Scene& scene, const std::vector<glm::mat4>& ma
 void compute_bounds(World& w) {
   w.bounds = Bounds{};
   for (const WorldObject& o : w.objects)
-    for (const glm::vec3& p : o.positions) w.bounds.extend(p);
+    if (!o.dynamic)
+      for (const glm::vec3& p : o.positions) w.bounds.extend(p);
 }
 
 }  // namespace
@@ -98,6 +100,7 @@ World World::build(const Scene& scene) {
   w.scene = &scene;
   std::vector<glm::mat4> mats = scene.world_matrices();
   std::vector<bool> visible = scene.visible_nodes();
+  const std::vector<bool> dynamic = scene.dynamic_nodes();
   std::vector<Object> objects = scene.objects();
   w.objects.reserve(objects.size());
   for (std::size_t i = 0; i < objects.size(); ++i) {
@@ -108,11 +111,13 @@ World World::build(const Scene& scene) {
     wo.mesh = o.mesh;
     wo.source = &scene.meshes[o.mesh];
     wo.visible = visible[o.node];
+    wo.dynamic = dynamic[o.node];
     place_object(wo, mats[o.node]);
     w.objects.push_back(std::move(wo));
   }
   // Hidden objects count for the bounds: the probe grid and ray offsets are sized once, and an
-  // object hidden at load may be shown later.
+  // object hidden at load may be shown later. Dynamic ones do not: the static scene is the
+  // scene without them.
   compute_bounds(w);
   place_lights(w, scene, mats, visible);
   return w;

@@ -291,6 +291,10 @@ json write_lightmaps(Bake& b, const PreparedScene& p, const std::vector<Lightmap
   json lightmaps = json::array();
   for (std::size_t i = 0; i < maps.size(); ++i) {
     const std::string& object_name = objects[i].name;
+    if (p.world().objects[i].dynamic) {  // no lightmap (docs/DYNAMIC.md)
+      lightmaps.push_back({{"object", object_name}, {"dynamic", true}});
+      continue;
+    }
     std::string name = std::to_string(i) + "_" + file_safe(object_name) + ".exr";
     ImageRGB img;
     img.width = maps[i].width;

@@ -1,6 +1,6 @@
-// The lighting options that change the loaded scene, shared by irradcast-bake and
-// irradcast-server: --sky R,G,B | FILE.exr, --sky-strength S and --sun DX,DY,DZ,W
-// (docs/ENGINE.md "Sky and sun"). The sky becomes Scene::sky; the sun a directional light on a
+// The options that change the loaded scene, shared by irradcast-bake and irradcast-server:
+// --sky R,G,B | FILE.exr, --sky-strength S and --sun DX,DY,DZ,W (docs/ENGINE.md "Sky and sun"),
+// and --dynamic NAME[,NAME...] (docs/DYNAMIC.md). The sky becomes Scene::sky; the sun a directional light on a
 // node of its own, exactly as a glTF directional light loads, so edits and the scene package see
 // an ordinary light.
 #pragma once
@@ -80,6 +80,7 @@ struct SceneOptions {
   std::string sky;  // "" (none), "R,G,B" or FILE.exr
   float sky_strength = 1.0f;
   std::string sun;  // "" (none) or "DX,DY,DZ,W"
+  std::vector<std::string> dynamic;  // node names
 
   // What apply() did, for the log and the report.
   bool sky_from_file = false;
@@ -101,9 +102,24 @@ struct SceneOptions {
                    "straight down), W its irradiance in W/m^2 on a surface facing it "
                    "(E = W cos theta)")
         ->default_str("none");
+    app.add_option("--dynamic", dynamic,
+                   "make these nodes (by name, with their subtrees) dynamic: no lightmap, not in "
+                   "the static scene, moved by edits at no engine cost and lit in the viewers by "
+                   "the probe volume (docs/DYNAMIC.md); repeat or comma-separate")
+        ->delimiter(',');
   }
 
-  // Puts the sky and the sun into `scene`. Throws irradcast::Error naming the bad option.
+  // Marks the --dynamic nodes. Throws irradcast::Error naming a name no node has.
+  void mark_dynamic(Scene& scene) const {
+    for (const std::string& name : dynamic) {
+      bool found = false;
+      for (Node& n : scene.nodes)
+        if (n.name == name) n.dynamic = found = true;
+      if (!found) throw Error("--dynamic: the scene has no node named '" + name + "'");
+    }
+  }
+
+  // Puts the sky and the sun into `scene`, and marks the --dynamic nodes. Throws irradcast::Error naming the bad option.
   void apply(Scene& scene) {
     if (sky == "none") sky.clear();  // the defaults --help shows
     if (sun == "none") sun.clear();
@@ -143,6 +159,7 @@ struct SceneOptions {
       sun_irradiance = v[3];
       add_sun(scene, sun_direction, sun_irradiance);
     }
+    mark_dynamic(scene);
   }
 
   // One line for the log: what lights `scene` (after apply()): its emitters and lights, the sun
@@ -158,6 +175,8 @@ struct SceneOptions {
     for (const Material& m : scene.materials) emissive += m.is_emissive() ? 1 : 0;
     for (const Node& n : scene.nodes) lights += n.light >= 0 ? 1 : 0;
     if (has_sun) --lights;
+    std::size_t dynamic_nodes = 0;
+    for (const bool d : scene.dynamic_nodes()) dynamic_nodes += d ? 1 : 0;
     std::string s = std::to_string(emissive) + " emissive materials, " + std::to_string(lights) +
                     " lights from the scene, ";
     if (has_sun)
@@ -169,6 +188,7 @@ struct SceneOptions {
            std::to_string(scene.sky.map.height) + ") x " + num(scene.sky.strength);
     else
       s += "sky " + vec(scene.sky.color) + " x " + num(scene.sky.strength);
+    if (dynamic_nodes > 0) s += "; " + std::to_string(dynamic_nodes) + " dynamic nodes";
     return s;
   }
 };

@@ -122,7 +122,7 @@ function objectGeometry(scene, obj) {
       for (let a = 0; a < 2; ++a) {
         if (mesh.uv0) uv0[2 * o + a] = mesh.uv0[2 * v + a];
         if (mesh.uv1) uv1[2 * o + a] = mesh.uv1[2 * v + a];
-        luv[2 * o + a] = obj.cornerUv[6 * t + 2 * c + a];
+        luv[2 * o + a] = obj.dynamic ? 0 : obj.cornerUv[6 * t + 2 * c + a];
       }
     }
   });
@@ -206,7 +206,9 @@ export class SceneView {
     this.scene.objects.forEach((o, i) => {
       this.meshes[i].matrix.copy(world[o.node]);
       this.meshes[i].matrixWorldNeedsUpdate = true;
-      this.meshes[i].visible = visible[o.node];
+      // A dynamic object has no lightmap: not drawn until the probe volume lights it (as in
+      // irradcast-view).
+      this.meshes[i].visible = visible[o.node] && !o.dynamic;
     });
   }
 

@@ -36,26 +36,30 @@ function readNodes(d) {
     light: int(n.light, 0),
     camera: int(n.camera, 0),
     hidden: !!n.hidden,
+    dynamic: !!n.dynamic,
   }));
   return nodes;
 }
 
-// World matrices and visibility, depth-first from the roots (Scene::world_matrices and
-// visible_nodes: a hidden node hides its subtree; cycles are cut).
+// World matrices, visibility and dynamic nodes, depth-first from the roots
+// (Scene::world_matrices, visible_nodes and dynamic_nodes: a hidden node hides its subtree, a
+// dynamic one makes it dynamic; cycles are cut).
 export function placeNodes(scene) {
   const world = scene.nodes.map(() => new THREE.Matrix4());
   const visible = scene.nodes.map(() => false);
+  const dynamic = scene.nodes.map(() => false);
   const reach = scene.nodes.map(() => false);
-  const stack = scene.roots.map((r) => [r, new THREE.Matrix4(), true]);
+  const stack = scene.roots.map((r) => [r, new THREE.Matrix4(), true, false]);
   while (stack.length) {
-    const [n, parent, vis] = stack.pop();
+    const [n, parent, vis, dyn] = stack.pop();
     if (reach[n]) continue;
     reach[n] = true;
     world[n] = parent.clone().multiply(scene.nodes[n].local);
     visible[n] = vis && !scene.nodes[n].hidden;
-    for (const c of scene.nodes[n].children) stack.push([c, world[n], visible[n]]);
+    dynamic[n] = dyn || scene.nodes[n].dynamic;
+    for (const c of scene.nodes[n].children) stack.push([c, world[n], visible[n], dynamic[n]]);
   }
-  return { world, visible, reach };
+  return { world, visible, reach, dynamic };
 }
 
 function readMaterial(m, textures, i) {
@@ -120,7 +124,7 @@ export function readScene(d) {
     if (n.camera !== -1) checkIndex(n.camera, scene.cameras.length, `node ${i}'s camera`);
   });
   scene.roots.forEach((r) => checkIndex(r, nn, 'root node'));
-  const { reach } = placeNodes(scene);
+  const { reach, dynamic } = placeNodes(scene);
   scene.objects = [];
   scene.nodes.forEach((n, i) => { if (reach[i] && n.mesh >= 0) scene.objects.push({ node: i, mesh: n.mesh }); });
   const layouts = d.layouts || [];
@@ -131,7 +135,9 @@ export function readScene(d) {
     o.width = l.width >>> 0;
     o.height = l.height >>> 0;
     o.cornerUv = l.corner_uv || [];
-    if (o.cornerUv.length !== 6 * tris) fail(`object ${i} has lightmap coordinates for the wrong triangle count`);
+    o.dynamic = dynamic[o.node];  // no lightmap (docs/DYNAMIC.md)
+    if (o.dynamic && (o.width || o.height || o.cornerUv.length)) fail(`object ${i} is dynamic and has a lightmap layout`);
+    if (!o.dynamic && o.cornerUv.length !== 6 * tris) fail(`object ${i} has lightmap coordinates for the wrong triangle count`);
   });
   scene.sky = readSky(d.sky);
   return scene;

@@ -119,9 +119,16 @@ void validate_layout(const Scene& s, const Atlas& atlas) {
   if (atlas.objects.size() != objects.size())
     fail("the lightmap layout has " + std::to_string(atlas.objects.size()) +
          " objects but the scene has " + std::to_string(objects.size()));
+  const std::vector<bool> dynamic = s.dynamic_nodes();
   for (std::size_t i = 0; i < objects.size(); ++i) {
     const ObjectLightmap& o = atlas.objects[i];
     const std::size_t tris = s.meshes[objects[i].mesh].triangles.size();
+    if (dynamic[static_cast<std::size_t>(objects[i].node)]) {  // no lightmap
+      if (o.width != 0 || o.height != 0 || !o.corner_uv.empty())
+        fail(idx("object", i) + " (\"" + objects[i].name +
+             "\") is dynamic and has a lightmap layout");
+      continue;
+    }
     if (o.width < 0 || o.height < 0 || static_cast<std::uint32_t>(o.width) > kMaxLightmapSize ||
         static_cast<std::uint32_t>(o.height) > kMaxLightmapSize)
       fail(idx("object", i) + " has an invalid lightmap size " + std::to_string(o.width) + " x " +
@@ -184,6 +191,7 @@ void put_nodes(SceneData& d, const Scene& s) {
     o->set_camera(n.camera);
     o->set_light(n.light);
     o->set_hidden(!n.visible);
+    o->set_dynamic(n.dynamic);
   }
   for (int r : s.roots) d.add_roots(r);
 }
@@ -311,6 +319,7 @@ void get_nodes(const SceneData& d, Scene& s) {
     n.camera = to_int(o.camera());
     n.light = to_int(o.light());
     n.visible = !o.hidden();
+    n.dynamic = o.dynamic();
     s.nodes.push_back(std::move(n));
   }
   s.roots.assign(d.roots().begin(), d.roots().end());

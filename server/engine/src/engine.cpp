@@ -97,7 +97,7 @@ void Engine::build_texels(const std::vector<TexelGBuffer>& gbuffers) {
   for (std::size_t o = 0; o < gbuffers.size(); ++o) {
     const TexelGBuffer& g = gbuffers[o];
     const WorldObject& obj = world_->objects[o];
-    if (!obj.visible) continue;  // hidden by an edit: its lightmap keeps its last values
+    if (!obj.in_static_scene()) continue;  // hidden: its lightmap keeps its last values
     for (std::size_t i = 0; i < g.size(); ++i) {
       if (!g.valid(i)) continue;
       glm::vec3 n = g.normal[i];

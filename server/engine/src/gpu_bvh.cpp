@@ -165,7 +165,7 @@ GpuBvh build_gpu_bvh(const World& world) {
   std::vector<GpuTriangle> source;
   std::vector<RTCBuildPrimitive> prims;
   for (const WorldObject& o : world.objects) {
-    if (!o.visible) continue;  // hidden by an edit: rays pass through
+    if (!o.in_static_scene()) continue;  // hidden by an edit, or dynamic: rays pass through
     const auto& tris = o.triangles();
     for (std::uint32_t t = 0; t < tris.size(); ++t) {
       glm::vec3 a = o.positions[tris[t].x], b = o.positions[tris[t].y], c = o.positions[tris[t].z];

@@ -55,7 +55,7 @@ Before snapshot(const World& world) {
   Before b;
   for (const WorldObject& o : world.objects) {
     b.boxes.push_back(object_box(o));
-    b.emitted.push_back(o.visible && emits(world, o));
+    b.emitted.push_back(o.in_static_scene() && emits(world, o));
   }
   b.lights = world.lights;
   return b;
@@ -118,6 +118,7 @@ void object_changes(const World& world, const Scene& scene, const std::vector<in
           t < obj.source->triangle_material.size() ? obj.source->triangle_material[t] : ~0u;
       uses_changed = m < material_changed.size() && material_changed[m];
     }
+    if (obj.dynamic) continue;  // not in the static scene
     const bool emits_now = obj.visible && emits(world, obj);
     if (uses_changed && !is_moved[o]) change.regions.push_back(object_box(obj));
     if ((before.emitted[o] || emits_now) && (is_moved[o] || uses_changed)) {
@@ -214,7 +215,10 @@ SceneChange PreparedScene::apply(std::span<const SceneEdit> edits, EditReport* r
 
   // World, ray scene (refit + top level), lights, G-buffers.
   LapTimer lap;
-  const std::vector<int> moved = s.world.update(s.scene);
+  // A dynamic object's move is the viewers' business: no ray, texel or region of the static scene
+  // changes with it.
+  std::vector<int> moved = s.world.update(s.scene);
+  std::erase_if(moved, [&](int o) { return s.world.objects[static_cast<std::size_t>(o)].dynamic; });
   lap.lap("world");
   s.rays->update(moved);
   lap.lap("ray scene");

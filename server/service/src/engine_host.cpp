@@ -215,6 +215,7 @@ std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
     journal_->append(revision, loaded);
   }
   apply_edit(validation_scene_, loaded);  // validates first: unchanged when it throws
+  const bool static_change = edit_changes_static_scene(validation_scene_, loaded);
   if (journal_ && journal_->wants_compaction()) {
     try {
       // The snapshot must replay: its absolute ops are checked like any edit's (a transform
@@ -229,7 +230,9 @@ std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
   std::lock_guard lock(mutex_);
   submitted_revision_ = revision;
   pending_edits_.emplace_back(revision, loaded);
-  stats_.idle = false;  // refining again from now on: nobody waits for an idle that is stale
+  // Refining again from now on (nobody waits for an idle that is stale), unless the edit moves
+  // dynamic nodes only: the engine applies it and stays idle.
+  if (static_change) stats_.idle = false;
   cv_.notify_all();
   return revision;
 }
@@ -263,13 +266,18 @@ void EngineHost::apply_edits() {
                                " could not be applied: " + report.edits[i].error);
   if (report.applied == 0) return;
   LapTimer lap(report.timings);
-  impl_->engine->scene_changed(change, queued.cameras);
-  lap.lap("engine (" + impl_->engine->change_timings() + ")");
-  publish_edits(queued, report, lap, began);
+  // Dynamic nodes only: the lightmaps and their tiles stay as they are (docs/DYNAMIC.md).
+  const bool lightmaps_change = !change.empty();
+  if (lightmaps_change) {
+    impl_->engine->scene_changed(change, queued.cameras);
+    lap.lap("engine (" + impl_->engine->change_timings() + ")");
+  }
+  publish_edits(queued, report, lap, began, lightmaps_change);
 }
 
 void EngineHost::publish_edits(QueuedEdits& queued, const EditReport& report, LapTimer& lap,
-                               std::chrono::steady_clock::time_point began) {
+                               std::chrono::steady_clock::time_point began,
+                               bool lightmaps_change) {
   std::vector<AppliedEdit> applied;
   for (std::size_t i = 0; i < queued.edits.size(); ++i) {
     if (!report.edits[i].applied) continue;
@@ -285,8 +293,9 @@ void EngineHost::publish_edits(QueuedEdits& queued, const EditReport& report, La
   std::uint64_t epoch = 0;
   {
     std::lock_guard lock(mutex_);
-    std::string key = std::to_string(tile_epoch_) + "|" + package->hash;
-    epoch = digest64(key);
+    // The tiles' versions go on under the same epoch when no lightmap changed.
+    epoch = lightmaps_change ? digest64(std::to_string(tile_epoch_) + "|" + package->hash)
+                             : tile_epoch_;
   }
   const double ms =
       1e3 * std::chrono::duration<double>(std::chrono::steady_clock::now() - began).count();
@@ -296,12 +305,14 @@ void EngineHost::publish_edits(QueuedEdits& queued, const EditReport& report, La
     revision_ = revision;
     package_ = package;
     tile_epoch_ = epoch;
-    stats_.idle = false;
     stats_.revision = revision;
     stats_.last_edit_ms = ms;
-    stats_.stale_texels = impl_->engine->stale_texels();
-    stats_.texels = impl_->engine->texel_count();
-    updates_since_edit_ = 0;
+    if (lightmaps_change) {
+      stats_.idle = false;
+      stats_.stale_texels = impl_->engine->stale_texels();
+      stats_.texels = impl_->engine->texel_count();
+      updates_since_edit_ = 0;
+    }
     listener = edit_listener_;
   }
   log::info("engine",
@@ -373,6 +384,11 @@ void EngineHost::run() {
     }
     try {
       apply_edits();
+      {
+        // Still idle after the edits: they moved dynamic nodes only (no texel to refine).
+        std::lock_guard lock(mutex_);
+        if (stats_.idle) continue;
+      }
       do_update();
     } catch (const std::exception& e) {
       // The engine's input was validated at construction; a failure here is a bug or a lost

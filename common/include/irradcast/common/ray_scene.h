@@ -46,6 +46,7 @@ struct RayBatch {
 
 class RayScene {
  public:
+  // The world's static scene (dynamic objects are not in it; hidden ones are, disabled).
   // `editable`: build the two-level structure that update() changes incrementally (traversal is
   // somewhat slower than the single-level BVH a static scene gets).
   explicit RayScene(const World& world, bool editable = false);

@@ -103,6 +103,11 @@ struct Node {
   // Hidden nodes (and everything under them) are not part of the lit scene: their meshes cast
   // no shadows and get no light, their lights are off. A scene edit shows or hides them.
   bool visible = true;
+  // Dynamic nodes (and everything under them) move freely and cheaply (docs/DYNAMIC.md): their
+  // meshes get no lightmap and take no part in the static scene the engine lights (they neither
+  // occlude nor reflect its light), and their lights are off; viewers draw them lit by the probe
+  // volume. glTF: "extras": {"irradcast": {"dynamic": true}}, or --dynamic NAME.
+  bool dynamic = false;
 };
 
 // A mesh placed in the world by a node: the unit that gets its own lightmap.
@@ -141,6 +146,8 @@ struct Scene {
   std::vector<Object> objects() const;
   // Per node: visible itself and every ancestor visible.
   std::vector<bool> visible_nodes() const;
+  // Per node: dynamic itself or under a dynamic ancestor.
+  std::vector<bool> dynamic_nodes() const;
   // Index of the first node with a camera, or -1.
   int first_camera_node() const;
 

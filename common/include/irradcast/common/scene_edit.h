@@ -80,6 +80,11 @@ void validate_edit(const Scene& scene, const SceneEdit& edit);
 // parts), not the transforms they lead to: `scene` needs its nodes, lights and materials only.
 // The edit journal checks a snapshot with it before it writes it.
 void validate_edit_ops(const Scene& scene, const SceneEdit& edit);
+// Whether the edit can change the static scene (what the engine lights): false only when every
+// op moves, shows or hides a dynamic node (Node::dynamic; docs/DYNAMIC.md), which costs the
+// engine nothing. Ops whose target does not resolve count as static. A light, material or sky
+// op always does.
+bool edit_changes_static_scene(const Scene& scene, const SceneEdit& edit);
 // Validates, then applies every operation in order. On an invalid edit it throws and the scene
 // is unchanged.
 EditEffect apply_edit(Scene& scene, const SceneEdit& edit);

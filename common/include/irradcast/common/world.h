@@ -37,6 +37,10 @@ struct WorldObject {
   const Mesh* source = nullptr;      // uv0 / uv1 / triangles / materials live here
   glm::mat4 transform{1.0f};         // object to world (the node's world matrix)
   bool visible = true;               // false: hidden by an edit (no rays hit it, no texels lit)
+  bool dynamic = false;              // a dynamic node's (Node::dynamic): not in the static scene
+  // Part of the static scene as it is now: what the engine lights, its rays hit and its lightmaps
+  // cover.
+  bool in_static_scene() const { return visible && !dynamic; }
 
   const std::vector<glm::uvec3>& triangles() const { return source->triangles; }
   // Unit geometric normal of triangle t (counter-clockwise winding) and twice its area.
@@ -70,8 +74,8 @@ struct CameraPose {
 struct World {
   const Scene* scene = nullptr;
   std::vector<WorldObject> objects;
-  std::vector<WorldLight> lights;
-  Bounds bounds;
+  std::vector<WorldLight> lights;  // of the static scene (none of a dynamic node)
+  Bounds bounds;                   // of the static scene's objects, hidden ones included
 
   static World build(const Scene& scene);
   // After an edit of `scene` (the same Scene this World was built from): places every object

@@ -162,6 +162,10 @@ struct SceneChange {
   std::vector<glm::vec3> other_lights;
   // Distance from p to the nearest region (0 inside one; +inf without regions).
   float distance(glm::vec3 p) const;
+  // Nothing of the static scene changed (an edit of dynamic nodes only): no texel is affected.
+  bool empty() const {
+    return !geometry && !surfaces && !sky && regions.empty() && light_points.empty();
+  }
 };
 
 }  // namespace irradcast

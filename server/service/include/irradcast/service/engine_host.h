@@ -137,9 +137,10 @@ class EngineHost final : public TileSource {
   void apply_edits();  // engine thread: applies the queued edits
   QueuedEdits take_queued_edits();
   // After the prepared scene and the engine took the applied edits: the new scene package and
-  // tile epoch, the stats, the log and the edit listener.
+  // tile epoch (the same epoch when no lightmap changes: dynamic nodes only), the stats, the log
+  // and the edit listener.
   void publish_edits(QueuedEdits& queued, const EditReport& report, LapTimer& lap,
-                     std::chrono::steady_clock::time_point began);
+                     std::chrono::steady_clock::time_point began, bool lightmaps_change);
   void record_passes(const UpdateStats& u);  // with mutex_ held
   static constexpr std::size_t kMaxUpdateEnds = 1u << 16;
 

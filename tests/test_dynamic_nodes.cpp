@@ -1,0 +1,285 @@
+// Dynamic nodes (issue 32 part 1 and 2, docs/DYNAMIC.md): marked in glTF extras or with
+// --dynamic, they take no part in the static scene (the engine's lightmaps and tiles are exactly
+// those of the scene without them), they travel in the scene package and glTF exports, and
+// moving them costs the engine nothing: no texel, tile version or tile epoch changes.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "cli.h"
+#include "engine_setup.h"
+#include "irradcast/common/builtin.h"
+#include "irradcast/common/camera.h"
+#include "irradcast/common/error.h"
+#include "irradcast/common/gltf.h"
+#include "irradcast/common/scene_edit.h"
+#include "irradcast/service/engine_host.h"
+#include "irradcast/wire/scene_package.h"
+#include "scene_builders.h"
+#include "service_fixture.h"
+
+using namespace irradcast;
+namespace fs = std::filesystem;
+
+namespace {
+
+// A mesh of `s` on a new node under `parent` (-1: a root).
+int add_child_block(Scene& s, const std::string& name, int parent, glm::vec3 lo, glm::vec3 hi,
+                    std::uint32_t material) {
+  Scene tmp;
+  tmp.materials = s.materials;
+  test::add_block(tmp, name.c_str(), lo, hi, material);
+  Mesh merged;
+  merged.name = name;
+  for (const Mesh& m : tmp.meshes) {
+    const auto base = static_cast<std::uint32_t>(merged.positions.size());
+    merged.positions.insert(merged.positions.end(), m.positions.begin(), m.positions.end());
+    merged.normals.insert(merged.normals.end(), m.normals.begin(), m.normals.end());
+    merged.uv0.insert(merged.uv0.end(), m.uv0.begin(), m.uv0.end());
+    for (const glm::uvec3& t : m.triangles) merged.triangles.push_back(t + glm::uvec3(base));
+    merged.triangle_material.insert(merged.triangle_material.end(), m.triangle_material.begin(),
+                                    m.triangle_material.end());
+  }
+  s.meshes.push_back(std::move(merged));
+  Node n;
+  n.name = name;
+  n.parent = parent;
+  n.mesh = static_cast<int>(s.meshes.size() - 1);
+  return s.add_node(std::move(n));
+}
+
+// The Cornell box with a dynamic prop: a glowing block "prop" hanging in the room, a white
+// block under it, and a point light on the prop, all dynamic (the flag is on "prop" only).
+Scene cornell_with_prop() {
+  Scene s = make_cornell_box();
+  const std::uint32_t glow =
+      test::add_material(s, glm::vec3(0.5f), glm::vec3(4.0f, 2.0f, 1.0f), 1.0f);
+  const std::uint32_t white = test::add_material(s, glm::vec3(0.9f));
+  const int prop = add_child_block(s, "prop", -1, {-0.2f, 0.9f, -0.2f}, {0.2f, 1.2f, 0.2f}, glow);
+  s.nodes[static_cast<std::size_t>(prop)].dynamic = true;
+  add_child_block(s, "prop_base", prop, {-0.3f, 0.7f, -0.3f}, {0.3f, 0.8f, 0.3f}, white);
+  Light bulb;
+  bulb.name = "bulb";
+  bulb.intensity = 5.0f;
+  s.lights.push_back(bulb);
+  Node lamp;
+  lamp.name = "lamp";
+  lamp.parent = prop;
+  lamp.light = static_cast<int>(s.lights.size() - 1);
+  lamp.local[3] = glm::vec4(0.0f, 0.6f, 0.0f, 1.0f);
+  s.add_node(std::move(lamp));
+  return s;
+}
+
+SceneEdit move(const std::string& node, glm::vec3 by) {
+  SceneEdit e;
+  EditOp op;
+  op.kind = EditOp::Kind::Move;
+  op.target = node;
+  op.vector = by;
+  e.ops.push_back(op);
+  return e;
+}
+
+std::vector<std::pair<std::uint64_t, std::string>> tile_state(const EngineHost& host) {
+  std::vector<std::pair<std::uint64_t, std::string>> out;
+  for (std::uint32_t i = 0; i < host.tiles().tile_count(); ++i) {
+    const auto snap = host.tiles().snapshot(i, wire::TILE_RGB9E5_ZSTD);
+    out.emplace_back(snap.version, snap.payload ? *snap.payload : std::string());
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST(DynamicNodes, ASubtreeIsDynamicAndOutOfTheStaticWorld) {
+  const Scene s = cornell_with_prop();
+  const Scene plain = make_cornell_box();
+  const std::vector<bool> dynamic = s.dynamic_nodes();
+  int marked = 0;
+  for (std::size_t n = 0; n < s.nodes.size(); ++n) {
+    marked += dynamic[n] ? 1 : 0;
+    EXPECT_EQ(dynamic[n], n >= plain.nodes.size()) << s.nodes[n].name;
+  }
+  EXPECT_EQ(marked, 3);  // prop, prop_base, lamp
+  const World w = World::build(s), wp = World::build(plain);
+  EXPECT_EQ(w.bounds.lo, wp.bounds.lo);
+  EXPECT_EQ(w.bounds.hi, wp.bounds.hi);
+  EXPECT_EQ(w.lights.size(), wp.lights.size());  // the lamp is off for the static scene
+  ASSERT_EQ(w.objects.size(), wp.objects.size() + 2);
+  EXPECT_TRUE(w.objects.back().dynamic);
+  EXPECT_FALSE(w.objects.back().in_static_scene());
+  EXPECT_TRUE(w.objects.back().visible);
+}
+
+// The acceptance test of part 1: the same texels, the same lightmaps bit for bit.
+TEST(DynamicNodes, StaticLightmapsAreThoseOfTheSceneWithoutThem) {
+  test::EngineSetup with(cornell_with_prop(), 32.0f), without(make_cornell_box(), 32.0f);
+  ASSERT_EQ(with.atlas.texel_count(), without.atlas.texel_count());
+  const std::size_t n = without.atlas.objects.size();
+  for (std::size_t o = n; o < with.atlas.objects.size(); ++o) {
+    EXPECT_EQ(with.atlas.objects[o].width, 0);
+    EXPECT_TRUE(with.atlas.objects[o].corner_uv.empty());
+  }
+  EngineParams p;
+  auto a = with.engine(p), b = without.engine(p);
+  for (int u = 0; u < 3; ++u) {
+    a->update();
+    b->update();
+  }
+  const std::vector<Lightmap> la = a->lightmaps(), lb = b->lightmaps();
+  ASSERT_EQ(la.size(), lb.size() + 2);
+  for (std::size_t o = 0; o < n; ++o) {
+    ASSERT_EQ(la[o].width, lb[o].width);
+    ASSERT_EQ(la[o].texels.size(), lb[o].texels.size());
+    for (std::size_t t = 0; t < lb[o].texels.size(); ++t)
+      ASSERT_EQ(la[o].texels[t], lb[o].texels[t]) << "object " << o << " texel " << t;
+  }
+}
+
+// Part 2: a moved dynamic node changes no texel, tile version or tile epoch; a moved static
+// node does (the same test would see it).
+TEST(DynamicNodes, MovingOneCostsTheEngineNothing) {
+  EngineHost still(cornell_with_prop(), "cornell", test::quick_host(0));
+  EngineHost moved(cornell_with_prop(), "cornell", test::quick_host(0));
+  EngineHost moved_static(cornell_with_prop(), "cornell", test::quick_host(0));
+  for (EngineHost* h : {&still, &moved, &moved_static}) h->step();
+  EXPECT_EQ(moved.submit_edit(move("prop", {0.3f, -0.1f, 0.0f})), 1u);
+  moved_static.submit_edit(move("tall_block", {0.05f, 0.0f, 0.0f}));
+  const std::uint64_t epoch = still.tile_epoch();
+  for (EngineHost* h : {&still, &moved, &moved_static}) h->step();
+  EXPECT_EQ(moved.revision(), 1u);
+  EXPECT_EQ(moved.tile_epoch(), epoch);
+  EXPECT_EQ(moved.stats().stale_texels, still.stats().stale_texels);
+  EXPECT_TRUE(tile_state(moved) == tile_state(still));
+  // The prop moved in the scene the viewers get.
+  const wire::UnpackedScene viewer = wire::open_scene_package(moved.package()->bytes, "");
+  EXPECT_EQ(viewer.revision, 1u);
+  const int prop = static_cast<int>(make_cornell_box().nodes.size());
+  EXPECT_FLOAT_EQ(viewer.scene.nodes[static_cast<std::size_t>(prop)].local[3].x, 0.3f);
+  EXPECT_TRUE(viewer.scene.nodes[static_cast<std::size_t>(prop)].dynamic);
+  // The control: a static move restarts texels under a new epoch.
+  EXPECT_NE(moved_static.tile_epoch(), epoch);
+  EXPECT_FALSE(tile_state(moved_static) == tile_state(still));
+}
+
+TEST(DynamicNodes, TheFlagTravelsInPackagesAndGltf) {
+  const Scene s = cornell_with_prop();
+  test::EngineSetup setup(s, 32.0f);
+  const wire::ScenePackage pkg = wire::make_scene_package(setup.scene, setup.atlas);
+  const wire::UnpackedScene back = wire::open_scene_package(pkg.bytes, pkg.hash);
+  ASSERT_EQ(back.scene.nodes.size(), s.nodes.size());
+  for (std::size_t n = 0; n < s.nodes.size(); ++n)
+    EXPECT_EQ(back.scene.nodes[n].dynamic, s.nodes[n].dynamic) << n;
+  EXPECT_NE(wire::scene_content_hash(s), wire::scene_content_hash(make_cornell_box()));
+  // A dynamic object with a lightmap layout is not a valid package.
+  Atlas bad = setup.atlas;
+  bad.objects.back() = bad.objects.front();
+  try {
+    wire::make_scene_package(setup.scene, bad);
+    ADD_FAILURE() << "a layout on a dynamic object was taken";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("is dynamic and has a lightmap layout"), std::string::npos)
+        << e.what();
+  }
+
+  const fs::path dir = fs::temp_directory_path() / "irradcast_dynamic_gltf";
+  fs::create_directories(dir);
+  save_gltf(s, (dir / "prop.glb").string());
+  const Scene loaded = load_gltf((dir / "prop.glb").string());
+  int dynamic = 0;
+  for (const bool d : loaded.dynamic_nodes()) dynamic += d ? 1 : 0;
+  EXPECT_EQ(dynamic, 3);
+
+  // Not a boolean: a clear error naming the node.
+  std::ofstream((dir / "bad.gltf").string())
+      << R"({"asset":{"version":"2.0"},"scenes":[{"nodes":[0]}],"scene":0,)"
+      << R"("nodes":[{"name":"door","extras":{"irradcast":{"dynamic":"yes"}}}]})";
+  try {
+    load_gltf((dir / "bad.gltf").string());
+    ADD_FAILURE() << "a dynamic flag that is not a boolean was taken";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("extras.irradcast.dynamic that is not a boolean"),
+              std::string::npos)
+        << e.what();
+  }
+  fs::remove_all(dir);
+}
+
+TEST(DynamicNodes, BakeTakesDynamicByName) {
+  const fs::path dir = fs::temp_directory_path() / "irradcast_dynamic_bake";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const test::CliResult bad = test::run_cli(
+      IRRADCAST_BAKE_EXE, "--scene cornell --dynamic no_such_node --out " + (dir / "x").string() +
+                              " --updates 1 --texels-per-scene 32 --width 32 --height 32");
+  EXPECT_NE(bad.status, 0) << bad.output;
+  EXPECT_NE(bad.output.find("--dynamic: the scene has no node named 'no_such_node'"),
+            std::string::npos)
+      << bad.output;
+  const test::CliResult ok = test::run_cli(
+      IRRADCAST_BAKE_EXE, "--scene cornell --dynamic tall_block --out " + (dir / "y").string() +
+                              " --updates 1 --texels-per-scene 32 --width 32 --height 32");
+  EXPECT_EQ(ok.status, 0) << ok.output;
+  EXPECT_NE(ok.output.find("1 dynamic nodes"), std::string::npos) << ok.output;
+  fs::remove_all(dir);
+}
+
+// A converged server stays idle when a dynamic node moves: the edit is applied and sent, and no
+// update runs.
+TEST(DynamicNodes, AConvergedHostStaysIdle) {
+  EngineHost host(cornell_with_prop(), "cornell", test::quick_host(2));
+  host.start();
+  ASSERT_TRUE(test::eventually([&] { return host.stats().idle; }));
+  const std::uint64_t updates = host.stats().updates;
+  std::atomic<std::uint64_t> sent{0};
+  host.set_edit_listener([&](const AppliedEdit& a) { sent = a.revision; });
+  host.submit_edit(move("prop", {0.0f, 0.1f, 0.0f}));
+  ASSERT_TRUE(test::eventually([&] { return host.stats().revision == 1; }));
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  EXPECT_TRUE(host.stats().idle);
+  EXPECT_EQ(host.stats().updates, updates);
+  // A static move wakes it.
+  host.submit_edit(move("tall_block", {0.02f, 0.0f, 0.0f}));
+  EXPECT_TRUE(test::eventually([&] { return host.stats().updates > updates; }));
+  host.stop();
+  EXPECT_EQ(sent, 2u);
+}
+
+// Through the server to a viewer: the viewer gets the scene with its dynamic nodes, the moved
+// pose with the edit, and not one tile more.
+TEST(DynamicNodes, AViewerGetsThePoseAndNoTile) {
+  using namespace std::chrono_literals;
+  EngineHost host(cornell_with_prop(), "cornell", test::quick_host(2));
+  host.start();
+  Server server(host, test::loopback());
+  server.start();
+  ViewClient viewer(test::client_of(server, "viewer"));
+  viewer.connect();
+  const auto deadline = std::chrono::steady_clock::now() + 60s;
+  while (std::chrono::steady_clock::now() < deadline &&
+         !(host.stats().idle && viewer.all_tiles_received()))
+    viewer.poll(50ms);
+  ASSERT_TRUE(viewer.all_tiles_received());
+  const std::vector<Lightmap> before = viewer.lightmaps();
+  const CameraPose camera = default_camera(viewer.scene(), viewer.world());
+  const ImageRGB image = viewer.compose(camera, 32, 32);
+  EXPECT_EQ(image.width, 32);
+  host.submit_edit(move("prop", {0.2f, 0.0f, 0.1f}));
+  while (std::chrono::steady_clock::now() < deadline && viewer.scene_revision() < 1)
+    viewer.poll(50ms);
+  ASSERT_EQ(viewer.scene_revision(), 1u);
+  viewer.poll(300ms);
+  const int prop = static_cast<int>(make_cornell_box().nodes.size());
+  EXPECT_FLOAT_EQ(viewer.scene().nodes[static_cast<std::size_t>(prop)].local[3].x, 0.2f);
+  const std::vector<Lightmap> after = viewer.lightmaps();
+  ASSERT_EQ(after.size(), before.size());
+  for (std::size_t o = 0; o < after.size(); ++o) EXPECT_TRUE(after[o].texels == before[o].texels);
+  EXPECT_EQ(viewer.compose(camera, 32, 32).width, 32);
+  viewer.close();
+  server.stop();
+  host.stop();
+}
