@@ -1,5 +1,5 @@
 // The engine's shared pass data (pass_data.h): the grid of radiance cells (cell lookup, cell
-// centres), the octahedral map of a probe's directions, and where a scene change happened.
+// centres), and where a scene change happened.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -51,16 +51,5 @@ float SceneChange::distance(glm::vec3 p) const {
   return nearest;
 }
 
-glm::vec3 octahedral_decode(glm::vec2 uv) {
-  glm::vec2 e = 2.0f * uv - 1.0f;
-  glm::vec3 d(e.x, e.y, 1.0f - std::fabs(e.x) - std::fabs(e.y));
-  if (d.z < 0.0f) {
-    glm::vec2 xy = (1.0f - glm::abs(glm::vec2(d.y, d.x))) *
-                   glm::vec2(d.x >= 0.0f ? 1.0f : -1.0f, d.y >= 0.0f ? 1.0f : -1.0f);
-    d.x = xy.x;
-    d.y = xy.y;
-  }
-  return glm::normalize(d);
-}
 
 }  // namespace irradcast

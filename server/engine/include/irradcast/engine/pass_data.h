@@ -13,6 +13,7 @@
 
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/lightmap.h"
+#include "irradcast/common/octahedral.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/world.h"
 #include "irradcast/engine/engine_params.h"
@@ -59,19 +60,6 @@ struct ProbeGrid {
   // cell's centre and usable.
   static ProbeGrid cells_of(const Bounds& bounds, const EngineParams& params);
 };
-
-// Octahedral mapping of unit directions to [0,1]^2 and back (encode inline: every scatter miss
-// reads a probe through it).
-inline glm::vec2 octahedral_encode(glm::vec3 d) {
-  d /= (std::fabs(d.x) + std::fabs(d.y) + std::fabs(d.z));
-  glm::vec2 e(d.x, d.y);
-  if (d.z < 0.0f) {
-    e = (1.0f - glm::abs(glm::vec2(d.y, d.x))) *
-        glm::vec2(d.x >= 0.0f ? 1.0f : -1.0f, d.y >= 0.0f ? 1.0f : -1.0f);
-  }
-  return 0.5f * e + 0.5f;
-}
-glm::vec3 octahedral_decode(glm::vec2 uv);
 
 // The previous bounce's outgoing radiance: albedo / pi * E_prev, read bilinearly at a hit.
 struct RadianceField {
