@@ -36,4 +36,10 @@ inline std::string proxy_v2(const std::string& source, std::uint16_t port,
   return h + addresses + tlvs;
 }
 
+// A LOCAL header: the proxy's own connection (a health check), no client.
+inline std::string proxy_v2_local() {
+  std::string h("\r\n\r\n\0\r\nQUIT\n", 12);
+  return h + std::string("\x20\x00\x00\x00", 4);
+}
+
 }  // namespace irradcast::test

@@ -21,8 +21,10 @@ asio::ip::address ip(const std::string& s) {
 
 std::string client_of(const std::string& header, ForwardedHeader which,
                       const TrustedProxies& trusted) {
-  const auto a = forwarded_client(header, which, trusted);
-  return a ? a->to_string() : "none";
+  const ForwardedClient c = forwarded_client(header, which, trusted);
+  return c.kind == ForwardedClient::Kind::Client    ? c.address.to_string()
+         : c.kind == ForwardedClient::Kind::Unknown ? "unknown"
+                                                    : "none";
 }
 
 }  // namespace
@@ -88,11 +90,15 @@ TEST(ForwardedClient, XForwardedForFromTheNearestHop) {
   EXPECT_EQ(client_of("garbage, 203.0.113.5", xff, t), "203.0.113.5");
   EXPECT_EQ(client_of("203.0.113.5,10.9.9.9", xff, t), "203.0.113.5");
   EXPECT_EQ(client_of("2001:db8::5, 10.0.0.2", xff, t), "2001:db8::5");
-  EXPECT_EQ(client_of("203.0.113.5, unknown", xff, t), "none");
+  EXPECT_EQ(client_of("203.0.113.5, unknown", xff, t), "unknown");
   EXPECT_EQ(client_of("10.0.0.3, 10.0.0.2", xff, t), "none");  // every hop trusted
   EXPECT_EQ(client_of("", xff, t), "none");
   EXPECT_EQ(client_of("  ", xff, t), "none");
-  EXPECT_EQ(client_of("203.0.113.5, ", xff, t), "none");  // an empty nearest hop
+  EXPECT_EQ(client_of("203.0.113.5, ", xff, t), "unknown");  // an empty nearest hop
+  // X-Forwarded-For has no quoting: a quote a client wrote swallows nothing its proxy appended
+  // (on the same line, or as a second header joined by ", ").
+  EXPECT_EQ(client_of("\", 203.0.113.9", xff, t), "203.0.113.9");
+  EXPECT_EQ(client_of("\"1.1.1.1, 203.0.113.9, 10.0.0.2", xff, t), "203.0.113.9");
 }
 
 TEST(ForwardedClient, ForwardedHeaderOfRfc7239) {
@@ -103,10 +109,15 @@ TEST(ForwardedClient, ForwardedHeaderOfRfc7239) {
             "2001:db8:cafe::17");
   EXPECT_EQ(client_of("for=198.51.100.1;proto=https, for=10.0.0.2", fwd, t), "198.51.100.1");
   EXPECT_EQ(client_of("for=\"a,b\", for=198.51.100.1", fwd, t), "198.51.100.1");
-  EXPECT_EQ(client_of("for=_hidden", fwd, t), "none");
-  EXPECT_EQ(client_of("for=198.51.100.1, proto=https", fwd, t), "none");  // a hop with no for=
+  EXPECT_EQ(client_of("for=_hidden", fwd, t), "unknown");
+  EXPECT_EQ(client_of("for=198.51.100.1, proto=https", fwd, t), "unknown");  // a hop, no for=
   // An X-Forwarded-For value is not a Forwarded header.
-  EXPECT_EQ(client_of("198.51.100.1", fwd, t), "none");
+  EXPECT_EQ(client_of("198.51.100.1", fwd, t), "unknown");
+  // A client's unbalanced quote is to the left of what its proxy appended: the split from the
+  // right never reaches it.
+  EXPECT_EQ(client_of("for=\", for=203.0.113.9", fwd, t), "203.0.113.9");
+  EXPECT_EQ(client_of("for=\"[::1, for=203.0.113.9;proto=https, for=10.0.0.2", fwd, t),
+            "203.0.113.9");
 }
 
 TEST(ProxyHeader, Ipv4AndIpv6SourcesByteByByte) {
@@ -199,4 +210,10 @@ TEST(PeerTable, AProxysSessionsMoveToTheirClients) {
             std::string::npos);
   // The proxy's own address is never banned for its clients' tokens.
   EXPECT_EQ(table.admit("10.0.0.1", none, true), PeerTable::Admission::Ok);
+  // Another trusted proxy (stacked behind a balancer) has no limit or ban of its own.
+  table.token_failed("10.0.0.9");
+  table.token_failed("10.0.0.9");
+  for (int i = 0; i < 3; ++i)
+    EXPECT_EQ(table.move("10.0.0.1", "10.0.0.9", true), PeerTable::Admission::Ok);
+  EXPECT_EQ(table.move("10.0.0.1", "10.0.0.9"), PeerTable::Admission::Banned);
 }

@@ -43,6 +43,7 @@ ServerOptions behind_proxy(std::uint32_t per_peer) {
   o.http_port = 0;
   o.max_clients_per_peer = per_peer;
   o.trusted_proxies = {"127.0.0.1/32"};
+  o.proxy_protocol = true;  // the protocol port: a TCP balancer; the web port: an HTTP proxy
   o.control_token = kToken;
   o.token_failure_delay = 20ms;
   o.max_token_failures = 2;
@@ -110,12 +111,17 @@ TEST(TrustedProxy, ProxyHeadersNameTheClientsOnTheProtocolPort) {
   EXPECT_TRUE(refused_with(third.error_then_close(2000ms), "too many connections"));
   Raw third6(server.port(), nullptr, proxy_v2("2001:db8::8", 40001));
   EXPECT_TRUE(refused_with(third6.error_then_close(2000ms), "too many connections"));
-  // The proxy's own connections (a health check, no header) are not limited.
+  // The proxy's own connections (a health check: a LOCAL header) are not limited.
   for (int i = 0; i < 3; ++i) {
-    open.push_back(std::make_unique<Raw>(server.port()));
+    open.push_back(std::make_unique<Raw>(server.port(), nullptr, test::proxy_v2_local()));
     ASSERT_TRUE(open.back()->join()) << i;
   }
   EXPECT_EQ(server.stats().peer_refused, 2u);
+  // The header is required (--proxy-protocol): a trusted peer's connection without one is not
+  // guessed at, it is closed.
+  Raw headless(server.port());
+  EXPECT_FALSE(headless.join());
+  EXPECT_TRUE(headless.eof);
   // A client that connects directly is limited, and its PROXY header is not believed: its
   // bytes are a frame of 168 MB.
   Raw a(server.port(), nullptr, {}, "127.0.0.2"), b(server.port(), nullptr, {}, "127.0.0.2");
@@ -162,8 +168,21 @@ TEST(TrustedProxy, WrongTokensBanTheClientNotTheProxy) {
   }
   ASSERT_TRUE(ack.has_value());
   EXPECT_TRUE(ack->has_scene_edit()) << ack->DebugString();
-  // So does the proxy itself (no header).
+  // The proxy's own page request (no X-Forwarded-For) is served.
   EXPECT_EQ(status_line(http_get(server.http_port(), {})), "HTTP/1.1 200 OK");
+  // A session that names no client may not present a token: its failures would fall on the
+  // proxy's other clients.
+  const std::uint64_t failures = server.stats().token_failures;
+  Raw unnamed(server.port(), nullptr, test::proxy_v2_local());
+  ASSERT_TRUE(unnamed.join());
+  unnamed.send(wrong_edit("guess-three-guess-three"));
+  std::optional<wire::Envelope> denied;
+  while ((denied = unnamed.read(5000ms)) && !denied->has_error()) {
+  }
+  ASSERT_TRUE(denied.has_value());
+  EXPECT_EQ(denied->error().code(), wire::PERMISSION_DENIED) << denied->DebugString();
+  EXPECT_NE(denied->error().message().find("does not name its client"), std::string::npos);
+  EXPECT_EQ(server.stats().token_failures, failures);
   server.stop();
 }
 
@@ -189,14 +208,16 @@ TEST(TrustedProxy, ForwardedForNamesTheClientsOnTheWebPort) {
   // The upgrade is refused alike.
   test::WsConnection refused(port, nullptr, "/ws", Headers{{"X-Forwarded-For", "203.0.113.9"}});
   EXPECT_FALSE(refused.opened());
-  // The proxy behind a PROXY header (a TCP balancer in front of it) is trusted the same way.
-  const std::string via_lb =
-      http_get(port, {{"X-Forwarded-For", "203.0.113.9"}}, {}, proxy_v2("10.2.3.4", 1000));
-  EXPECT_EQ(status_line(via_lb), "HTTP/1.1 503 Service Unavailable") << via_lb;
-  // ... and a client the balancer names directly is that client, whatever it writes.
-  const std::string direct_lb =
-      http_get(port, {{"X-Forwarded-For", "203.0.113.77"}}, {}, proxy_v2("203.0.113.9", 1000));
-  EXPECT_EQ(status_line(direct_lb), "HTTP/1.1 503 Service Unavailable") << direct_lb;
+  // A quote a client wrote before what its proxy appended changes nothing (X-Forwarded-For has
+  // no quoting), on one line or as a second header line.
+  const std::string quoted = http_get(port, {{"X-Forwarded-For", "\", 203.0.113.9"}});
+  EXPECT_EQ(status_line(quoted), "HTTP/1.1 503 Service Unavailable") << quoted;
+  const std::string two_lines =
+      http_get(port, {{"X-Forwarded-For", "\""}, {"X-Forwarded-For", "203.0.113.9"}});
+  EXPECT_EQ(status_line(two_lines), "HTTP/1.1 503 Service Unavailable") << two_lines;
+  // A forwarded header that names no client is refused: nobody to count it under.
+  const std::string unknown = http_get(port, {{"X-Forwarded-For", "203.0.113.9, unknown"}});
+  EXPECT_EQ(status_line(unknown), "HTTP/1.1 400 Bad Request") << unknown;
   // Directly connected: the header is the client's own word, and ignored.
   test::WsConnection a(port, nullptr, "/ws", Headers{{"X-Forwarded-For", "192.0.2.1"}}, {},
                        "127.0.0.2");
@@ -210,6 +231,49 @@ TEST(TrustedProxy, ForwardedForNamesTheClientsOnTheWebPort) {
   // write it): the request counts as the proxy's own.
   EXPECT_EQ(status_line(http_get(port, {{"Forwarded", "for=203.0.113.9"}})), "HTTP/1.1 200 OK");
   EXPECT_EQ(server.stats().peer_refused, 5u);
+  server.stop();
+}
+
+// A TCP balancer (PROXY headers, --proxy-protocol web) in front of trusted HTTP proxies
+// (X-Forwarded-For): each hop trusted, the client counted; the HTTP proxy itself is neither
+// limited nor banned, whatever its unnamed requests do.
+TEST(TrustedProxy, StackedBalancerAndProxies) {
+  EngineHost host(make_cornell_box(), "cornell", test::quick_host());
+  ServerOptions o = behind_proxy(1);
+  o.trusted_proxies.push_back("10.0.0.0/8");
+  o.web_proxy_protocol = true;
+  Server server(host, o);
+  server.start();
+  const std::uint16_t port = server.http_port();
+  const std::string via_proxy = proxy_v2("10.2.3.4", 1000);
+  test::WsConnection a(port, nullptr, "/ws", Headers{{"X-Forwarded-For", "203.0.113.9"}},
+                       via_proxy);
+  ASSERT_TRUE(a.join());
+  const std::string again = http_get(port, {{"X-Forwarded-For", "203.0.113.9"}}, {}, via_proxy);
+  EXPECT_EQ(status_line(again), "HTTP/1.1 503 Service Unavailable") << again;
+  // The balancer naming the client directly: that client, whatever it writes.
+  const std::string direct =
+      http_get(port, {{"X-Forwarded-For", "203.0.113.77"}}, {}, proxy_v2("203.0.113.9", 1000));
+  EXPECT_EQ(status_line(direct), "HTTP/1.1 503 Service Unavailable") << direct;
+  // The HTTP proxy's own connections (no X-Forwarded-For): no limit of 1 for it.
+  std::vector<std::unique_ptr<test::WsConnection>> own;
+  for (int i = 0; i < 3; ++i) {
+    own.push_back(std::make_unique<test::WsConnection>(port, nullptr, "/ws", Headers{}, via_proxy));
+    ASSERT_TRUE(own.back()->join()) << i;
+  }
+  // ... and their tokens are not taken, so they cannot get it banned.
+  own.front()->send(wrong_edit("guess-four-guess-four"));
+  std::optional<wire::Envelope> e;
+  while ((e = own.front()->read(5000ms)) && !e->has_error()) {
+  }
+  ASSERT_TRUE(e.has_value());
+  EXPECT_EQ(e->error().code(), wire::PERMISSION_DENIED);
+  test::WsConnection b(port, nullptr, "/ws", Headers{{"X-Forwarded-For", "203.0.113.10"}},
+                       via_proxy);
+  EXPECT_TRUE(b.join());
+  // Without the balancer's header the connection is closed unanswered.
+  EXPECT_EQ(http_get(port, {{"X-Forwarded-For", "203.0.113.11"}}), "");
+  EXPECT_EQ(server.stats().token_failures, 0u);
   server.stop();
 }
 
@@ -239,6 +303,7 @@ TEST(TrustedProxy, ProxyHeaderBeforeTls) {
   const test::TlsFiles files = test::make_tls_files(dir.string());
   EngineHost host(make_cornell_box(), "cornell", test::quick_host());
   ServerOptions o = behind_proxy(1);
+  o.web_proxy_protocol = true;
   o.tls_cert = files.cert;
   o.tls_key = files.key;
   Server server(host, o);
@@ -287,6 +352,13 @@ TEST(TrustedProxy, TheProgramsNameABadNetwork) {
     EXPECT_NE(r.output.find("'10.1.2.3/16': the address has bits set past the prefix length"),
               std::string::npos)
         << r.output;
+    const test::CliResult alone = test::run_cli(
+        std::string("timeout 30 ") + exe,
+        std::string("--proxy-protocol both --port 0") +
+            (exe == std::string(IRRADCAST_GATEWAY_EXE) ? " --nats nats://127.0.0.1:1" : ""));
+    EXPECT_EQ(alone.status, 1) << alone.output;
+    EXPECT_NE(alone.output.find("--proxy-protocol both needs --trusted-proxy"), std::string::npos)
+        << alone.output;
   }
 }
 

@@ -40,6 +40,7 @@ struct NetworkOptions {
   std::vector<std::string> allowed_origins;  // --allowed-origin
   std::vector<std::string> trusted_proxies;  // --trusted-proxy
   std::string forwarded_header = "x-forwarded-for";
+  std::string proxy_protocol = "none";
   std::uint32_t max_clients = ServerOptions().max_clients;
   std::uint32_t max_clients_per_peer = ServerOptions().max_clients_per_peer;
 
@@ -83,6 +84,12 @@ struct NetworkOptions {
                    "the header the trusted proxies append their clients' addresses to, on the "
                    "web port (the other one is ignored: a client could write it)")
         ->check(CLI::IsMember({"x-forwarded-for", "forwarded"}, CLI::ignore_case));
+    app.add_option("--proxy-protocol", proxy_protocol,
+                   "the ports on which every connection from a --trusted-proxy starts with a "
+                   "PROXY protocol v2 header (HAProxy's send-proxy-v2; a LOCAL header for its "
+                   "health checks): none, protocol, web or both; one without is refused, and "
+                   "on other ports no PROXY header is read")
+        ->check(CLI::IsMember({"none", "protocol", "web", "both"}, CLI::ignore_case));
     app.add_option("--metrics-port", metrics_port,
                    "serve Prometheus metrics at http://ADDR:PORT/metrics (0 = any free port; off "
                    "when not given)")
@@ -157,11 +164,19 @@ struct NetworkOptions {
     so.trusted_proxies = trusted_proxies;
     so.forwarded_header = forwarded_header == "forwarded" ? ForwardedHeader::Forwarded
                                                           : ForwardedHeader::XForwardedFor;
+    so.proxy_protocol = proxy_protocol == "protocol" || proxy_protocol == "both";
+    so.web_proxy_protocol = proxy_protocol == "web" || proxy_protocol == "both";
+    if ((so.proxy_protocol || so.web_proxy_protocol) && trusted_proxies.empty())
+      throw Error("--proxy-protocol " + proxy_protocol +
+                  " needs --trusted-proxy (whose "
+                  "connections carry the header)");
     if (!trusted_proxies.empty())
       log::info(tag, "trusted proxies: " + std::to_string(trusted_proxies.size()) +
-                         " networks; clients' addresses from PROXY headers and " +
+                         " networks; clients' addresses from " +
                          (so.forwarded_header == ForwardedHeader::Forwarded ? "Forwarded"
-                                                                            : "X-Forwarded-For"));
+                                                                            : "X-Forwarded-For") +
+                         " on the web port and PROXY headers on " + proxy_protocol +
+                         " (--proxy-protocol)");
     so.tls_cert = tls_cert;
     so.tls_key = tls_key;
     so.max_clients = max_clients;

@@ -49,34 +49,38 @@ bool all_digits(std::string_view s) {
          std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
 }
 
-// The hops of a header, nearest last: X-Forwarded-For's list, or the `for=` parameter of each
-// Forwarded element (RFC 7239; an element without one is a hop that names no address).
+// The `for=` parameter of a Forwarded element (RFC 7239), or "" (a hop that names no address).
+std::string_view for_parameter(std::string_view element) {
+  std::string_view found;
+  while (!element.empty()) {
+    const std::size_t semicolon = element.find(';');
+    const std::string_view pair = trim(element.substr(0, semicolon));
+    element =
+        semicolon == std::string_view::npos ? std::string_view() : element.substr(semicolon + 1);
+    if (pair.size() > 4 && std::tolower(static_cast<unsigned char>(pair[0])) == 'f' &&
+        std::tolower(static_cast<unsigned char>(pair[1])) == 'o' &&
+        std::tolower(static_cast<unsigned char>(pair[2])) == 'r' && pair[3] == '=')
+      found = pair.substr(4);
+  }
+  return found;
+}
+
+// The hops of a header, nearest first, split from the right: X-Forwarded-For at every comma,
+// Forwarded at the commas outside quoted strings (the quotes counted from the right, so that an
+// unbalanced quote a client wrote on the left cannot swallow the elements its proxies appended).
 std::vector<std::string_view> hops_of(std::string_view value, ForwardedHeader header) {
   std::vector<std::string_view> hops;
-  std::size_t start = 0;
+  std::size_t end = value.size();
   bool quoted = false;
-  for (std::size_t i = 0; i <= value.size(); ++i) {
-    if (i < value.size() && value[i] == '"') quoted = !quoted;
-    if (i < value.size() && (value[i] != ',' || quoted)) continue;
-    std::string_view element = trim(value.substr(start, i - start));
-    start = i + 1;
-    if (header == ForwardedHeader::XForwardedFor) {
-      hops.push_back(element);
-      continue;
-    }
-    std::string_view found;
-    while (!element.empty()) {
-      const std::size_t semicolon = element.find(';');
-      std::string_view pair = trim(element.substr(0, semicolon));
-      element =
-          semicolon == std::string_view::npos ? std::string_view() : element.substr(semicolon + 1);
-      if (pair.size() > 4 && std::tolower(static_cast<unsigned char>(pair[0])) == 'f' &&
-          std::tolower(static_cast<unsigned char>(pair[1])) == 'o' &&
-          std::tolower(static_cast<unsigned char>(pair[2])) == 'r' && pair[3] == '=')
-        found = pair.substr(4);
-    }
-    hops.push_back(found);
+  for (std::size_t i = value.size(); i-- > 0;) {
+    if (header == ForwardedHeader::Forwarded && value[i] == '"') quoted = !quoted;
+    if (value[i] != ',' || quoted) continue;
+    hops.push_back(trim(value.substr(i + 1, end - i - 1)));
+    end = i;
   }
+  hops.push_back(trim(value.substr(0, end)));
+  if (header == ForwardedHeader::Forwarded)
+    for (std::string_view& h : hops) h = for_parameter(h);
   return hops;
 }
 
@@ -152,17 +156,23 @@ std::optional<asio::ip::address> parse_forwarded_address(std::string_view text) 
   return parse_address(text);
 }
 
-std::optional<asio::ip::address> forwarded_client(std::string_view header_value,
-                                                  ForwardedHeader header,
-                                                  const TrustedProxies& trusted) {
-  if (trim(header_value).empty()) return std::nullopt;
-  const std::vector<std::string_view> hops = hops_of(header_value, header);
-  for (auto it = hops.rbegin(); it != hops.rend(); ++it) {
-    const auto a = parse_forwarded_address(*it);
-    if (!a) return std::nullopt;  // "unknown", a name: nobody to count it under but the proxy
-    if (!trusted.contains(*a)) return a;
+ForwardedClient forwarded_client(std::string_view header_value, ForwardedHeader header,
+                                 const TrustedProxies& trusted) {
+  ForwardedClient out;
+  if (trim(header_value).empty()) return out;
+  for (const std::string_view hop : hops_of(header_value, header)) {
+    const auto a = parse_forwarded_address(hop);
+    if (!a) {
+      out.kind = ForwardedClient::Kind::Unknown;
+      return out;
+    }
+    if (!trusted.contains(*a)) {
+      out.kind = ForwardedClient::Kind::Client;
+      out.address = *a;
+      return out;
+    }
   }
-  return std::nullopt;
+  return out;
 }
 
 ProxyHeaderReader::State ProxyHeaderReader::feed(const char* data, std::size_t n) {

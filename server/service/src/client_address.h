@@ -48,12 +48,20 @@ std::optional<asio::ip::address> parse_forwarded_address(std::string_view text);
 
 // The client behind a trusted peer, from the header its proxy sets (every instance of the header,
 // joined by ", "): the hops are read from the right (the nearest) and trusted proxies skipped; the
-// first one that is not trusted is the client. nullopt when there is none to believe (no header,
-// every hop trusted, or a hop that is not an address before an untrusted one: the connection stays
-// the proxy's).
-std::optional<asio::ip::address> forwarded_client(std::string_view header_value,
-                                                  ForwardedHeader header,
-                                                  const TrustedProxies& trusted);
+// first one that is not trusted is the client. The hops are split from the right, so nothing a
+// client wrote (an unbalanced quote included) changes what its proxy appended: X-Forwarded-For at
+// every comma (it has no quoting), Forwarded at each comma outside a quoted string.
+struct ForwardedClient {
+  enum class Kind {
+    None,     // no header, or every hop is a trusted proxy: the connection is the proxy's own
+    Client,   // `address`
+    Unknown,  // the nearest untrusted hop is not an address ("unknown", "_hidden", garbage)
+  };
+  Kind kind = Kind::None;
+  asio::ip::address address;
+};
+ForwardedClient forwarded_client(std::string_view header_value, ForwardedHeader header,
+                                 const TrustedProxies& trusted);
 
 // The PROXY protocol version 2 header (haproxy.org's proxy-protocol.txt, section 2.2) at the start
 // of a connection from a trusted peer. Fed the bytes as they are read; the header is recognised by

@@ -276,8 +276,7 @@ void EngineHost::apply_edits() {
 }
 
 void EngineHost::publish_edits(QueuedEdits& queued, const EditReport& report, LapTimer& lap,
-                               std::chrono::steady_clock::time_point began,
-                               bool lightmaps_change) {
+                               std::chrono::steady_clock::time_point began, bool lightmaps_change) {
   std::vector<AppliedEdit> applied;
   for (std::size_t i = 0; i < queued.edits.size(); ++i) {
     if (!report.edits[i].applied) continue;

@@ -31,15 +31,18 @@ PeerTable::Admission PeerTable::admit(const std::string& key,
   return Admission::Ok;
 }
 
-PeerTable::Admission PeerTable::move(const std::string& from, const std::string& to) {
+PeerTable::Admission PeerTable::move(const std::string& from, const std::string& to,
+                                     bool to_trusted) {
   if (from == to) return Admission::Ok;
   const auto now = Clock::now();
   std::lock_guard lock(mutex_);
   Peer& p = peers_[to];
   p.last_seen = now;
-  if (p.banned_until > now) return Admission::Banned;
-  if (options_.max_clients_per_peer > 0 && p.sessions >= options_.max_clients_per_peer)
-    return Admission::PeerLimit;
+  if (!to_trusted) {
+    if (p.banned_until > now) return Admission::Banned;
+    if (options_.max_clients_per_peer > 0 && p.sessions >= options_.max_clients_per_peer)
+      return Admission::PeerLimit;
+  }
   ++p.sessions;
   auto it = peers_.find(from);
   if (it != peers_.end() && it->second.sessions > 0) {

@@ -32,7 +32,8 @@ class PeerTable {
                   bool trusted_proxy = false);
   // A session admitted under `from` (a trusted proxy) turns out to be a client at `to`: counted
   // under `to` from now on when `to` is under its limit and not banned (else it stays `from`'s).
-  Admission move(const std::string& from, const std::string& to);
+  // to_trusted: `to` is another trusted proxy (stacked proxies): no limit or ban of its own.
+  Admission move(const std::string& from, const std::string& to, bool to_trusted = false);
   // What a refused connection is told (Error REFUSED, or the web port's HTTP reply).
   std::string refusal(Admission admission) const;
   // A session of `key` ended.

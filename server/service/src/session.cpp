@@ -35,7 +35,10 @@ Session::Session(SessionServer& server, tcp::socket socket, std::string peer_key
       stall_timer_(strand_),
       protocol_(server_.context, id, std::move(peer_key), peer_name(stream_.socket())),
       proxied_(proxied && server_.proxies) {
-  if (proxied_) proxy_reader_ = std::make_unique<ProxyHeaderReader>();
+  const ServerOptions& o = server_.context.options;
+  if (proxied_ && (web ? o.web_proxy_protocol : o.proxy_protocol))
+    proxy_reader_ = std::make_unique<ProxyHeaderReader>();
+  protocol_.set_unattributed(proxied_);  // until the proxy names the client
   if (web) make_websocket();
 }
 
@@ -131,8 +134,9 @@ void Session::start() {
   });
 }
 
-// The raw bytes of a trusted proxy's connection up to the end of its PROXY header, if it sends
-// one (within the hello timeout); what follows the header goes back to the stream.
+// The raw bytes of a trusted proxy's connection up to the end of its PROXY header
+// (--proxy-protocol: required, within the hello timeout); what follows the header goes back to the
+// stream.
 void Session::read_proxy_header() {
   stream_.socket().async_read_some(
       asio::buffer(buffer_),
@@ -156,7 +160,11 @@ void Session::read_proxy_header() {
             if (reader.source()) self->learn_client(*reader.source());
             break;
           case ProxyHeaderReader::State::None:
-            break;
+            self->protocol_.note(log::Level::Info,
+                                 "closed: no PROXY protocol v2 header from a trusted proxy "
+                                 "(--proxy-protocol)");
+            self->close(CloseReason::BadFrame);
+            return;
         }
         self->stream_.unread(reader.take_rest());
         self->proxy_reader_.reset();
@@ -165,9 +173,11 @@ void Session::read_proxy_header() {
 }
 
 void Session::learn_client(const asio::ip::address& client) {
-  proxied_ = server_.proxies->contains(client);
-  refusal_ = protocol_.move_peer(peer_key_of(client),
-                                 client.to_string() + " via " + peer_name(stream_.socket()));
+  const bool trusted = server_.proxies->contains(client);
+  refusal_ = protocol_.move_peer(
+      peer_key_of(client), client.to_string() + " via " + peer_name(stream_.socket()), trusted);
+  proxied_ = trusted;
+  if (refusal_.empty()) protocol_.set_unattributed(trusted);
 }
 
 // The web port's requests: the client a trusted proxy names in its forwarded header, and the
@@ -176,9 +186,19 @@ std::optional<wire::HttpReply> Session::screen_request(
     const std::function<std::string(const std::string&)>& header) {
   if (refusal_.empty() && proxied_) {
     const ForwardedHeader which = server_.context.options.forwarded_header;
-    const std::string value =
-        header(which == ForwardedHeader::Forwarded ? "Forwarded" : "X-Forwarded-For");
-    if (const auto client = forwarded_client(value, which, *server_.proxies)) learn_client(*client);
+    const char* name = which == ForwardedHeader::Forwarded ? "Forwarded" : "X-Forwarded-For";
+    const ForwardedClient client = forwarded_client(header(name), which, *server_.proxies);
+    if (client.kind == ForwardedClient::Kind::Client) learn_client(client.address);
+    if (client.kind == ForwardedClient::Kind::Unknown) {
+      // Nobody to count it under: not the proxy either (its other clients would share it).
+      protocol_.note(log::Level::Info, std::string("refused: the ") + name +
+                                           " header of a trusted proxy names no client address");
+      return wire::HttpReply{400,
+                             {{"Content-Type", "text/plain; charset=utf-8"}},
+                             std::string("the ") + name +
+                                 " header names no client address: this server counts every "
+                                 "client by its address\n"};
+    }
   }
   if (refusal_.empty()) return std::nullopt;
   protocol_.note(log::Level::Info, "refused: " + refusal_);

@@ -245,6 +245,13 @@ bool SessionProtocol::token_accepted(const std::string& presented) {
           "--control-token-file)");
     return false;
   }
+  if (unattributed_) {
+    // Nobody to hold to a wrong token: the proxy's other clients would share its penalty.
+    error(wire::PERMISSION_DENIED,
+          "a control token is not taken through a trusted proxy that does not name its client "
+          "(a PROXY header or X-Forwarded-For; docs/OPERATIONS.md \"Behind a proxy\")");
+    return false;
+  }
   if (!same_secret(presented, token)) {
     // Answered after a delay that doubles with each failure of the address; nothing else of
     // this session is handled meanwhile. Too many: the address is refused for a while.
@@ -350,8 +357,8 @@ void SessionProtocol::hello_timed_out(bool handshaking) {
   const std::string text =
       "no hello within " + std::to_string(ctx_.options.hello_timeout.count()) + " ms";
   if (handshaking) {
-    // Still in the TLS handshake: no frame can be sent.
-    note(log::Level::Info, "closed: " + text + " (TLS handshake not completed)");
+    // Still in the TLS handshake or a proxy's PROXY header: no frame can be sent.
+    note(log::Level::Info, "closed: " + text + " (TLS handshake or PROXY header not completed)");
     events_.close = CloseReason::HelloTimeout;
     return;
   }
@@ -461,8 +468,9 @@ SessionWrite SessionProtocol::next_tile(Clock::time_point now) {
   return {SessionWrite::Kind::Tile, std::move(held_frame_)};
 }
 
-std::string SessionProtocol::move_peer(const std::string& key, const std::string& peer) {
-  const PeerTable::Admission admission = ctx_.peers.move(peer_key_, key);
+std::string SessionProtocol::move_peer(const std::string& key, const std::string& peer,
+                                       bool trusted) {
+  const PeerTable::Admission admission = ctx_.peers.move(peer_key_, key, trusted);
   switch (admission) {
     case PeerTable::Admission::Ok:
       peer_key_ = key;

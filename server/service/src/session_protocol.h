@@ -113,7 +113,10 @@ class SessionProtocol {
   // session is counted, limited and banned under `key` from now on, and logged as `peer`. Empty
   // when admitted; else why not (counted like a refused connection; the session stays as it
   // was, for the caller to close).
-  std::string move_peer(const std::string& key, const std::string& peer);
+  std::string move_peer(const std::string& key, const std::string& peer, bool trusted = false);
+  // The session is counted under a trusted proxy's address, not its client's: it may not present
+  // a control token (a wrong one would penalise the proxy's other clients).
+  void set_unattributed(bool unattributed) { unattributed_ = unattributed; }
 
   // The client may not have a session (move_peer's refusal): Error REFUSED, then close.
   void refuse(const std::string& message) { fail(wire::REFUSED, message, CloseReason::Disconnect); }
@@ -164,7 +167,8 @@ class SessionProtocol {
 
   SessionContext& ctx_;
   std::uint64_t id_;
-  std::string peer_key_;  // what admit() counted this session under
+  std::string peer_key_;       // what admit() counted this session under
+  bool unattributed_ = false;  // a trusted proxy's, with no client named
   std::string peer_, client_name_;
   wire::FrameDecoder decoder_;
   SessionEvents events_;

@@ -49,6 +49,11 @@ struct ServerOptions {
   // per-address limit. Empty: every peer is its own client.
   std::vector<std::string> trusted_proxies;
   ForwardedHeader forwarded_header = ForwardedHeader::XForwardedFor;
+  // Every connection from a trusted proxy to the protocol port (proxy_protocol) or the web port
+  // (web_proxy_protocol) starts with a PROXY protocol v2 header (--proxy-protocol); one without
+  // is refused. Off: no PROXY header is read on that port (a trusted peer's bytes are its own).
+  bool proxy_protocol = false;
+  bool web_proxy_protocol = false;
 
   // Hostile clients (docs/OPERATIONS.md).
   // TLS on the protocol port: PEM certificate chain and private key (both or neither).
