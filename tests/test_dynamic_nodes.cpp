@@ -260,10 +260,18 @@ TEST(DynamicNodes, AViewerGetsThePoseAndNoTile) {
   ViewClient viewer(test::client_of(server, "viewer"));
   viewer.connect();
   const auto deadline = std::chrono::steady_clock::now() + 60s;
-  while (std::chrono::steady_clock::now() < deadline &&
-         !(host.stats().idle && viewer.all_tiles_received()))
-    viewer.poll(50ms);
-  ASSERT_TRUE(viewer.all_tiles_received());
+  // Caught up: the engine is done and the viewer holds every tile's last version.
+  const auto caught_up = [&] {
+    if (!host.stats().idle) return false;
+    const TileStore& tiles = host.tiles();
+    for (std::uint32_t i = 0; i < tiles.tile_count(); ++i) {
+      const TileStore::Tile& t = tiles.tile(i);
+      if (viewer.tile_version(t.lightmap, t.tx, t.ty) != tiles.version(i)) return false;
+    }
+    return true;
+  };
+  while (std::chrono::steady_clock::now() < deadline && !caught_up()) viewer.poll(50ms);
+  ASSERT_TRUE(caught_up());
   const std::vector<Lightmap> before = viewer.lightmaps();
   const CameraPose camera = default_camera(viewer.scene(), viewer.world());
   const ImageRGB image = viewer.compose(camera, 32, 32);
@@ -279,6 +287,47 @@ TEST(DynamicNodes, AViewerGetsThePoseAndNoTile) {
   ASSERT_EQ(after.size(), before.size());
   for (std::size_t o = 0; o < after.size(); ++o) EXPECT_TRUE(after[o].texels == before[o].texels);
   EXPECT_EQ(viewer.compose(camera, 32, 32).width, 32);
+  viewer.close();
+  server.stop();
+  host.stop();
+}
+
+// The server computes the probe volume for a scene with dynamic nodes and every viewer gets it:
+// in the middle of the room it agrees with the path tracer.
+TEST(DynamicNodes, ViewersGetTheProbeVolume) {
+  using namespace std::chrono_literals;
+  EngineHost host(cornell_with_prop(), "cornell", test::quick_host(4));
+  EXPECT_EQ(host.probe_volume(), nullptr);  // the first version comes with the first update
+  host.start();
+  Server server(host, test::loopback());
+  server.start();
+  ViewClient viewer(test::client_of(server, "viewer"));
+  viewer.connect();
+  const auto deadline = std::chrono::steady_clock::now() + 60s;
+  while (std::chrono::steady_clock::now() < deadline &&
+         !(host.stats().idle && viewer.probe_volume().has_sh &&
+           viewer.probe_volume().version == host.probe_volume()->version))
+    viewer.poll(50ms);
+  ASSERT_TRUE(viewer.probe_volume().has_sh);
+  EXPECT_EQ(viewer.probe_volume().version, host.probe_volume()->version);
+  const IrradianceVolume& v = viewer.probe_volume().volume;
+  EXPECT_GT(v.probe_count(), 100u);
+  // Against the truth at the middle of the static room, for the 6 axis normals.
+  test::EngineSetup truth_scene(make_cornell_box(), 32.0f);
+  PathTracer truth(truth_scene.world, truth_scene.rays, truth_scene.lights,
+                   PathTracerOptions{3, true, 5});
+  const glm::vec3 p = truth_scene.world.bounds.center();
+  double got = 0.0, expected = 0.0;
+  for (const glm::vec3& n : {glm::vec3(1, 0, 0), glm::vec3(-1, 0, 0), glm::vec3(0, 1, 0),
+                             glm::vec3(0, -1, 0), glm::vec3(0, 0, 1), glm::vec3(0, 0, -1)}) {
+    Rng rng(3, static_cast<std::uint64_t>(n.x * 3 + n.y * 5 + n.z * 7 + 10));
+    glm::dvec3 e(0.0);
+    for (int s = 0; s < 4000; ++s) e += glm::dvec3(truth.irradiance(p, n, n, 3, rng));
+    expected += luminance(glm::vec3(e / 4000.0));
+    got += luminance(v.irradiance(p, n));
+  }
+  std::printf("viewer's volume / path tracer at the centre: %.4f\n", got / expected);
+  EXPECT_NEAR(got / expected, 1.0, 0.1);
   viewer.close();
   server.stop();
   host.stop();

@@ -202,6 +202,20 @@ std::vector<Envelope> all_messages() {
     e.mutable_scene_export()->set_scene_bytes(123456);
     out.push_back(e);
   }
+  {
+    Envelope e;
+    ProbeVolume* v = e.mutable_probe_volume();
+    v->set_epoch(2);
+    v->set_version(5);
+    for (int a = 0; a < 3; ++a) {
+      v->add_origin(-1.0f + a);
+      v->add_counts(4);
+    }
+    v->set_spacing(0.5f);
+    v->set_layout(std::string(40, '\x11'));
+    v->set_sh(std::string(30, '\x22'));
+    out.push_back(e);
+  }
   out.push_back(make_error(UNSUPPORTED_VERSION, "protocol version 9 is not supported"));
   out.push_back(make_bye("viewer closed"));
   return out;

@@ -12,6 +12,7 @@
 #include "irradcast/common/irradiance_volume.h"
 #include "irradcast/common/sampling.h"
 #include "irradcast/engine/irradiance_volume_builder.h"
+#include "irradcast/wire/probe_volume_message.h"
 #include "scene_builders.h"
 
 using namespace irradcast;
@@ -228,4 +229,54 @@ TEST(IrradianceVolume, CornellBoxAgainstThePathTracer) {
               sum_volume / sum_truth, rel_mse, worst);
   EXPECT_NEAR(sum_volume / sum_truth, 1.0, 0.05);
   EXPECT_LT(rel_mse, 0.02);
+}
+
+// The ProbeVolume message: a round trip within binary16, and hostile messages refused whole.
+TEST(ProbeVolumeMessage, RoundTripAndBadMessages) {
+  test::EngineSetup setup(make_cornell_box(), 32.0f);
+  std::vector<Lightmap> maps;
+  for (const ObjectLightmap& o : setup.atlas.objects)
+    maps.emplace_back(o.width, o.height, glm::vec3(1.0f));
+  IrradianceVolumeBuilder builder(setup.world, setup.rays, setup.atlas);
+  builder.refine(maps);
+  const IrradianceVolume& v = builder.volume();
+  const wire::ProbeVolume full = wire::probe_volume_to_proto(v, 3, 7, true);
+  const wire::ProbeVolume sh = wire::probe_volume_to_proto(v, 3, 8, false);
+  std::printf("probe volume: %zu probes, %zu bytes with the layout, %zu bytes of SH per version\n",
+              v.probe_count(), full.ByteSizeLong(), sh.ByteSizeLong());
+  wire::ReceivedVolume got;
+  EXPECT_FALSE(wire::apply_probe_volume(sh, got));  // no layout of epoch 3 yet: ignored
+  ASSERT_TRUE(wire::apply_probe_volume(full, got));
+  EXPECT_TRUE(wire::apply_probe_volume(sh, got));
+  EXPECT_EQ(got.epoch, 3u);
+  EXPECT_EQ(got.version, 8u);
+  ASSERT_EQ(got.volume.probe_count(), v.probe_count());
+  for (const glm::vec3& p : {glm::vec3(0.0f), v.grid.position({1, 2, 3})})
+    for (const glm::vec3& n : kNormals) {
+      const float a = luminance(v.irradiance(p, n)), b = luminance(got.volume.irradiance(p, n));
+      EXPECT_NEAR(b, a, 0.01f * a + 1e-4f);
+    }
+  const wire::ReceivedVolume before = got;
+  const auto refused = [&](wire::ProbeVolume m, const char* what) {
+    EXPECT_THROW(wire::apply_probe_volume(m, got), Error) << what;
+    EXPECT_EQ(got.version, before.version) << what;
+  };
+  wire::ProbeVolume m = full;
+  m.set_counts(0, 0);
+  refused(m, "a count of 0");
+  m = full;
+  m.set_counts(0, 1u << 20);
+  refused(m, "too many probes");
+  m = full;
+  m.set_spacing(std::nanf(""));
+  refused(m, "a spacing that is not a number");
+  m = full;
+  m.set_sh(m.sh().substr(0, m.sh().size() / 2));
+  refused(m, "cut SH data");
+  m = full;
+  m.set_layout("not zstd");
+  refused(m, "a layout that is not zstd");
+  m = full;
+  m.clear_origin();
+  refused(m, "no origin");
 }

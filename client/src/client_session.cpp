@@ -1,6 +1,8 @@
 // The client side of the protocol without I/O (client_session.h).
 #include "irradcast/client/client_session.h"
 
+#include "irradcast/wire/probe_volume_message.h"
+
 #include <algorithm>
 
 #include "irradcast/common/log.h"
@@ -70,6 +72,13 @@ ClientStep ClientSession::on_frame(const wire::Envelope& e) {
       break;
     case wire::Envelope::kBye:
       step.event = ClientStep::Event::Bye;
+      break;
+    case wire::Envelope::kProbeVolume:
+      try {
+        wire::apply_probe_volume(e.probe_volume(), volume_);
+      } catch (const Error& ex) {
+        throw ClientSessionFailure("protocol", ex.what());
+      }
       break;
     default:
       break;  // Pong and anything newer: nothing to do

@@ -135,6 +135,8 @@ const char* message_name(const Envelope& e) {
       return "scene_export_request";
     case Envelope::kSceneExport:
       return "scene_export";
+    case Envelope::kProbeVolume:
+      return "probe_volume";
     case Envelope::MSG_NOT_SET:
       break;
   }

@@ -2,18 +2,28 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 
 #include "irradcast/common/error.h"
 #include "irradcast/common/gltf.h"
 #include "irradcast/common/lap_timer.h"
 #include "irradcast/common/log.h"
+#include "irradcast/common/sampling.h"
 #include "irradcast/engine/engine.h"
 #include "irradcast/service/thread_priority.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/wire/probe_volume_message.h"
 
 namespace irradcast {
 
 struct EngineHost::Impl {
   std::unique_ptr<Engine> engine;
+  // The irradiance volume (a scene with dynamic nodes only; docs/DYNAMIC.md), its epoch (a new
+  // one per placement) and version, and the band-0 irradiance it last published.
+  std::unique_ptr<IrradianceVolumeBuilder> volume;
+  std::uint64_t volume_epoch = 0, volume_version = 0;
+  std::vector<float> volume_published;
+  bool volume_placed = false;  // placed again since the last publish: a new epoch
 };
 
 namespace {
@@ -113,6 +123,18 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
     tile_epoch_ = digest64(key);
     // Replayed edits: the tiles are not those of a host that applied them while it ran.
     if (replayed > 0) tile_epoch_ = digest64(std::to_string(tile_epoch_) + "|journal");
+  }
+  const std::vector<bool> dynamic = prepared_.scene().dynamic_nodes();
+  if (std::find(dynamic.begin(), dynamic.end(), true) != dynamic.end()) {
+    impl_->volume = std::make_unique<IrradianceVolumeBuilder>(
+        prepared_.world(), prepared_.rays(), prepared_.atlas(), options_.probe_volume);
+    impl_->volume_placed = true;
+    const VolumeGrid& g = impl_->volume->volume().grid;
+    log::info("engine", "probe volume: " + std::to_string(g.counts.x) + " x " +
+                            std::to_string(g.counts.y) + " x " + std::to_string(g.counts.z) +
+                            " probes every " + std::to_string(g.spacing) + " (" +
+                            std::to_string(impl_->volume->switched_off()) + " off, " +
+                            std::to_string(impl_->volume->moved()) + " moved out of geometry)");
   }
   revision_ = submitted_revision_ = stats_.revision = replayed;
   stats_.texels = impl_->engine->texel_count();
@@ -271,6 +293,15 @@ void EngineHost::apply_edits() {
   if (lightmaps_change) {
     impl_->engine->scene_changed(change, queued.cameras);
     lap.lap("engine (" + impl_->engine->change_timings() + ")");
+    if (impl_->volume) {  // the probes see the static scene: placed again, or their light anew
+      if (change.geometry) {
+        impl_->volume->place();
+        impl_->volume_placed = true;
+      } else {
+        impl_->volume->restart();
+      }
+      lap.lap("probe volume");
+    }
   }
   publish_edits(queued, report, lap, began, lightmaps_change);
 }
@@ -425,6 +456,7 @@ void EngineHost::do_update() {
                                standard_error.empty() ? nullptr : &standard_error};
   std::vector<std::uint32_t> changed =
       tiles_->publish(maps, now_us(), noise_aware ? &noise : nullptr);
+  const bool volume_changed = refine_probe_volume(maps);
   const double bytes_per_texel = tiles_->bytes_per_texel();
   const auto ended = std::chrono::steady_clock::now();
   PublishListener listener;
@@ -449,7 +481,7 @@ void EngineHost::do_update() {
   }
   log::debug("engine", "update " + std::to_string(impl_->engine->updates()) + ": " +
                            std::to_string(changed.size()) + " tiles changed");
-  if (listener && !changed.empty()) listener(changed);
+  if (listener && (!changed.empty() || volume_changed)) listener(changed);
   if (last) {
     // Idle only once the listener has queued the final tiles: whoever sees "idle" and an
     // empty queue then really has every final tile.
@@ -461,6 +493,47 @@ void EngineHost::do_update() {
                             (method.empty() ? "" : " (" + method + ")"));
   }
   cv_.notify_all();
+}
+
+// Refines the irradiance volume from the published lightmaps; a new version when its band-0
+// irradiance moved by more than 1 % (summed over the probes) since the last one, or after a new
+// placement (a new epoch, with its layout). True when there is a new version.
+bool EngineHost::refine_probe_volume(const std::vector<Lightmap>& maps) {
+  if (!impl_->volume) return false;
+  IrradianceVolumeBuilder& b = *impl_->volume;
+  b.refine(maps);
+  const IrradianceVolume& v = b.volume();
+  std::vector<float> level(v.probe_count());
+  double moved = 0.0, total = 0.0;
+  for (std::size_t i = 0; i < level.size(); ++i) {
+    level[i] = luminance(v.sh[i][0]);
+    if (i < impl_->volume_published.size())
+      moved += std::fabs(level[i] - impl_->volume_published[i]);
+    total += std::fabs(level[i]);
+  }
+  if (!impl_->volume_placed && moved <= 0.01 * total) return false;
+  if (impl_->volume_placed) ++impl_->volume_epoch;
+  ++impl_->volume_version;
+  auto frames = std::make_shared<ProbeVolumeFrames>();
+  frames->epoch = impl_->volume_epoch;
+  frames->version = impl_->volume_version;
+  for (const bool layout : {true, false}) {
+    wire::Envelope e;
+    *e.mutable_probe_volume() =
+        wire::probe_volume_to_proto(v, frames->epoch, frames->version, layout);
+    (layout ? frames->with_layout : frames->sh_only) =
+        std::make_shared<const std::string>(wire::encode_frame(e));
+  }
+  impl_->volume_published = std::move(level);
+  impl_->volume_placed = false;
+  std::lock_guard lock(mutex_);
+  probe_volume_ = std::move(frames);
+  return true;
+}
+
+std::shared_ptr<const ProbeVolumeFrames> EngineHost::probe_volume() const {
+  std::lock_guard lock(mutex_);
+  return probe_volume_;
 }
 
 void EngineHost::record_passes(const UpdateStats& u) {

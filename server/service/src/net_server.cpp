@@ -232,7 +232,8 @@ void Server::Impl::on_publish(const std::vector<std::uint32_t>& tiles) {
     publish_pending[t] = 1;
     publish_list.push_back(t);
   }
-  if (publish_posted || publish_list.empty()) return;
+  // An empty list: the probe volume changed alone; the sessions look at it in the fan-out.
+  if (publish_posted) return;
   publish_posted = true;
   asio::post(io, [this] { fan_out(); });
 }

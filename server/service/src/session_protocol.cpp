@@ -222,6 +222,18 @@ void SessionProtocol::on_subscribe(const wire::Subscribe& s) {
       if (tiles.version(t) > known_[t]) queue_.push(t);
   }
   queue_changed();
+  offer_probe_volume();
+}
+
+void SessionProtocol::offer_probe_volume() {
+  const std::shared_ptr<const ProbeVolumeFrames> v = ctx_.host.probe_volume();
+  if (!v || (v->epoch == volume_layout_epoch_ && v->version == volume_version_)) return;
+  // The client needs this epoch's layout unless it was written, or waits in the frame replaced.
+  const bool layout = v->epoch != volume_layout_epoch_ || volume_frame_has_layout_;
+  volume_frame_ = layout ? v->with_layout : v->sh_only;
+  volume_frame_has_layout_ = layout;
+  volume_layout_epoch_ = v->epoch;
+  volume_version_ = v->version;
 }
 
 // The viewer's camera: the engine refines what the viewers see first after an edit.
@@ -338,6 +350,7 @@ void SessionProtocol::tiles_changed(const std::vector<std::uint32_t>& tiles) {
   for (std::uint32_t t : tiles)
     if (subscribed_[store.tile(t).lightmap]) queue_.push(t);
   queue_changed();
+  offer_probe_volume();
 }
 
 // Broadcasts wait in their own bounded queue (not with the replies, whose bound drops the
@@ -414,6 +427,10 @@ SessionWrite SessionProtocol::next_write(Clock::time_point now) {
     return {Kind::Edit, std::move(frame)};
   }
   if (closing_) return {Kind::Close, nullptr};  // the reason fail() gave stands
+  if (volume_frame_) {
+    volume_frame_has_layout_ = false;
+    return {Kind::Control, std::exchange(volume_frame_, nullptr)};
+  }
   if (scene_active_) return {Kind::Scene, std::make_shared<const std::string>(next_scene_chunk())};
   if (streaming_) return next_tile(now);
   return {};

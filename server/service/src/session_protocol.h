@@ -97,6 +97,10 @@ class SessionProtocol {
 
   // The engine thread's news (posted to the session's strand).
   void tiles_changed(const std::vector<std::uint32_t>& tiles);
+  // Queues the host's irradiance volume when it is newer than what this client has (after
+  // Subscribe): the newest replaces one still waiting, with its layout while the client has
+  // none of its epoch.
+  void offer_probe_volume();
   void edit_applied(std::shared_ptr<const std::string> frame);
 
   // The connection's timers and state.
@@ -182,7 +186,10 @@ class SessionProtocol {
   std::uint64_t log_suppressed_ = 0;
   std::deque<std::string> control_;
   std::deque<std::shared_ptr<const std::string>> edits_;  // broadcasts not yet written
-  std::shared_ptr<const wire::ScenePackage> package_;     // set by Hello
+  std::shared_ptr<const std::string> volume_frame_;       // the probe volume, not yet written
+  bool volume_frame_has_layout_ = false;
+  std::uint64_t volume_layout_epoch_ = 0, volume_version_ = 0;  // queued or written
+  std::shared_ptr<const wire::ScenePackage> package_;           // set by Hello
   bool scene_active_ = false;
   std::uint64_t scene_offset_ = 0;
   bool streaming_ = false;

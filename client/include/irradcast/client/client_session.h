@@ -26,6 +26,7 @@
 #include "irradcast/common/error.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/world.h"
+#include "irradcast/wire/probe_volume_message.h"
 #include "irradcast/wire/scene_package.h"
 
 namespace irradcast {
@@ -136,6 +137,8 @@ class ClientSession {
   // The package of the last completed download (for the driver's cache); empty otherwise.
   const std::string& downloaded_package() const { return downloaded_; }
   const TileCache& tiles() const { return tiles_; }
+  // The irradiance volume the server sent (epoch 0: none; docs/DYNAMIC.md).
+  const wire::ReceivedVolume& probe_volume() const { return volume_; }
   const std::string& scene_hash() const { return scene_hash_; }
   std::uint64_t tile_epoch() const { return tile_epoch_; }
   std::uint64_t revision() const { return revision_; }
@@ -166,6 +169,7 @@ class ClientSession {
   std::uint64_t session_ = 0;
   std::uint64_t tile_epoch_ = 0;
   std::uint64_t revision_ = 0;
+  wire::ReceivedVolume volume_;
   TileCache tiles_;
   std::vector<wire::SceneEdit> pending_edits_;  // arrived while the scene loads
   bool reload_ = false;

@@ -107,6 +107,8 @@ class ViewClient {
   }
   // True when every tile has arrived at least once.
   bool all_tiles_received() const { return core_.tiles().all_received(); }
+  // The irradiance volume the server sent (epoch 0: none).
+  const wire::ReceivedVolume& probe_volume() const { return core_.probe_volume(); }
   std::size_t tile_count() const { return core_.tiles().tile_count(); }
   ViewClientCounters counters() const;
   // The hash of the scene package downloaded (or taken from the cache) at the last connection;

@@ -24,7 +24,7 @@ struct IrradianceVolumeOptions {
   float spacing = 0.0f;
   float spacing_fraction = 0.125f;
   // Fewer probes than this: the spacing grows until the grid fits.
-  std::size_t max_probes = std::size_t{1} << 18;
+  std::size_t max_probes = std::size_t{1} << 16;
   int rays_per_probe = 192;  // per refine()
   int placement_rays = 256;  // per probe, to place it and measure its distances
   int max_history = 32;      // the running mean's window (refines), then exponential

@@ -24,6 +24,7 @@
 #include "irradcast/common/world.h"
 #include "irradcast/engine/backend_select.h"
 #include "irradcast/engine/engine_params.h"
+#include "irradcast/engine/irradiance_volume_builder.h"
 #include "irradcast/engine/prepared_scene.h"
 #include "irradcast/service/edit_journal.h"
 #include "irradcast/service/tile_source.h"
@@ -54,6 +55,9 @@ struct EngineHostOptions {
   std::string state_dir;
   // The journal is rewritten as one snapshot once it holds this many edits (0: never).
   std::uint32_t journal_compact_after = 1000;
+  // The irradiance volume that lights dynamic objects (computed when the scene has dynamic
+  // nodes; docs/DYNAMIC.md).
+  IrradianceVolumeOptions probe_volume;
 };
 
 class EngineHost final : public TileSource {
@@ -117,6 +121,7 @@ class EngineHost final : public TileSource {
   const TileStore& tiles() const override { return *tiles_; }
   // A copy of the stats; update_rate is computed at the time of the call.
   EngineHostStats stats() const override;
+  std::shared_ptr<const ProbeVolumeFrames> probe_volume() const override;
   static constexpr std::chrono::seconds kUpdateRateWindow{10};
   // Blocks until at least `updates` updates are published or the engine is idle (tests).
   void wait_for_updates(std::uint64_t updates) const;
@@ -141,7 +146,8 @@ class EngineHost final : public TileSource {
   // and the edit listener.
   void publish_edits(QueuedEdits& queued, const EditReport& report, LapTimer& lap,
                      std::chrono::steady_clock::time_point began, bool lightmaps_change);
-  void record_passes(const UpdateStats& u);  // with mutex_ held
+  void record_passes(const UpdateStats& u);                     // with mutex_ held
+  bool refine_probe_volume(const std::vector<Lightmap>& maps);  // engine thread
   static constexpr std::size_t kMaxUpdateEnds = 1u << 16;
 
   std::string scene_id_;
@@ -173,6 +179,7 @@ class EngineHost final : public TileSource {
   mutable std::mutex mutex_;
   mutable std::condition_variable cv_;
   EngineHostStats stats_;
+  std::shared_ptr<const ProbeVolumeFrames> probe_volume_;  // guarded by mutex_
   // For update_rate: when the first update began, and when each update of the last
   // kUpdateRateWindow finished (oldest first).
   std::chrono::steady_clock::time_point first_update_{};

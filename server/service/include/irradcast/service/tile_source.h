@@ -65,6 +65,15 @@ struct EngineHostStats {
   std::uint64_t stale_texels = 0;
 };
 
+// The irradiance volume as sessions send it (docs/DYNAMIC.md): one version's ProbeVolume frame
+// with the probes' layout (for a client that has none of this epoch) and without it, each
+// encoded once for every session.
+struct ProbeVolumeFrames {
+  std::uint64_t epoch = 0;
+  std::uint64_t version = 0;
+  std::shared_ptr<const std::string> with_layout, sh_only;
+};
+
 class TileSource {
  public:
   virtual ~TileSource() = default;
@@ -95,6 +104,10 @@ class TileSource {
   virtual void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) = 0;
   // The engine's stats (a gateway: the origin's, as last published). Any thread.
   virtual EngineHostStats stats() const = 0;
+  // The irradiance volume's current version, set before the listener hears of the tiles of the
+  // same update; null when there is none (a scene without dynamic nodes; a gateway, for now).
+  // Any thread.
+  virtual std::shared_ptr<const ProbeVolumeFrames> probe_volume() const { return nullptr; }
 };
 
 }  // namespace irradcast

@@ -1,0 +1,141 @@
+// The irradiance volume's ProbeVolume message: binary16 numbers under zstd.
+#include "irradcast/wire/probe_volume_message.h"
+
+#include <zstd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include <glm/gtc/packing.hpp>
+
+#include "irradcast/common/error.h"
+
+namespace irradcast::wire {
+
+namespace {
+
+constexpr int kZstdLevel = 3;
+constexpr std::size_t kLayoutBytesPerProbe =
+    3 * 2 + 1 + std::size_t{IrradianceVolume::kDepthTexels} * 2 * 2;
+constexpr std::size_t kShBytesPerProbe = kShCoefficients * 3 * 2;
+
+void put_half(std::string& out, float x) {
+  const float c = std::isfinite(x) ? std::clamp(x, -65504.0f, 65504.0f) : 0.0f;
+  const std::uint16_t h = glm::packHalf1x16(c);
+  out.push_back(static_cast<char>(h & 0xff));
+  out.push_back(static_cast<char>(h >> 8));
+}
+
+float get_half(const std::string& in, std::size_t& at) {
+  const auto lo = static_cast<unsigned char>(in[at]), hi = static_cast<unsigned char>(in[at + 1]);
+  at += 2;
+  return glm::unpackHalf1x16(static_cast<std::uint16_t>(lo | (hi << 8)));
+}
+
+std::string compress(const std::string& raw) {
+  std::string z(ZSTD_compressBound(raw.size()), '\0');
+  const std::size_t n = ZSTD_compress(z.data(), z.size(), raw.data(), raw.size(), kZstdLevel);
+  if (ZSTD_isError(n)) throw irradcast::Error(std::string("probe volume: zstd: ") + ZSTD_getErrorName(n));
+  z.resize(n);
+  return z;
+}
+
+std::string decompress(const std::string& z, std::size_t expected, const char* what) {
+  const unsigned long long size = ZSTD_getFrameContentSize(z.data(), z.size());
+  if (size != expected)
+    throw irradcast::Error(std::string("probe volume: the ") + what + " is not zstd of " +
+                std::to_string(expected) + " bytes");
+  std::string raw(expected, '\0');
+  const std::size_t n = ZSTD_decompress(raw.data(), raw.size(), z.data(), z.size());
+  if (ZSTD_isError(n) || n != expected)
+    throw irradcast::Error(std::string("probe volume: the ") + what + " is corrupt");
+  return raw;
+}
+
+}  // namespace
+
+ProbeVolume probe_volume_to_proto(const IrradianceVolume& v, std::uint64_t epoch,
+                                  std::uint64_t version, bool with_layout) {
+  ProbeVolume m;
+  m.set_epoch(epoch);
+  m.set_version(version);
+  for (int a = 0; a < 3; ++a) {
+    m.add_origin(v.grid.origin[a]);
+    m.add_counts(static_cast<std::uint32_t>(v.grid.counts[a]));
+  }
+  m.set_spacing(v.grid.spacing);
+  const std::size_t n = v.probe_count();
+  if (with_layout) {
+    std::string raw;
+    raw.reserve(n * kLayoutBytesPerProbe);
+    for (std::size_t i = 0; i < n; ++i) {
+      for (int a = 0; a < 3; ++a) put_half(raw, v.offsets[i][a]);
+      raw.push_back(v.active[i] ? 1 : 0);
+    }
+    for (const glm::vec2& d : v.depth) {
+      put_half(raw, d.x);
+      put_half(raw, d.y);
+    }
+    m.set_layout(compress(raw));
+  }
+  std::string raw;
+  raw.reserve(n * kShBytesPerProbe);
+  for (const ShIrradiance& e : v.sh)
+    for (const glm::vec3& c : e)
+      for (int a = 0; a < 3; ++a) put_half(raw, c[a]);
+  m.set_sh(compress(raw));
+  return m;
+}
+
+bool apply_probe_volume(const ProbeVolume& m, ReceivedVolume& into) {
+  const bool layout = !m.layout().empty();
+  if (!layout && m.epoch() != into.epoch) return false;  // its layout has not come
+  if (m.origin_size() != 3 || m.counts_size() != 3)
+    throw irradcast::Error("probe volume: the grid needs 3 origin coordinates and 3 counts");
+  VolumeGrid g;
+  std::size_t probes = 1;
+  for (int a = 0; a < 3; ++a) {
+    g.origin[a] = m.origin(a);
+    const std::uint32_t c = m.counts(a);
+    if (c == 0 || c > kMaxWireProbes) throw irradcast::Error("probe volume: a count of " + std::to_string(c));
+    g.counts[a] = static_cast<int>(c);
+    probes *= c;
+    if (probes > kMaxWireProbes)
+      throw irradcast::Error("probe volume: more than " + std::to_string(kMaxWireProbes) + " probes");
+  }
+  g.spacing = m.spacing();
+  if (!(g.spacing > 0.0f) || !std::isfinite(g.spacing) || !std::isfinite(g.origin.x) ||
+      !std::isfinite(g.origin.y) || !std::isfinite(g.origin.z))
+    throw irradcast::Error("probe volume: a spacing or origin that is not finite (or a spacing <= 0)");
+  if (!layout && g.probe_count() != into.volume.probe_count())
+    throw irradcast::Error("probe volume: the grid differs from its epoch's layout");
+  const std::string sh = decompress(m.sh(), probes * kShBytesPerProbe, "SH data");
+  IrradianceVolume next;
+  if (layout) {
+    const std::string raw = decompress(m.layout(), probes * kLayoutBytesPerProbe, "layout");
+    next.reset(g);
+    std::size_t at = 0;
+    for (std::size_t i = 0; i < probes; ++i) {
+      for (int a = 0; a < 3; ++a) next.offsets[i][a] = get_half(raw, at);
+      next.active[i] = raw[at++] != 0 ? 1 : 0;
+    }
+    for (glm::vec2& d : next.depth) {
+      d.x = get_half(raw, at);
+      d.y = get_half(raw, at);
+    }
+  } else {
+    next = into.volume;
+  }
+  std::size_t at = 0;
+  for (ShIrradiance& e : next.sh)
+    for (glm::vec3& c : e)
+      for (int a = 0; a < 3; ++a) c[a] = get_half(sh, at);
+  into.volume = std::move(next);
+  into.epoch = m.epoch();
+  into.version = m.version();
+  into.has_sh = true;
+  return true;
+}
+
+}  // namespace irradcast::wire
