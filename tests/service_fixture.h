@@ -21,8 +21,10 @@
 #include "irradcast/client/view_client.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/progress.h"
+#include "irradcast/common/scene_edit.h"
 #include "irradcast/service/engine_host.h"
 #include "irradcast/service/net_server.h"
+#include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/frame.h"
 #include "irradcast/wire/transport.h"
 
@@ -81,6 +83,21 @@ bool eventually(F condition, std::chrono::milliseconds limit = std::chrono::mill
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   return condition();
+}
+
+// A SceneEdit frame that nudges the Cornell box's tall block, with `token`.
+inline wire::Envelope nudge_edit_frame(const std::string& token, std::uint64_t request_id) {
+  SceneEdit edit;
+  EditOp op;
+  op.kind = EditOp::Kind::Move;
+  op.target = "tall_block";
+  op.vector = {0.0001f, 0.0f, 0.0f};
+  edit.ops.push_back(op);
+  wire::Envelope e;
+  wire::to_proto(edit, e.mutable_scene_edit());
+  e.mutable_scene_edit()->set_token(token);
+  e.mutable_scene_edit()->set_request_id(request_id);
+  return e;
 }
 
 inline wire::Envelope hello_frame(const std::string& name = "raw",

@@ -93,6 +93,24 @@ std::vector<std::pair<std::uint64_t, std::string>> tile_state(const EngineHost& 
   return out;
 }
 
+// A started host on the Cornell box with its prop, a server and one connected viewer.
+struct Served {
+  explicit Served(std::uint32_t max_updates)
+      : host(cornell_with_prop(), "cornell", test::quick_host(max_updates)),
+        server((host.start(), host), test::loopback()),
+        viewer((server.start(), test::client_of(server, "viewer"))) {
+    viewer.connect();
+  }
+  ~Served() {
+    viewer.close();
+    server.stop();
+    host.stop();
+  }
+  EngineHost host;
+  Server server;
+  ViewClient viewer;
+};
+
 }  // namespace
 
 TEST(DynamicNodes, ASubtreeIsDynamicAndOutOfTheStaticWorld) {
@@ -253,12 +271,9 @@ TEST(DynamicNodes, AConvergedHostStaysIdle) {
 // pose with the edit, and not one tile more.
 TEST(DynamicNodes, AViewerGetsThePoseAndNoTile) {
   using namespace std::chrono_literals;
-  EngineHost host(cornell_with_prop(), "cornell", test::quick_host(2));
-  host.start();
-  Server server(host, test::loopback());
-  server.start();
-  ViewClient viewer(test::client_of(server, "viewer"));
-  viewer.connect();
+  Served s(2);
+  EngineHost& host = s.host;
+  ViewClient& viewer = s.viewer;
   const auto deadline = std::chrono::steady_clock::now() + 60s;
   // Caught up: the engine is done and the viewer holds every tile's last version.
   const auto caught_up = [&] {
@@ -287,22 +302,17 @@ TEST(DynamicNodes, AViewerGetsThePoseAndNoTile) {
   ASSERT_EQ(after.size(), before.size());
   for (std::size_t o = 0; o < after.size(); ++o) EXPECT_TRUE(after[o].texels == before[o].texels);
   EXPECT_EQ(viewer.compose(camera, 32, 32).width, 32);
-  viewer.close();
-  server.stop();
-  host.stop();
 }
 
 // The server computes the probe volume for a scene with dynamic nodes and every viewer gets it:
 // in the middle of the room it agrees with the path tracer.
 TEST(DynamicNodes, ViewersGetTheProbeVolume) {
   using namespace std::chrono_literals;
-  EngineHost host(cornell_with_prop(), "cornell", test::quick_host(4));
-  EXPECT_EQ(host.probe_volume(), nullptr);  // the first version comes with the first update
-  host.start();
-  Server server(host, test::loopback());
-  server.start();
-  ViewClient viewer(test::client_of(server, "viewer"));
-  viewer.connect();
+  EXPECT_EQ(EngineHost(cornell_with_prop(), "cornell", test::quick_host(4)).probe_volume(),
+            nullptr);  // the first version comes with the first update
+  Served s(4);
+  EngineHost& host = s.host;
+  ViewClient& viewer = s.viewer;
   const auto deadline = std::chrono::steady_clock::now() + 60s;
   while (std::chrono::steady_clock::now() < deadline &&
          !(host.stats().idle && viewer.probe_volume().has_sh &&
@@ -328,7 +338,4 @@ TEST(DynamicNodes, ViewersGetTheProbeVolume) {
   }
   std::printf("viewer's volume / path tracer at the centre: %.4f\n", got / expected);
   EXPECT_NEAR(got / expected, 1.0, 0.1);
-  viewer.close();
-  server.stop();
-  host.stop();
 }

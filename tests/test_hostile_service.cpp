@@ -52,17 +52,7 @@ wire::Envelope hello(const std::string& name = "raw") {
 }
 
 wire::Envelope edit_frame(const std::string& token, std::uint64_t request_id) {
-  SceneEdit edit;
-  EditOp op;
-  op.kind = EditOp::Kind::Move;
-  op.target = "tall_block";
-  op.vector = {0.0001f, 0.0f, 0.0f};
-  edit.ops.push_back(op);
-  wire::Envelope e;
-  wire::to_proto(edit, e.mutable_scene_edit());
-  e.mutable_scene_edit()->set_token(token);
-  e.mutable_scene_edit()->set_request_id(request_id);
-  return e;
+  return test::nudge_edit_frame(token, request_id);
 }
 
 // Sessions closed for a reason; waits up to a second for it to reach `at_least` (the server

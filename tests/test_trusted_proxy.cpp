@@ -52,17 +52,7 @@ ServerOptions behind_proxy(std::uint32_t per_peer) {
 }
 
 wire::Envelope wrong_edit(const std::string& token) {
-  SceneEdit edit;
-  EditOp op;
-  op.kind = EditOp::Kind::Move;
-  op.target = "tall_block";
-  op.vector = {0.0001f, 0.0f, 0.0f};
-  edit.ops.push_back(op);
-  wire::Envelope e;
-  wire::to_proto(edit, e.mutable_scene_edit());
-  e.mutable_scene_edit()->set_token(token);
-  e.mutable_scene_edit()->set_request_id(7);
-  return e;
+  return test::nudge_edit_frame(token, 7);
 }
 
 // One HTTP request to the web port with `headers`, from `from` (empty: 127.0.0.1), after

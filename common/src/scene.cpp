@@ -100,36 +100,35 @@ std::vector<glm::mat4> Scene::world_matrices() const {
   return world;
 }
 
-std::vector<bool> Scene::visible_nodes() const {
-  std::vector<bool> visible(nodes.size(), false);
-  std::vector<bool> done(nodes.size(), false);
+namespace {
+
+// A per-node flag handed down from the roots: flag(parent's value, node) for each node reached
+// (false for nodes no root reaches; cycles are cut).
+template <class Flag>
+std::vector<bool> inherited(const Scene& s, bool root_value, Flag flag) {
+  std::vector<bool> value(s.nodes.size(), false);
+  std::vector<bool> done(s.nodes.size(), false);
   std::vector<std::pair<int, bool>> stack;
-  for (int r : roots) stack.emplace_back(r, true);
+  for (int r : s.roots) stack.emplace_back(r, root_value);
   while (!stack.empty()) {
     auto [n, parent] = stack.back();
     stack.pop_back();
     if (done[n]) continue;
     done[n] = true;
-    visible[n] = parent && nodes[n].visible;
-    for (int c : nodes[n].children) stack.emplace_back(c, visible[n]);
+    value[n] = flag(parent, s.nodes[n]);
+    for (int c : s.nodes[n].children) stack.emplace_back(c, value[n]);
   }
-  return visible;
+  return value;
+}
+
+}  // namespace
+
+std::vector<bool> Scene::visible_nodes() const {
+  return inherited(*this, true, [](bool parent, const Node& n) { return parent && n.visible; });
 }
 
 std::vector<bool> Scene::dynamic_nodes() const {
-  std::vector<bool> dynamic(nodes.size(), false);
-  std::vector<bool> done(nodes.size(), false);
-  std::vector<std::pair<int, bool>> stack;
-  for (int r : roots) stack.emplace_back(r, false);
-  while (!stack.empty()) {
-    auto [n, parent] = stack.back();
-    stack.pop_back();
-    if (done[n]) continue;
-    done[n] = true;
-    dynamic[n] = parent || nodes[n].dynamic;
-    for (int c : nodes[n].children) stack.emplace_back(c, dynamic[n]);
-  }
-  return dynamic;
+  return inherited(*this, false, [](bool parent, const Node& n) { return parent || n.dynamic; });
 }
 
 std::vector<Object> Scene::objects() const {
