@@ -7,6 +7,16 @@
 
 namespace irradcast {
 
+// A peer's own limits: its ban and its session count (a trusted proxy has neither).
+PeerTable::Admission PeerTable::own_limits(const Peer& p, Clock::time_point now,
+                                           bool trusted_proxy) const {
+  if (trusted_proxy) return Admission::Ok;
+  if (p.banned_until > now) return Admission::Banned;
+  if (options_.max_clients_per_peer > 0 && p.sessions >= options_.max_clients_per_peer)
+    return Admission::PeerLimit;
+  return Admission::Ok;
+}
+
 PeerTable::Admission PeerTable::admit(const std::string& key,
                                       const std::function<std::size_t()>& sessions,
                                       bool trusted_proxy) {
@@ -21,11 +31,7 @@ PeerTable::Admission PeerTable::admit(const std::string& key,
     });
   Peer& p = peers_[key];
   p.last_seen = now;
-  if (!trusted_proxy) {
-    if (p.banned_until > now) return Admission::Banned;
-    if (options_.max_clients_per_peer > 0 && p.sessions >= options_.max_clients_per_peer)
-      return Admission::PeerLimit;
-  }
+  if (const Admission own = own_limits(p, now, trusted_proxy); own != Admission::Ok) return own;
   if (sessions() >= options_.max_clients) return Admission::Full;
   ++p.sessions;
   return Admission::Ok;
@@ -38,11 +44,7 @@ PeerTable::Admission PeerTable::move(const std::string& from, const std::string&
   std::lock_guard lock(mutex_);
   Peer& p = peers_[to];
   p.last_seen = now;
-  if (!to_trusted) {
-    if (p.banned_until > now) return Admission::Banned;
-    if (options_.max_clients_per_peer > 0 && p.sessions >= options_.max_clients_per_peer)
-      return Admission::PeerLimit;
-  }
+  if (const Admission own = own_limits(p, now, to_trusted); own != Admission::Ok) return own;
   ++p.sessions;
   auto it = peers_.find(from);
   if (it != peers_.end() && it->second.sessions > 0) {

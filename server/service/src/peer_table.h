@@ -52,6 +52,8 @@ class PeerTable {
     Clock::time_point last_seen{};
   };
 
+  Admission own_limits(const Peer& p, Clock::time_point now, bool trusted_proxy) const;
+
   const ServerOptions& options_;
   std::mutex mutex_;
   std::unordered_map<std::string, Peer> peers_;
