@@ -58,7 +58,11 @@ Scene cornell_with_prop() {
   const std::uint32_t glow =
       test::add_material(s, glm::vec3(0.5f), glm::vec3(4.0f, 2.0f, 1.0f), 1.0f);
   const std::uint32_t white = test::add_material(s, glm::vec3(0.9f));
-  const int prop = add_child_block(s, "prop", -1, {-0.2f, 0.9f, -0.2f}, {0.2f, 1.2f, 0.2f}, glow);
+  Node rig;  // a static node with no mesh: the prop hangs under it
+  rig.name = "rig";
+  const int rig_node = s.add_node(std::move(rig));
+  const int prop =
+      add_child_block(s, "prop", rig_node, {-0.2f, 0.9f, -0.2f}, {0.2f, 1.2f, 0.2f}, glow);
   s.nodes[static_cast<std::size_t>(prop)].dynamic = true;
   add_child_block(s, "prop_base", prop, {-0.3f, 0.7f, -0.3f}, {0.3f, 0.8f, 0.3f}, white);
   Light bulb;
@@ -120,7 +124,7 @@ TEST(DynamicNodes, ASubtreeIsDynamicAndOutOfTheStaticWorld) {
   int marked = 0;
   for (std::size_t n = 0; n < s.nodes.size(); ++n) {
     marked += dynamic[n] ? 1 : 0;
-    EXPECT_EQ(dynamic[n], n >= plain.nodes.size()) << s.nodes[n].name;
+    EXPECT_EQ(dynamic[n], n > plain.nodes.size()) << s.nodes[n].name;  // all but the rig
   }
   EXPECT_EQ(marked, 3);  // prop, prop_base, lamp
   const World w = World::build(s), wp = World::build(plain);
@@ -176,7 +180,7 @@ TEST(DynamicNodes, MovingOneCostsTheEngineNothing) {
   // The prop moved in the scene the viewers get.
   const wire::UnpackedScene viewer = wire::open_scene_package(moved.package()->bytes, "");
   EXPECT_EQ(viewer.revision, 1u);
-  const int prop = static_cast<int>(make_cornell_box().nodes.size());
+  const int prop = static_cast<int>(make_cornell_box().nodes.size()) + 1;  // after the rig
   EXPECT_FLOAT_EQ(viewer.scene.nodes[static_cast<std::size_t>(prop)].local[3].x, 0.3f);
   EXPECT_TRUE(viewer.scene.nodes[static_cast<std::size_t>(prop)].dynamic);
   // The control: a static move restarts texels under a new epoch.
@@ -260,11 +264,17 @@ TEST(DynamicNodes, AConvergedHostStaysIdle) {
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   EXPECT_TRUE(host.stats().idle);
   EXPECT_EQ(host.stats().updates, updates);
+  // Nor does a rig: a static node without a mesh whose children are dynamic.
+  host.submit_edit(move("rig", {0.1f, 0.0f, 0.0f}));
+  ASSERT_TRUE(test::eventually([&] { return host.stats().revision == 2; }));
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  EXPECT_TRUE(host.stats().idle);
+  EXPECT_EQ(host.stats().updates, updates);
   // A static move wakes it.
   host.submit_edit(move("tall_block", {0.02f, 0.0f, 0.0f}));
   EXPECT_TRUE(test::eventually([&] { return host.stats().updates > updates; }));
   host.stop();
-  EXPECT_EQ(sent, 2u);
+  EXPECT_EQ(sent, 3u);
 }
 
 // Through the server to a viewer: the viewer gets the scene with its dynamic nodes, the moved
@@ -296,7 +306,7 @@ TEST(DynamicNodes, AViewerGetsThePoseAndNoTile) {
     viewer.poll(50ms);
   ASSERT_EQ(viewer.scene_revision(), 1u);
   viewer.poll(300ms);
-  const int prop = static_cast<int>(make_cornell_box().nodes.size());
+  const int prop = static_cast<int>(make_cornell_box().nodes.size()) + 1;  // after the rig
   EXPECT_FLOAT_EQ(viewer.scene().nodes[static_cast<std::size_t>(prop)].local[3].x, 0.2f);
   const std::vector<Lightmap> after = viewer.lightmaps();
   ASSERT_EQ(after.size(), before.size());

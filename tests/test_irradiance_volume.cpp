@@ -4,6 +4,8 @@
 // and light that must not leak through a wall.
 #include <gtest/gtest.h>
 
+#include <zstd.h>
+
 #include <cmath>
 
 #include "engine_setup.h"
@@ -279,4 +281,29 @@ TEST(ProbeVolumeMessage, RoundTripAndBadMessages) {
   m = full;
   m.clear_origin();
   refused(m, "no origin");
+  // binary16 infinity or NaN in the SH: refused, not evaluated to NaN.
+  std::string nan_sh;
+  for (std::size_t i = 0; i < v.probe_count() * kShCoefficients * 3; ++i) nan_sh += "\x00\x7e";
+  std::string z(ZSTD_compressBound(nan_sh.size()), '\0');
+  z.resize(ZSTD_compress(z.data(), z.size(), nan_sh.data(), nan_sh.size(), 1));
+  m = full;
+  m.set_sh(z);
+  refused(m, "NaN coefficients");
+}
+
+// Distance moments survive binary16 at any scale: a probe grid of 1 km spacing keeps its
+// visibility (a mean square in metres would clip at 65504 past 256 m).
+TEST(ProbeVolumeMessage, MomentsKeepTheirPrecisionAtAnyScale) {
+  VolumeGrid g;
+  g.counts = {2, 2, 2};
+  g.spacing = 1000.0f;
+  IrradianceVolume v;
+  v.reset(g);
+  v.depth[3] = glm::vec2(800.0f, 800.0f * 800.0f + 5000.0f);
+  wire::ReceivedVolume got;
+  ASSERT_TRUE(wire::apply_probe_volume(wire::probe_volume_to_proto(v, 1, 1, true), got));
+  for (std::size_t t : {std::size_t{0}, std::size_t{3}}) {
+    EXPECT_NEAR(got.volume.depth[t].x, v.depth[t].x, 1e-3f * v.depth[t].x) << t;
+    EXPECT_NEAR(got.volume.depth[t].y, v.depth[t].y, 2e-3f * v.depth[t].y) << t;
+  }
 }

@@ -63,7 +63,7 @@ glm::vec3 IrradianceVolume::irradiance(glm::vec3 p, glm::vec3 n) const {
   glm::vec3 f;
   for (int a = 0; a < 3; ++a) {
     const int last = std::max(grid.counts[a] - 2, 0);
-    base[a] = std::clamp(static_cast<int>(std::floor(g[a])), 0, last);
+    base[a] = static_cast<int>(std::clamp(std::floor(g[a]), 0.0f, float(last)));  // NaN: 0
     f[a] = grid.counts[a] > 1 ? std::clamp(g[a] - float(base[a]), 0.0f, 1.0f) : 0.0f;
   }
   glm::vec3 sum(0.0f);

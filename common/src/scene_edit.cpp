@@ -290,10 +290,25 @@ void validate_edit_ops(const Scene& scene, const SceneEdit& edit) {
 
 bool edit_changes_static_scene(const Scene& scene, const SceneEdit& edit) {
   const std::vector<bool> dynamic = scene.dynamic_nodes();
+  // Whether node n's subtree holds a static mesh or light (a rig of dynamic children holds none).
+  const auto holds_static = [&](int n) {
+    std::vector<int> stack{n};
+    std::vector<bool> seen(scene.nodes.size(), false);
+    while (!stack.empty()) {
+      const int i = stack.back();
+      stack.pop_back();
+      if (i < 0 || static_cast<std::size_t>(i) >= scene.nodes.size() || seen[i]) continue;
+      seen[i] = true;
+      const Node& node = scene.nodes[i];
+      if (!dynamic[i] && (node.mesh >= 0 || node.light >= 0)) return true;
+      stack.insert(stack.end(), node.children.begin(), node.children.end());
+    }
+    return false;
+  };
   for (const EditOp& op : edit.ops) {
     if (target_of(op.kind) != Target::Node) return true;
     const int n = find(scene.nodes, op.target);
-    if (n < 0 || !dynamic[static_cast<std::size_t>(n)]) return true;
+    if (n < 0 || holds_static(n)) return true;
   }
   return false;
 }

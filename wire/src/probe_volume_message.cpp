@@ -30,13 +30,17 @@ void put_half(std::string& out, float x) {
 float get_half(const std::string& in, std::size_t& at) {
   const auto lo = static_cast<unsigned char>(in[at]), hi = static_cast<unsigned char>(in[at + 1]);
   at += 2;
-  return glm::unpackHalf1x16(static_cast<std::uint16_t>(lo | (hi << 8)));
+  const auto h = static_cast<std::uint16_t>(lo | (hi << 8));
+  if ((h & 0x7c00) == 0x7c00)  // infinity or NaN: a peer's data, not ours
+    throw irradcast::Error("probe volume: a value that is not finite");
+  return glm::unpackHalf1x16(h);
 }
 
 std::string compress(const std::string& raw) {
   std::string z(ZSTD_compressBound(raw.size()), '\0');
   const std::size_t n = ZSTD_compress(z.data(), z.size(), raw.data(), raw.size(), kZstdLevel);
-  if (ZSTD_isError(n)) throw irradcast::Error(std::string("probe volume: zstd: ") + ZSTD_getErrorName(n));
+  if (ZSTD_isError(n))
+    throw irradcast::Error(std::string("probe volume: zstd: ") + ZSTD_getErrorName(n));
   z.resize(n);
   return z;
 }
@@ -45,7 +49,7 @@ std::string decompress(const std::string& z, std::size_t expected, const char* w
   const unsigned long long size = ZSTD_getFrameContentSize(z.data(), z.size());
   if (size != expected)
     throw irradcast::Error(std::string("probe volume: the ") + what + " is not zstd of " +
-                std::to_string(expected) + " bytes");
+                           std::to_string(expected) + " bytes");
   std::string raw(expected, '\0');
   const std::size_t n = ZSTD_decompress(raw.data(), raw.size(), z.data(), z.size());
   if (ZSTD_isError(n) || n != expected)
@@ -73,9 +77,12 @@ ProbeVolume probe_volume_to_proto(const IrradianceVolume& v, std::uint64_t epoch
       for (int a = 0; a < 3; ++a) put_half(raw, v.offsets[i][a]);
       raw.push_back(v.active[i] ? 1 : 0);
     }
+    // As fractions of the farthest distance recorded: binary16 keeps its precision at any
+    // scene scale (a mean square in metres would clip past 256 m).
+    const float far = v.grid.max_distance();
     for (const glm::vec2& d : v.depth) {
-      put_half(raw, d.x);
-      put_half(raw, d.y);
+      put_half(raw, d.x / far);
+      put_half(raw, d.y / (far * far));
     }
     m.set_layout(compress(raw));
   }
@@ -98,16 +105,19 @@ bool apply_probe_volume(const ProbeVolume& m, ReceivedVolume& into) {
   for (int a = 0; a < 3; ++a) {
     g.origin[a] = m.origin(a);
     const std::uint32_t c = m.counts(a);
-    if (c == 0 || c > kMaxWireProbes) throw irradcast::Error("probe volume: a count of " + std::to_string(c));
+    if (c == 0 || c > kMaxWireProbes)
+      throw irradcast::Error("probe volume: a count of " + std::to_string(c));
     g.counts[a] = static_cast<int>(c);
     probes *= c;
     if (probes > kMaxWireProbes)
-      throw irradcast::Error("probe volume: more than " + std::to_string(kMaxWireProbes) + " probes");
+      throw irradcast::Error("probe volume: more than " + std::to_string(kMaxWireProbes) +
+                             " probes");
   }
   g.spacing = m.spacing();
-  if (!(g.spacing > 0.0f) || !std::isfinite(g.spacing) || !std::isfinite(g.origin.x) ||
+  if (!(g.spacing >= 1e-6f) || !std::isfinite(g.spacing) || !std::isfinite(g.origin.x) ||
       !std::isfinite(g.origin.y) || !std::isfinite(g.origin.z))
-    throw irradcast::Error("probe volume: a spacing or origin that is not finite (or a spacing <= 0)");
+    throw irradcast::Error(
+        "probe volume: a spacing or origin that is not finite (or a spacing under 1e-6)");
   if (!layout && g.probe_count() != into.volume.probe_count())
     throw irradcast::Error("probe volume: the grid differs from its epoch's layout");
   const std::string sh = decompress(m.sh(), probes * kShBytesPerProbe, "SH data");
@@ -120,18 +130,21 @@ bool apply_probe_volume(const ProbeVolume& m, ReceivedVolume& into) {
       for (int a = 0; a < 3; ++a) next.offsets[i][a] = get_half(raw, at);
       next.active[i] = raw[at++] != 0 ? 1 : 0;
     }
+    const float far = g.max_distance();
     for (glm::vec2& d : next.depth) {
       d.x = get_half(raw, at);
       d.y = get_half(raw, at);
+      if (d.x < 0.0f || d.y < 0.0f) throw irradcast::Error("probe volume: a negative distance");
+      d *= glm::vec2(far, far * far);
     }
-  } else {
-    next = into.volume;
   }
+  std::vector<ShIrradiance> coefficients(probes);
   std::size_t at = 0;
-  for (ShIrradiance& e : next.sh)
+  for (ShIrradiance& e : coefficients)
     for (glm::vec3& c : e)
       for (int a = 0; a < 3; ++a) c[a] = get_half(sh, at);
-  into.volume = std::move(next);
+  if (layout) into.volume = std::move(next);
+  into.volume.sh = std::move(coefficients);
   into.epoch = m.epoch();
   into.version = m.version();
   into.has_sh = true;

@@ -23,7 +23,8 @@ struct EngineHost::Impl {
   std::unique_ptr<IrradianceVolumeBuilder> volume;
   std::uint64_t volume_epoch = 0, volume_version = 0;
   std::vector<float> volume_published;
-  bool volume_placed = false;  // placed again since the last publish: a new epoch
+  bool volume_placed = false;              // placed again since the last publish: a new epoch
+  std::uint64_t volume_since_publish = 0;  // refines since the last version
 };
 
 namespace {
@@ -495,40 +496,52 @@ void EngineHost::do_update() {
   cv_.notify_all();
 }
 
-// Refines the irradiance volume from the published lightmaps; a new version when its band-0
-// irradiance moved by more than 1 % (summed over the probes) since the last one, or after a new
-// placement (a new epoch, with its layout). True when there is a new version.
+// Refines the irradiance volume from the published lightmaps. A new version after a new
+// placement (a new epoch, with its layout), else when its band-0 irradiance moved by more than
+// 1 % (summed over the probes) since the last one and enough refines have passed: their number
+// doubles from a restart up to 32, so that Monte Carlo noise alone cannot send a version per
+// update. True when there is a new version. A failure stops the volume, not the engine.
 bool EngineHost::refine_probe_volume(const std::vector<Lightmap>& maps) {
   if (!impl_->volume) return false;
-  IrradianceVolumeBuilder& b = *impl_->volume;
-  b.refine(maps);
-  const IrradianceVolume& v = b.volume();
-  std::vector<float> level(v.probe_count());
-  double moved = 0.0, total = 0.0;
-  for (std::size_t i = 0; i < level.size(); ++i) {
-    level[i] = luminance(v.sh[i][0]);
-    if (i < impl_->volume_published.size())
-      moved += std::fabs(level[i] - impl_->volume_published[i]);
-    total += std::fabs(level[i]);
+  try {
+    IrradianceVolumeBuilder& b = *impl_->volume;
+    b.refine(maps);
+    ++impl_->volume_since_publish;
+    const IrradianceVolume& v = b.volume();
+    std::vector<float> level(v.probe_count());
+    double moved = 0.0, total = 0.0;
+    for (std::size_t i = 0; i < level.size(); ++i) {
+      level[i] = luminance(v.sh[i][0]);
+      if (i < impl_->volume_published.size())
+        moved += std::fabs(level[i] - impl_->volume_published[i]);
+      total += std::fabs(level[i]);
+    }
+    const std::uint64_t wait = std::clamp<std::uint64_t>(b.rounds() / 2, 1, 32);
+    if (!impl_->volume_placed && (impl_->volume_since_publish < wait || moved <= 0.01 * total))
+      return false;
+    if (impl_->volume_placed) ++impl_->volume_epoch;
+    ++impl_->volume_version;
+    auto frames = std::make_shared<ProbeVolumeFrames>();
+    frames->epoch = impl_->volume_epoch;
+    frames->version = impl_->volume_version;
+    for (const bool layout : {true, false}) {
+      wire::Envelope e;
+      *e.mutable_probe_volume() =
+          wire::probe_volume_to_proto(v, frames->epoch, frames->version, layout);
+      (layout ? frames->with_layout : frames->sh_only) =
+          std::make_shared<const std::string>(wire::encode_frame(e));
+    }
+    impl_->volume_published = std::move(level);
+    impl_->volume_placed = false;
+    impl_->volume_since_publish = 0;
+    std::lock_guard lock(mutex_);
+    probe_volume_ = std::move(frames);
+    return true;
+  } catch (const std::exception& e) {
+    log::error("engine", std::string("probe volume stopped: ") + e.what());
+    impl_->volume.reset();
+    return false;
   }
-  if (!impl_->volume_placed && moved <= 0.01 * total) return false;
-  if (impl_->volume_placed) ++impl_->volume_epoch;
-  ++impl_->volume_version;
-  auto frames = std::make_shared<ProbeVolumeFrames>();
-  frames->epoch = impl_->volume_epoch;
-  frames->version = impl_->volume_version;
-  for (const bool layout : {true, false}) {
-    wire::Envelope e;
-    *e.mutable_probe_volume() =
-        wire::probe_volume_to_proto(v, frames->epoch, frames->version, layout);
-    (layout ? frames->with_layout : frames->sh_only) =
-        std::make_shared<const std::string>(wire::encode_frame(e));
-  }
-  impl_->volume_published = std::move(level);
-  impl_->volume_placed = false;
-  std::lock_guard lock(mutex_);
-  probe_volume_ = std::move(frames);
-  return true;
 }
 
 std::shared_ptr<const ProbeVolumeFrames> EngineHost::probe_volume() const {

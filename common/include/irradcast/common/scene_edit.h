@@ -81,9 +81,10 @@ void validate_edit(const Scene& scene, const SceneEdit& edit);
 // The edit journal checks a snapshot with it before it writes it.
 void validate_edit_ops(const Scene& scene, const SceneEdit& edit);
 // Whether the edit can change the static scene (what the engine lights): false only when every
-// op moves, shows or hides a dynamic node (Node::dynamic; docs/DYNAMIC.md), which costs the
-// engine nothing. Ops whose target does not resolve count as static. A light, material or sky
-// op always does.
+// op moves, shows or hides a node whose subtree holds no static mesh or light (a dynamic node,
+// or a rig of dynamic children; Node::dynamic, docs/DYNAMIC.md), which costs the engine nothing.
+// Ops whose target does not resolve count as static. A light, material or sky op always does
+// (even on a material only dynamic objects use).
 bool edit_changes_static_scene(const Scene& scene, const SceneEdit& edit);
 // Validates, then applies every operation in order. On an invalid edit it throws and the scene
 // is unchanged.
