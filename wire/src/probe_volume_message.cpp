@@ -59,8 +59,32 @@ std::string decompress(const std::string& z, std::size_t expected, const char* w
 
 }  // namespace
 
+std::string encode_probe_layout(const IrradianceVolume& v) {
+  const std::size_t n = v.probe_count();
+  std::string raw;
+  raw.reserve(n * kLayoutBytesPerProbe);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) put_half(raw, v.offsets[i][a]);
+    raw.push_back(v.active[i] ? 1 : 0);
+  }
+  // As fractions of the farthest distance recorded: binary16 keeps its precision at any
+  // scene scale (a mean square in metres would clip past 256 m).
+  const float far = v.grid.max_distance();
+  for (const glm::vec2& d : v.depth) {
+    put_half(raw, d.x / far);
+    put_half(raw, d.y / (far * far));
+  }
+  return compress(raw);
+}
+
 ProbeVolume probe_volume_to_proto(const IrradianceVolume& v, std::uint64_t epoch,
                                   std::uint64_t version, bool with_layout) {
+  return probe_volume_to_proto(v, epoch, version,
+                               with_layout ? encode_probe_layout(v) : std::string());
+}
+
+ProbeVolume probe_volume_to_proto(const IrradianceVolume& v, std::uint64_t epoch,
+                                  std::uint64_t version, const std::string& layout) {
   ProbeVolume m;
   m.set_epoch(epoch);
   m.set_version(version);
@@ -69,25 +93,9 @@ ProbeVolume probe_volume_to_proto(const IrradianceVolume& v, std::uint64_t epoch
     m.add_counts(static_cast<std::uint32_t>(v.grid.counts[a]));
   }
   m.set_spacing(v.grid.spacing);
-  const std::size_t n = v.probe_count();
-  if (with_layout) {
-    std::string raw;
-    raw.reserve(n * kLayoutBytesPerProbe);
-    for (std::size_t i = 0; i < n; ++i) {
-      for (int a = 0; a < 3; ++a) put_half(raw, v.offsets[i][a]);
-      raw.push_back(v.active[i] ? 1 : 0);
-    }
-    // As fractions of the farthest distance recorded: binary16 keeps its precision at any
-    // scene scale (a mean square in metres would clip past 256 m).
-    const float far = v.grid.max_distance();
-    for (const glm::vec2& d : v.depth) {
-      put_half(raw, d.x / far);
-      put_half(raw, d.y / (far * far));
-    }
-    m.set_layout(compress(raw));
-  }
+  m.set_layout(layout);
   std::string raw;
-  raw.reserve(n * kShBytesPerProbe);
+  raw.reserve(v.probe_count() * kShBytesPerProbe);
   for (const ShIrradiance& e : v.sh)
     for (const glm::vec3& c : e)
       for (int a = 0; a < 3; ++a) put_half(raw, c[a]);

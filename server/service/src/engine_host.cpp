@@ -25,6 +25,7 @@ struct EngineHost::Impl {
   std::vector<float> volume_published;
   bool volume_placed = false;              // placed again since the last publish: a new epoch
   std::uint64_t volume_since_publish = 0;  // refines since the last version
+  std::string volume_layout;               // ProbeVolume.layout of the current epoch
 };
 
 namespace {
@@ -519,18 +520,20 @@ bool EngineHost::refine_probe_volume(const std::vector<Lightmap>& maps) {
     const std::uint64_t wait = std::clamp<std::uint64_t>(b.rounds() / 2, 1, 32);
     if (!impl_->volume_placed && (impl_->volume_since_publish < wait || moved <= 0.01 * total))
       return false;
-    if (impl_->volume_placed) ++impl_->volume_epoch;
+    if (impl_->volume_placed) {
+      ++impl_->volume_epoch;
+      impl_->volume_layout = wire::encode_probe_layout(v);  // once per epoch
+    }
     ++impl_->volume_version;
     auto frames = std::make_shared<ProbeVolumeFrames>();
     frames->epoch = impl_->volume_epoch;
     frames->version = impl_->volume_version;
-    for (const bool layout : {true, false}) {
-      wire::Envelope e;
-      *e.mutable_probe_volume() =
-          wire::probe_volume_to_proto(v, frames->epoch, frames->version, layout);
-      (layout ? frames->with_layout : frames->sh_only) =
-          std::make_shared<const std::string>(wire::encode_frame(e));
-    }
+    wire::Envelope e;
+    *e.mutable_probe_volume() =
+        wire::probe_volume_to_proto(v, frames->epoch, frames->version, impl_->volume_layout);
+    frames->with_layout = std::make_shared<const std::string>(wire::encode_frame(e));
+    e.mutable_probe_volume()->clear_layout();  // the same SH, encoded once
+    frames->sh_only = std::make_shared<const std::string>(wire::encode_frame(e));
     impl_->volume_published = std::move(level);
     impl_->volume_placed = false;
     impl_->volume_since_publish = 0;

@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <string>
 
 #include "irradcast.pb.h"
 #include "irradcast/common/irradiance_volume.h"
@@ -18,6 +19,12 @@ inline constexpr std::size_t kMaxWireProbes = std::size_t{1} << 16;
 // `with_layout`: the grid's layout too (a client's first volume of this epoch).
 ProbeVolume probe_volume_to_proto(const IrradianceVolume& v, std::uint64_t epoch,
                                   std::uint64_t version, bool with_layout);
+// The same with the layout given as encode_probe_layout(v) made it (empty: none), for a sender
+// that encodes it once per epoch rather than once per version.
+ProbeVolume probe_volume_to_proto(const IrradianceVolume& v, std::uint64_t epoch,
+                                  std::uint64_t version, const std::string& layout);
+// ProbeVolume.layout of v: its probes' offsets, on/off flags and distance moments.
+std::string encode_probe_layout(const IrradianceVolume& v);
 
 // A volume a client holds from the messages so far.
 struct ReceivedVolume {
