@@ -62,9 +62,9 @@ Scene cornell_with_prop() {
   rig.name = "rig";
   const int rig_node = s.add_node(std::move(rig));
   const int prop =
-      add_child_block(s, "prop", rig_node, {-0.2f, 0.9f, -0.2f}, {0.2f, 1.2f, 0.2f}, glow);
+      add_child_block(s, "prop", rig_node, {0.10f, 0.30f, 0.08f}, {0.20f, 0.40f, 0.16f}, glow);
   s.nodes[static_cast<std::size_t>(prop)].dynamic = true;
-  add_child_block(s, "prop_base", prop, {-0.3f, 0.7f, -0.3f}, {0.3f, 0.8f, 0.3f}, white);
+  add_child_block(s, "prop_base", prop, {0.08f, 0.25f, 0.06f}, {0.22f, 0.28f, 0.18f}, white);
   Light bulb;
   bulb.name = "bulb";
   bulb.intensity = 5.0f;
@@ -73,7 +73,7 @@ Scene cornell_with_prop() {
   lamp.name = "lamp";
   lamp.parent = prop;
   lamp.light = static_cast<int>(s.lights.size() - 1);
-  lamp.local[3] = glm::vec4(0.0f, 0.6f, 0.0f, 1.0f);
+  lamp.local[3] = glm::vec4(0.15f, 0.45f, 0.12f, 1.0f);
   s.add_node(std::move(lamp));
   return s;
 }
@@ -299,8 +299,22 @@ TEST(DynamicNodes, AViewerGetsThePoseAndNoTile) {
   ASSERT_TRUE(caught_up());
   const std::vector<Lightmap> before = viewer.lightmaps();
   const CameraPose camera = default_camera(viewer.scene(), viewer.world());
-  const ImageRGB image = viewer.compose(camera, 32, 32);
-  EXPECT_EQ(image.width, 32);
+  // The glowing prop's pixels (emission (4, 2, 1)): how many, and their mean column.
+  const auto glow = [](const ImageRGB& im) {
+    double sx = 0.0;
+    int n = 0;
+    for (int y = 0; y < im.height; ++y)
+      for (int x = 0; x < im.width; ++x) {
+        const glm::vec3 p = im.at(x, y);
+        if (p.x > 3.5f && p.x > 1.6f * p.y && p.x < 2.6f * p.y) {
+          sx += x;
+          ++n;
+        }
+      }
+    return std::pair<int, double>(n, n > 0 ? sx / n : 0.0);
+  };
+  const auto [n0, x0] = glow(viewer.compose(camera, 64, 64));
+  EXPECT_GT(n0, 10);  // the viewer draws the dynamic prop
   host.submit_edit(move("prop", {0.2f, 0.0f, 0.1f}));
   while (std::chrono::steady_clock::now() < deadline && viewer.scene_revision() < 1)
     viewer.poll(50ms);
@@ -311,7 +325,10 @@ TEST(DynamicNodes, AViewerGetsThePoseAndNoTile) {
   const std::vector<Lightmap> after = viewer.lightmaps();
   ASSERT_EQ(after.size(), before.size());
   for (std::size_t o = 0; o < after.size(); ++o) EXPECT_TRUE(after[o].texels == before[o].texels);
-  EXPECT_EQ(viewer.compose(camera, 32, 32).width, 32);
+  // The next frame shows the new pose: 0.2 m along +x is to the left in this camera's image.
+  const auto [n1, x1] = glow(viewer.compose(camera, 64, 64));
+  EXPECT_GT(n1, 10);
+  EXPECT_LT(x1, x0 - 5.0) << "the prop did not move on screen";
 }
 
 // The server computes the probe volume for a scene with dynamic nodes and every viewer gets it:

@@ -16,8 +16,16 @@ std::shared_ptr<ClientScene> make_client_scene(const std::string& bytes, const s
   auto s = std::make_shared<ClientScene>();
   s->unpacked = wire::open_scene_package(bytes, hash);
   s->world = World::build(s->unpacked.scene);
-  s->rays = std::make_unique<RayScene>(s->world);
+  s->build_ray_scenes();
   return s;
+}
+
+void ClientScene::build_ray_scenes() {
+  rays = std::make_unique<RayScene>(world);
+  const bool any_dynamic = std::any_of(world.objects.begin(), world.objects.end(),
+                                       [](const WorldObject& o) { return o.dynamic; });
+  dynamic_rays =
+      any_dynamic ? std::make_unique<RayScene>(world, true, RaySceneContent::Dynamic) : nullptr;
 }
 
 ClientSession::ClientSession(ClientSessionOptions options, ClientSceneFactory factory)
@@ -176,6 +184,7 @@ ClientStep ClientSession::install(std::shared_ptr<ClientScene> scene, bool from_
   scene_ = std::move(scene);
   scene_hash_ = welcome_.scene_hash();
   revision_ = scene_->unpacked.revision;
+  ++static_revision_;
   phase_ = Phase::Streaming;
   // Edits that arrived during the download, in order (those the package has are skipped).
   std::vector<wire::SceneEdit> pending;
@@ -237,10 +246,13 @@ void ClientSession::apply_scene_edit(const wire::SceneEdit& m) {
   ClientScene& s = *scene_;
   try {
     const SceneEdit edit = wire::from_proto(m);
+    const bool static_change = edit_changes_static_scene(s.unpacked.scene, edit);
     apply_edit(s.unpacked.scene, edit);  // validates first: unchanged on a bad edit
     const std::vector<int> changed = s.world.update(s.unpacked.scene);
     if (s.rays) s.rays->update(changed);
+    if (s.dynamic_rays) s.dynamic_rays->update(changed);
     revision_ = m.revision();
+    if (static_change) ++static_revision_;
     ++counters_.edits_applied;
     log::info(options_.log_tag, "applied scene edit " + std::to_string(revision_) + ": " +
                                     edit_to_json(edit) + " (" + std::to_string(changed.size()) +

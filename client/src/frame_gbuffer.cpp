@@ -37,7 +37,7 @@ glm::vec3 ScreenProjection::project(glm::vec3 p) const {
 
 FrameGBuffer trace_frame(const World& world, const RayScene& rays, const Atlas& atlas,
                          const std::vector<Lightmap>& lightmaps, const CameraPose& camera,
-                         int width, int height) {
+                         int width, int height, const DynamicView* dynamic) {
   if (width <= 0 || height <= 0) throw Error("image size must be positive");
   const HitShader shader(world, atlas, lightmaps);
   FrameGBuffer g;
@@ -72,6 +72,14 @@ FrameGBuffer trace_frame(const World& world, const RayScene& rays, const Atlas& 
       [&](int x, int y, glm::vec3 direction) {
         if (sky) g.emission[g.index(x, y)] = sky->radiance(direction);
       });
+  if (dynamic && dynamic->rays)
+    for (const DynamicPixel& d : trace_dynamic(world, rays, *dynamic, camera, width, height)) {
+      g.position[d.index] = d.position;
+      g.normal[d.index] = d.normal;
+      g.depth[d.index] = d.depth;
+      g.diffuse[d.index] = d.shade.diffuse;
+      g.emission[d.index] = d.shade.emission;
+    }
   return g;
 }
 

@@ -47,7 +47,7 @@ class SceneCache {
     auto s = std::make_shared<ClientScene>();
     s->unpacked = wire::open_scene_package(bytes, hash);
     s->world = World::build(s->unpacked.scene);
-    if (need_rays) s->rays = std::make_unique<RayScene>(s->world);
+    if (need_rays) s->build_ray_scenes();
     scenes_.emplace(hash, s);
     return s;
   }

@@ -40,6 +40,28 @@ void ReprojectionCache::clear() {
   tile_next_ = 0;
 }
 
+std::size_t ReprojectionCache::forget(const std::vector<Bounds>& regions) {
+  if (regions.empty()) return 0;
+  std::atomic<std::size_t> forgotten{0};
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, history_.count.size(), 4096),
+      [&](const tbb::blocked_range<std::size_t>& r) {
+        std::size_t local = 0;
+        for (std::size_t i = r.begin(); i < r.end(); ++i) {
+          if (history_.count[i] == 0) continue;
+          const glm::vec3 p = history_.position[i];
+          for (const Bounds& b : regions)
+            if (glm::all(glm::greaterThanEqual(p, b.lo)) && glm::all(glm::lessThanEqual(p, b.hi))) {
+              history_.count[i] = 0;
+              ++local;
+              break;
+            }
+        }
+        forgotten += local;
+      });
+  return forgotten;
+}
+
 std::vector<int> ReprojectionCache::refresh_tiles(int width, int height) {
   const int tx = (width + params_.tile - 1) / params_.tile;
   const int ty = (height + params_.tile - 1) / params_.tile;

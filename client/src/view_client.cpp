@@ -347,16 +347,24 @@ void ViewClient::close() {
   net_.reset();
 }
 
+DynamicView ViewClient::dynamic_view() const {
+  const wire::ReceivedVolume& v = core_.probe_volume();
+  return {core_.scene().dynamic_rays.get(), v.epoch != 0 && v.has_sh ? &v.volume : nullptr};
+}
+
 ImageRGB ViewClient::compose(const CameraPose& camera, int width, int height) const {
   const ClientScene& s = core_.scene();
-  return irradcast::compose(s.world, *s.rays, s.unpacked.atlas, lightmaps(), camera, width, height);
+  const DynamicView dynamic = dynamic_view();
+  return irradcast::compose(s.world, *s.rays, s.unpacked.atlas, lightmaps(), camera, width, height,
+                            nullptr, &dynamic);
 }
 
 ImageRGB ViewClient::compose(const CameraPose& camera, int width, int height, ClientPasses& passes,
                              ClientFrameStats* stats) const {
   const ClientScene& s = core_.scene();
+  const DynamicView dynamic = dynamic_view();
   return passes.compose(s.world, *s.rays, s.unpacked.atlas, lightmaps(), camera, width, height,
-                        stats);
+                        stats, &dynamic);
 }
 
 const Scene& ViewClient::scene() const {

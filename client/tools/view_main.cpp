@@ -173,7 +173,7 @@ Frames compose_frames(const Options& o, irradcast::ViewClient& client,
                       Clock::time_point deadline) {
   using namespace irradcast;
   client.send_camera(camera);
-  std::uint64_t revision = client.scene_revision();
+  std::uint64_t revision = client.static_revision();
   Frames f;
   const auto interval = std::chrono::milliseconds(o.frame_ms);
   for (;;) {
@@ -195,9 +195,9 @@ Frames compose_frames(const Options& o, irradcast::ViewClient& client,
         camera = path->at(static_cast<double>(f.count) * o.path_dt);
         client.send_camera(camera);
       }
-      if (client.scene_revision() != revision) {  // the history shows the old scene
+      if (client.static_revision() != revision) {  // the history shows the old scene
         passes.reset();
-        revision = client.scene_revision();
+        revision = client.static_revision();
       }
       ClientFrameStats fs;
       f.last = client.compose(camera, o.width, o.height, passes, &fs);

@@ -32,7 +32,7 @@ void store_row(const BlockShade& s, int j, glm::vec3* out) {
 
 ImageRGB compose(const World& world, const RayScene& rays, const Atlas& atlas,
                  const std::vector<Lightmap>& lightmaps, const CameraPose& camera, int width,
-                 int height, ComposeStats* stats) {
+                 int height, ComposeStats* stats, const DynamicView* dynamic) {
   if (width <= 0 || height <= 0) throw Error("image size must be positive");
   auto start = std::chrono::steady_clock::now();
   const HitShader shader(world, atlas, lightmaps);
@@ -59,6 +59,9 @@ ImageRGB compose(const World& world, const RayScene& rays, const Atlas& atlas,
       }
     });
   });
+  if (dynamic && dynamic->rays)
+    for (const DynamicPixel& d : trace_dynamic(world, rays, *dynamic, camera, width, height))
+      image.pixels[d.index] = d.shade.diffuse + d.shade.emission;
   if (stats) {
     stats->rays = static_cast<std::uint64_t>(width) * height;
     stats->seconds =

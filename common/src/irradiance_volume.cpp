@@ -79,9 +79,12 @@ glm::vec3 IrradianceVolume::irradiance(glm::vec3 p, glm::vec3 n) const {
     const glm::vec3 to_probe = probe_position(i) - q;
     const float dist = glm::length(to_probe);
     const glm::vec3 dir = dist > 0.0f ? to_probe / dist : n;
-    // Probes behind the surface count less (DDGI's smooth backface term).
+    // Probes behind the surface count less (DDGI's smooth backface term), with the square root
+    // of DDGI's (1 + cos) / 2 rather than its square: the square leans on the probes in front of
+    // the surface so much that a point reads the light half a spacing out along its normal
+    // (spheres near walls and openings 5-10 % off against the path tracer; docs/DYNAMIC.md).
     const float facing = 0.5f * (glm::dot(dir, n) + 1.0f);
-    float w = facing * facing + 0.2f;
+    float w = std::sqrt(facing) + 0.2f;
     // Chebyshev: how likely the probe sees q, from its distance moments towards q.
     const glm::vec2 m = moments(i, -dir);
     if (dist > m.x) {

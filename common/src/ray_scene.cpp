@@ -110,8 +110,10 @@ struct RayScene::Impl {
   bool packets16 = __builtin_cpu_supports("avx512f");
 };
 
-RayScene::RayScene(const World& world, bool editable)
+RayScene::RayScene(const World& world, bool editable, RaySceneContent content)
     : impl_(std::make_unique<Impl>()), world_(&world) {
+  const bool dynamic = content == RaySceneContent::Dynamic;
+  editable = editable || dynamic;
   float extent = world.bounds.max_extent();
   epsilon_ = 1e-4f * (extent > 0.0f ? extent : 1.0f);
   RTCDevice device = shared_device();
@@ -127,8 +129,8 @@ RayScene::RayScene(const World& world, bool editable)
   }
   impl_->filters.resize(world.objects.size());
   for (const WorldObject& o : world.objects) {
-    if (o.dynamic) {  // not in the static scene: not even a disabled geometry (its BVH is
-      impl_->geometries.push_back(nullptr);  // the scene's without the object)
+    if (o.dynamic != dynamic) {  // not in this scene: not even a disabled geometry (the static
+      impl_->geometries.push_back(nullptr);  // BVH is the one of the scene without the object)
       continue;
     }
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
@@ -173,7 +175,7 @@ void RayScene::update(const std::vector<int>& objects) {
       throw Error("ray scene: no object " + std::to_string(index) + " to update");
     const WorldObject& o = world_->objects[static_cast<std::size_t>(index)];
     RTCGeometry geom = impl_->geometries[static_cast<std::size_t>(index)];
-    if (!geom) continue;  // dynamic: not in this scene
+    if (!geom) continue;  // not in this scene
     auto* vb = static_cast<float*>(rtcGetGeometryBufferData(geom, RTC_BUFFER_TYPE_VERTEX, 0));
     if (!vb) throw Error("ray scene: object " + std::to_string(index) + " has no vertex buffer");
     std::memcpy(vb, o.positions.data(), o.positions.size() * sizeof(glm::vec3));

@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -30,6 +31,7 @@
 #include "irradcast/engine/backend_select.h"
 #include "irradcast/engine/denoise.h"
 #include "irradcast/engine/engine.h"
+#include "irradcast/engine/irradiance_volume_builder.h"
 #include "irradcast/engine/path_tracer.h"
 #include "irradcast/engine/prepared_scene.h"
 #include "irradcast/engine/reference_lightmaps.h"
@@ -313,12 +315,48 @@ json write_lightmaps(Bake& b, const PreparedScene& p, const std::vector<Lightmap
   return lightmaps;
 }
 
-// Composes the view from the lightmaps and writes view.exr and view.png.
+// The dynamic objects (docs/DYNAMIC.md) as a viewer draws them: their own ray scene and the probe
+// volume the server would stream, refined from the lightmaps as many times as its running mean
+// keeps (a server's volume after as many updates).
+struct DynamicObjects {
+  std::unique_ptr<RayScene> rays;
+  std::unique_ptr<IrradianceVolumeBuilder> volume;
+  DynamicView view() const { return {rays.get(), volume ? &volume->volume() : nullptr}; }
+};
+
+DynamicObjects light_dynamic_objects(Bake& b, const PreparedScene& p,
+                                     const std::vector<Lightmap>& maps) {
+  DynamicObjects d;
+  const World& w = p.world();
+  if (std::none_of(w.objects.begin(), w.objects.end(),
+                   [](const WorldObject& o) { return o.dynamic; }))
+    return d;
+  d.rays = std::make_unique<RayScene>(w, true, RaySceneContent::Dynamic);
+  const IrradianceVolumeOptions vo;
+  d.volume = std::make_unique<IrradianceVolumeBuilder>(w, p.rays(), p.atlas(), vo);
+  for (int i = 0; i < vo.max_history; ++i) d.volume->refine(maps);
+  b.timings["probe_volume"] = b.sw.lap();
+  const VolumeGrid& g = d.volume->volume().grid;
+  b.report["probe_volume"] = {{"probes", g.probe_count()},
+                              {"counts", {g.counts.x, g.counts.y, g.counts.z}},
+                              {"spacing", g.spacing},
+                              {"switched_off", d.volume->switched_off()},
+                              {"refines", vo.max_history}};
+  log::info("bake", "probe volume for the dynamic objects: " + std::to_string(g.probe_count()) +
+                        " probes, " + std::to_string(vo.max_history) + " refines");
+  return d;
+}
+
+// Composes the view from the lightmaps (and the dynamic objects from the probe volume) and
+// writes view.exr and view.png.
 ImageRGB compose_view(Bake& b, const PreparedScene& p, const std::vector<Lightmap>& maps,
-                      const CameraPose& camera, const ToneMapOptions& tm) {
+                      const DynamicObjects& dynamic, const CameraPose& camera,
+                      const ToneMapOptions& tm) {
   const Options& o = b.o;
   ComposeStats cs;
-  ImageRGB view = compose(p.world(), p.rays(), p.atlas(), maps, camera, o.width, o.height, &cs);
+  const DynamicView dv = dynamic.view();
+  ImageRGB view =
+      compose(p.world(), p.rays(), p.atlas(), maps, camera, o.width, o.height, &cs, &dv);
   b.timings["compose"] = b.sw.lap();
   write_exr((fs::path(o.out) / "view.exr").string(), view);
   write_png_tonemapped((fs::path(o.out) / "view.png").string(), view, tm);
@@ -445,7 +483,10 @@ int run(const Options& o) {
   const Lightmaps lm = o.method == "reference" ? reference_method(b, p, pto) : engine_method(b, p);
   b.add_rays("lightmaps", lm.rays, lm.seconds);
   json lightmaps = write_lightmaps(b, p, lm.maps);
-  const ImageRGB view = compose_view(b, p, lm.maps, camera, tm);
+  const DynamicObjects dynamic = light_dynamic_objects(b, p, lm.maps);
+  const ImageRGB view = compose_view(b, p, lm.maps, dynamic, camera, tm);
+  // The reference sees the dynamic objects with camera rays only, as the viewers draw them.
+  pto.camera_only = dynamic.rays.get();
   if (o.reference_spp > 0) compare_with_reference(b, view, render_reference(b, p, pto, camera), tm);
   b.timings["total"] = b.total.lap();
   write_report(b, p, view, tm, std::move(lightmaps));

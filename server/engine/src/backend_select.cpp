@@ -91,6 +91,9 @@ BackendChoice make_backend(const BackendOptions& options, const World& world, co
 std::unique_ptr<ReferenceRenderer> make_reference(const BackendOptions& options, const World& world,
                                                   const RayScene& rays, const LightSampler& lights,
                                                   const PathTracerOptions& tracer) {
+  // Objects seen by camera rays only are the CPU path tracer's alone (reference.comp traces the
+  // static scene).
+  if (tracer.camera_only) return std::make_unique<CpuReference>(world, rays, lights, tracer);
   std::string reason;
   std::unique_ptr<VulkanBackend> v = choose_vulkan(options, world, rays, lights, reason);
   if (v) return std::make_unique<VulkanReference>(std::move(v), tracer);

@@ -93,6 +93,11 @@ glm::vec3 PathTracer::reflected(const Hit& h, glm::vec3 wo, int bounces, Rng& rn
 glm::vec3 PathTracer::radiance(const Ray& ray, Rng& rng, std::uint64_t* ray_count) const {
   Hit h = rays_->intersect(ray);
   if (ray_count) *ray_count += 1;
+  if (options_.camera_only) {
+    const Hit d = options_.camera_only->intersect(ray);
+    if (ray_count) *ray_count += 1;
+    if (d.valid() && (!h.valid() || d.t < h.t)) h = d;
+  }
   if (!h.valid())
     return lights_->has_sky() ? lights_->sky()->radiance(ray.direction) : glm::vec3(0.0f);
   return emitted(*world_, h, ray.direction) +
@@ -100,10 +105,14 @@ glm::vec3 PathTracer::radiance(const Ray& ray, Rng& rng, std::uint64_t* ray_coun
 }
 
 ImageRGB PathTracer::render(const CameraPose& camera, int width, int height, int spp,
-                            const std::function<void(int, int)>& on_pass,
-                            RenderStats* stats) const {
+                            const std::function<void(int, int)>& on_pass, RenderStats* stats,
+                            const std::vector<std::uint8_t>* only) const {
   if (width <= 0 || height <= 0) throw Error("image size must be positive");
   if (spp <= 0) throw Error("samples per pixel must be positive");
+  if (only && only->size() != static_cast<std::size_t>(width) * static_cast<std::size_t>(height))
+    throw Error("path tracer: the pixel mask has " + std::to_string(only->size()) +
+                " entries for a " + std::to_string(width) + " x " + std::to_string(height) +
+                " image");
   auto start = std::chrono::steady_clock::now();
   const std::size_t n = static_cast<std::size_t>(width) * height;
   std::vector<glm::dvec3> sum(n, glm::dvec3(0.0));
@@ -118,6 +127,7 @@ ImageRGB PathTracer::render(const CameraPose& camera, int width, int height, int
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         std::uint64_t local = 0;
                         for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                          if (only && !(*only)[i]) continue;
                           Rng rng(mix64(options_.seed) ^ i, static_cast<std::uint64_t>(pass));
                           sum[i] += glm::dvec3(radiance(primary[i], rng, &local));
                         }

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "irradcast/common/atlas.h"
+#include "irradcast/common/dynamic_view.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/lightmap.h"
 #include "irradcast/common/ray_scene.h"
@@ -35,17 +36,23 @@ struct ClientFrameStats {
   double resolve_s = 0.0;
   double total_s = 0.0;
   std::size_t ssao_pixels = 0;  // pixels whose SSAO was estimated this frame
+  std::size_t forgotten = 0;    // history pixels forgotten because a dynamic object moved
   ReprojectionStats reprojection;
 };
 
 class ClientPasses {
  public:
   explicit ClientPasses(ClientPassOptions options = {});
-  // The next frame. Linear radiance like irradcast::compose().
+  // The next frame. Linear radiance like irradcast::compose(); with `dynamic`, the dynamic
+  // objects drawn too (dynamic_view.h). SSAO sees them (contact shadows), and where one moved
+  // since the last frame, the history of what it covers and shadows (its old and new boxes
+  // grown by the SSAO radius) is forgotten, so a moving object leaves no ghost.
   ImageRGB compose(const World& world, const RayScene& rays, const Atlas& atlas,
                    const std::vector<Lightmap>& lightmaps, const CameraPose& camera, int width,
-                   int height, ClientFrameStats* stats = nullptr);
-  // Forget the history (a camera cut, a scene edit).
+                   int height, ClientFrameStats* stats = nullptr,
+                   const DynamicView* dynamic = nullptr);
+  // Forget the history (a camera cut, an edit of the static scene; a dynamic object's move needs
+  // no reset).
   void reset();
   const ClientPassOptions& options() const { return options_; }
   // The SSAO visibility of the last frame (empty without --ssao).
@@ -57,6 +64,7 @@ class ClientPasses {
   std::vector<float> visibility_;
   std::vector<std::uint8_t> compute_;
   std::uint32_t frame_ = 0;
+  std::vector<Bounds> dynamic_boxes_;  // where the dynamic objects were in the last frame
 };
 
 }  // namespace irradcast

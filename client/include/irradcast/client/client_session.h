@@ -37,6 +37,11 @@ struct ClientScene {
   wire::UnpackedScene unpacked;
   World world;
   std::unique_ptr<RayScene> rays;  // null when the client does not compose frames
+  // The dynamic objects' own ray scene (dynamic_view.h); null without dynamic objects or rays.
+  std::unique_ptr<RayScene> dynamic_rays;
+
+  // Builds `rays` and, when the world has dynamic objects, `dynamic_rays`.
+  void build_ray_scenes();
 };
 
 // Makes the scene of a package (checking it against `hash`); throws irradcast::Error.
@@ -142,6 +147,10 @@ class ClientSession {
   const std::string& scene_hash() const { return scene_hash_; }
   std::uint64_t tile_epoch() const { return tile_epoch_; }
   std::uint64_t revision() const { return revision_; }
+  // Counts the changes to the static scene: a scene installed, or an applied edit that moved,
+  // hid or changed static content (edit_changes_static_scene). Edits that only move dynamic
+  // objects leave it (a viewer's history stays valid; client_passes.h).
+  std::uint64_t static_revision() const { return static_revision_; }
   std::uint64_t session() const { return session_; }
   std::chrono::milliseconds ping_interval() const { return ping_interval_; }
   const std::optional<wire::Stats>& last_stats() const { return last_stats_; }
@@ -169,6 +178,7 @@ class ClientSession {
   std::uint64_t session_ = 0;
   std::uint64_t tile_epoch_ = 0;
   std::uint64_t revision_ = 0;
+  std::uint64_t static_revision_ = 0;
   wire::ReceivedVolume volume_;
   TileCache tiles_;
   std::vector<wire::SceneEdit> pending_edits_;  // arrived while the scene loads

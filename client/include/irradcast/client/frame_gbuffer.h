@@ -10,6 +10,7 @@
 #include <glm/glm.hpp>
 
 #include "irradcast/common/atlas.h"
+#include "irradcast/common/dynamic_view.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/lightmap.h"
 #include "irradcast/common/ray_scene.h"
@@ -55,12 +56,13 @@ struct FrameGBuffer {
   }
 };
 
-// One primary ray per pixel (Embree packets, as compose()) and the lightmap lookup at each hit.
-// For the same inputs, diffuse + emission equals compose()'s pixel exactly. Throws
+// One primary ray per pixel (Embree packets, as compose()) and the lightmap lookup at each hit;
+// with `dynamic`, the dynamic objects where they are nearer (dynamic_view.h), so that SSAO sees
+// them. For the same inputs, diffuse + emission equals compose()'s pixel exactly. Throws
 // irradcast::Error like compose() on a bad size or lightmaps that do not match the scene.
 FrameGBuffer trace_frame(const World& world, const RayScene& rays, const Atlas& atlas,
                          const std::vector<Lightmap>& lightmaps, const CameraPose& camera,
-                         int width, int height);
+                         int width, int height, const DynamicView* dynamic = nullptr);
 
 // radiance = diffuse * visibility + emission per pixel (the sky on misses: never occluded);
 // `visibility` empty means 1 everywhere.

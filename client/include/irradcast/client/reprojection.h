@@ -68,6 +68,10 @@ class ReprojectionCache {
 
   // Forgets the history: the next frame is computed from scratch.
   void clear();
+  // Forgets the history of the points inside any of `regions` (world space): what a moved
+  // dynamic object covered or shadowed is computed from scratch in the next frame. Returns the
+  // number of history pixels forgotten.
+  std::size_t forget(const std::vector<Bounds>& regions);
   const ReprojectionParams& params() const { return params_; }
   std::uint64_t frames() const { return frame_; }
 

@@ -93,9 +93,11 @@ class ViewClient {
   // Says Bye and closes. Idempotent.
   void close();
 
+  // The viewer's frame: the static scene from the lightmaps and the dynamic objects lit by the
+  // probe volume (unlit until it arrives; docs/DYNAMIC.md).
   ImageRGB compose(const CameraPose& camera, int width, int height) const;
   // The same frame through the client passes (SSAO, reprojection; client_passes.h). Reset
-  // `passes` when scene_revision() changes: its history belongs to the old scene.
+  // `passes` when static_revision() changes: its history belongs to the old scene.
   ImageRGB compose(const CameraPose& camera, int width, int height, ClientPasses& passes,
                    ClientFrameStats* stats = nullptr) const;
   const Scene& scene() const;
@@ -117,6 +119,8 @@ class ViewClient {
   // The revision of the viewer's scene: the package's, plus the edits applied since (every
   // applied SceneEdit the server broadcasts, in order; docs/EDITS.md).
   std::uint64_t scene_revision() const { return core_.revision(); }
+  // Changes with each new scene and each edit of the static scene (not with dynamic moves).
+  std::uint64_t static_revision() const { return core_.static_revision(); }
   std::uint64_t session() const { return core_.session(); }
   // The address of the current connection (or of the next attempt).
   const HostPort& server() const { return servers_[current_]; }
@@ -139,6 +143,8 @@ class ViewClient {
   void send_all(const ClientStep& step);
   // Next frame within the deadline; false on timeout. Throws ConnectionLost.
   bool read_frame(wire::Envelope& out, std::chrono::steady_clock::time_point deadline);
+  // The dynamic objects and the volume that lights them, for compose().
+  DynamicView dynamic_view() const;
   // Hands a frame to the protocol core and acts on a server Error or Bye.
   ClientStep feed(const wire::Envelope& e);
   // After ConnectionLost: reconnects (establish) or, without options.reconnect, throws Error.

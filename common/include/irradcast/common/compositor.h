@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "irradcast/common/atlas.h"
+#include "irradcast/common/dynamic_view.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/lightmap.h"
 #include "irradcast/common/ray_scene.h"
@@ -23,9 +24,11 @@ struct ComposeStats {
 };
 
 // Linear radiance, no exposure, no tone map. `lightmaps` and `atlas.objects` are indexed like
-// world.objects. Misses show world.scene's sky.
+// world.objects. Misses show world.scene's sky. With `dynamic`, the dynamic objects are drawn
+// over the static scene where they are nearer (dynamic_view.h); without, the image is the static
+// scene's alone.
 ImageRGB compose(const World& world, const RayScene& rays, const Atlas& atlas,
                  const std::vector<Lightmap>& lightmaps, const CameraPose& camera, int width,
-                 int height, ComposeStats* stats = nullptr);
+                 int height, ComposeStats* stats = nullptr, const DynamicView* dynamic = nullptr);
 
 }  // namespace irradcast

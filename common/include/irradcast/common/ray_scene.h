@@ -44,12 +44,21 @@ struct RayBatch {
   Hit hit[kSize];
 };
 
+// Which of a world's objects a RayScene holds.
+enum class RaySceneContent {
+  Static,   // the static scene: what the engine lights and traces (dynamic objects are not in it)
+  Dynamic,  // the dynamic objects only: what a viewer draws over the static scene (always
+            // editable, so that a move refits one object's BVH)
+};
+
 class RayScene {
  public:
-  // The world's static scene (dynamic objects are not in it; hidden ones are, disabled).
-  // `editable`: build the two-level structure that update() changes incrementally (traversal is
-  // somewhat slower than the single-level BVH a static scene gets).
-  explicit RayScene(const World& world, bool editable = false);
+  // The world's static scene (dynamic objects are not in it; hidden ones are, disabled), or with
+  // RaySceneContent::Dynamic its dynamic objects (hidden ones disabled). Geometry IDs are object
+  // indices either way. `editable`: build the two-level structure that update() changes
+  // incrementally (traversal is somewhat slower than the single-level BVH a static scene gets).
+  explicit RayScene(const World& world, bool editable = false,
+                    RaySceneContent content = RaySceneContent::Static);
   ~RayScene();
   RayScene(const RayScene&) = delete;
   RayScene& operator=(const RayScene&) = delete;
@@ -72,7 +81,8 @@ class RayScene {
     return p + (glm::dot(ng, d) >= 0.0f ? epsilon_ : -epsilon_) * ng;
   }
 
-  // After World::update: the objects whose positions or visibility changed. Refits their BVHs
+  // After World::update: the objects whose positions or visibility changed (objects this scene
+  // does not hold are skipped). Refits their BVHs
   // (rigid motion keeps every triangle, so a refit is always valid) and rebuilds the top level.
   // Not thread-safe against concurrent intersect() calls.
   void update(const std::vector<int>& objects);

@@ -48,7 +48,8 @@ BackendChoice make_backend(const BackendOptions& options, const World& world, co
 
 // The reference path tracer on the device make_backend would pick: reference.comp on the
 // Vulkan backend, or PathTracer on the CPU with `tracer`'s bounces and seed (logs the choice
-// like make_backend). `world`, `rays` and `lights` must outlive it.
+// like make_backend); always the CPU's with tracer.camera_only (dynamic objects). `world`,
+// `rays` and `lights` must outlive it.
 std::unique_ptr<ReferenceRenderer> make_reference(const BackendOptions& options, const World& world,
                                                   const RayScene& rays, const LightSampler& lights,
                                                   const PathTracerOptions& tracer);

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <vector>
 
 #include <glm/glm.hpp>
 
@@ -23,6 +24,11 @@ struct PathTracerOptions {
                              // leave the scene to the sky (area lights and sky only; an
                              // independent estimator for cross-checks)
   std::uint64_t seed = 1;
+  // Objects seen by camera rays only (a viewer's dynamic objects, RaySceneContent::Dynamic of
+  // the same world): a primary ray that meets one first is shaded there, and every later ray
+  // traces the static scene alone (they see the room; the room does not see them, nor they
+  // themselves). Null: none.
+  const RayScene* camera_only = nullptr;
 };
 
 class PathTracer {
@@ -46,10 +52,12 @@ class PathTracer {
   };
   // Progressive render: `spp` passes of one path per pixel (through the pixel centre, like the
   // compositor, so the two differ only in their lighting). `on_pass(done, spp)` is called after
-  // every pass. Deterministic for a given seed whatever the thread count.
+  // every pass. Deterministic for a given seed whatever the thread count. With `only`
+  // (width x height flags), only the flagged pixels are rendered; the others stay black.
   ImageRGB render(const CameraPose& camera, int width, int height, int spp,
                   const std::function<void(int, int)>& on_pass = {},
-                  RenderStats* stats = nullptr) const;
+                  RenderStats* stats = nullptr,
+                  const std::vector<std::uint8_t>* only = nullptr) const;
 
   const PathTracerOptions& options() const { return options_; }
 

@@ -1,0 +1,72 @@
+#include "irradcast/common/dynamic_view.h"
+
+#include <mutex>
+
+#include "irradcast/common/error.h"
+#include "irradcast/common/primary_hits.h"
+#include "irradcast/common/sampling.h"
+
+namespace irradcast {
+
+HitShade shade_dynamic(const World& world, const IrradianceVolume* volume, glm::vec3 direction,
+                       const Hit& h, glm::vec3 p, glm::vec3 n) {
+  HitShade s;
+  const Material& m = world.material(h.object, h.triangle);
+  if (m.is_emissive()) {
+    const glm::vec3 ng =
+        world.objects[static_cast<std::size_t>(h.object)].geometric_normal(h.triangle);
+    if (m.double_sided || glm::dot(ng, direction) < 0.0f)
+      s.emission = world.emission(h.object, h.triangle, h.u, h.v);
+  }
+  if (volume && volume->probe_count() > 0)
+    s.diffuse = world.albedo(h.object, h.triangle, h.u, h.v) * kInvPi * volume->irradiance(p, n);
+  return s;
+}
+
+std::vector<DynamicPixel> trace_dynamic(const World& world, const RayScene& static_rays,
+                                        const DynamicView& view, const CameraPose& camera,
+                                        int width, int height) {
+  if (width <= 0 || height <= 0) throw Error("image size must be positive");
+  std::vector<DynamicPixel> out;
+  if (!view.rays) return out;
+  std::mutex lock;
+  trace_primary_blocks(*view.rays, camera, width, height, [&](const PrimaryBlock& b) {
+    DynamicPixel local[PrimaryBlock::kLanes];
+    int count = 0;
+    for (int k = 0; k < PrimaryBlock::kLanes; ++k) {
+      if (!b.active[k] || !b.hit(k)) continue;
+      Ray ray;
+      ray.origin = b.origin;
+      ray.direction = b.direction(k);
+      ray.tmax = b.t[k];
+      if (static_rays.occluded(ray)) continue;  // a static surface is nearer
+      const Hit h = b.hit_at(k);
+      const WorldObject& o = world.objects[static_cast<std::size_t>(h.object)];
+      DynamicPixel& px = local[count++];
+      px.index = static_cast<std::size_t>(b.y(k)) * static_cast<std::size_t>(width) +
+                 static_cast<std::size_t>(b.x(k));
+      px.position = ray.origin + h.t * ray.direction;
+      px.normal = o.shading_normal(h.triangle, h.u, h.v);
+      if (glm::dot(px.normal, ray.direction) > 0.0f) px.normal = -px.normal;
+      px.depth = std::max(glm::dot(px.position - camera.eye, camera.forward), 1e-30f);
+      px.shade = shade_dynamic(world, view.volume, ray.direction, h, px.position, px.normal);
+    }
+    if (count == 0) return;
+    const std::lock_guard<std::mutex> g(lock);
+    out.insert(out.end(), local, local + count);
+  });
+  return out;
+}
+
+std::vector<Bounds> dynamic_bounds(const World& world) {
+  std::vector<Bounds> boxes;
+  for (const WorldObject& o : world.objects) {
+    if (!o.dynamic || !o.visible) continue;
+    Bounds b;
+    for (const glm::vec3& p : o.positions) b.extend(p);
+    boxes.push_back(b);
+  }
+  return boxes;
+}
+
+}  // namespace irradcast
