@@ -281,6 +281,9 @@ TEST(ProbeVolumeMessage, RoundTripAndBadMessages) {
   m = full;
   m.clear_origin();
   refused(m, "no origin");
+  m = full;
+  m.set_origin(0, 3e38f);
+  refused(m, "a grid whose probes lie past any finite coordinate");
   // binary16 infinity or NaN in the SH: refused, not evaluated to NaN.
   std::string nan_sh;
   for (std::size_t i = 0; i < v.probe_count() * kShCoefficients * 3; ++i) nan_sh += "\x00\x7e";

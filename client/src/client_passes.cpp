@@ -34,33 +34,31 @@ ClientPasses::ClientPasses(ClientPassOptions options)
 void ClientPasses::reset() {
   cache_.clear();
   frame_ = 0;
-  dynamic_boxes_.clear();
+  dynamic_state_.clear();
 }
 
-namespace {
-
-// The regions whose history a dynamic object's move made stale: the old and new boxes of every
-// object whose box changed (all of them when one appeared or went), grown by `margin`.
-std::vector<Bounds> moved_regions(const std::vector<Bounds>& before, const std::vector<Bounds>& now,
-                                  float margin) {
-  std::vector<Bounds> out;
+std::vector<Bounds> ClientPasses::moved_dynamic_objects(const World& world, float margin) {
+  std::vector<Bounds> regions;
+  if (dynamic_state_.size() != world.objects.size())
+    dynamic_state_.assign(world.objects.size(), {});
   const auto grown = [margin](Bounds b) {
     b.lo -= glm::vec3(margin);
     b.hi += glm::vec3(margin);
     return b;
   };
-  const bool same_set = before.size() == now.size();
-  for (std::size_t i = 0; i < now.size(); ++i) {
-    if (same_set && before[i].lo == now[i].lo && before[i].hi == now[i].hi) continue;
-    out.push_back(grown(now[i]));
-    if (same_set) out.push_back(grown(before[i]));
+  for (std::size_t i = 0; i < world.objects.size(); ++i) {
+    const WorldObject& o = world.objects[i];
+    DynamicState& s = dynamic_state_[i];
+    if (!o.dynamic || (s.known && s.visible == o.visible && s.transform == o.transform)) continue;
+    if (s.known && s.visible) regions.push_back(grown(s.box));
+    s = DynamicState{true, o.visible, o.transform, Bounds{}};
+    if (o.visible) {
+      for (const glm::vec3& p : o.positions) s.box.extend(p);
+      regions.push_back(grown(s.box));
+    }
   }
-  if (!same_set)
-    for (const Bounds& b : before) out.push_back(grown(b));
-  return out;
+  return regions;
 }
-
-}  // namespace
 
 ImageRGB ClientPasses::compose(const World& world, const RayScene& rays, const Atlas& atlas,
                                const std::vector<Lightmap>& lightmaps, const CameraPose& camera,
@@ -82,10 +80,12 @@ ImageRGB ClientPasses::compose(const World& world, const RayScene& rays, const A
   if (options_.reproject) {
     auto t = Clock::now();
     if (dynamic && dynamic->rays) {
-      std::vector<Bounds> boxes = dynamic_bounds(world);
       const float eps = options_.reprojection.epsilon * world.bounds.max_extent();
-      st.forgotten = cache_.forget(moved_regions(dynamic_boxes_, boxes, radius + eps));
-      dynamic_boxes_ = std::move(boxes);
+      const std::vector<Bounds> regions = moved_dynamic_objects(world, radius + eps);
+      if (regions.size() > kMaxForgetRegions)
+        cache_.clear();  // many objects moved at once: cheaper to start again
+      else
+        st.forgotten = cache_.forget(regions);
     }
     const float eps = options_.reprojection.epsilon * world.bounds.max_extent();
     cache_.reproject(g, eps, compute_, &st.reprojection);

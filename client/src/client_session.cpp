@@ -185,6 +185,7 @@ ClientStep ClientSession::install(std::shared_ptr<ClientScene> scene, bool from_
   scene_hash_ = welcome_.scene_hash();
   revision_ = scene_->unpacked.revision;
   ++static_revision_;
+  volume_ = wire::ReceivedVolume{};  // the old scene's; the server sends this one's on subscribe
   phase_ = Phase::Streaming;
   // Edits that arrived during the download, in order (those the package has are skipped).
   std::vector<wire::SceneEdit> pending;

@@ -73,13 +73,13 @@ FrameGBuffer trace_frame(const World& world, const RayScene& rays, const Atlas& 
         if (sky) g.emission[g.index(x, y)] = sky->radiance(direction);
       });
   if (dynamic && dynamic->rays)
-    for (const DynamicPixel& d : trace_dynamic(world, rays, *dynamic, camera, width, height)) {
+    trace_dynamic(world, rays, *dynamic, camera, width, height, [&](const DynamicPixel& d) {
       g.position[d.index] = d.position;
       g.normal[d.index] = d.normal;
       g.depth[d.index] = d.depth;
       g.diffuse[d.index] = d.shade.diffuse;
       g.emission[d.index] = d.shade.emission;
-    }
+    });
   return g;
 }
 

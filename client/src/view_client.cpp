@@ -348,8 +348,7 @@ void ViewClient::close() {
 }
 
 DynamicView ViewClient::dynamic_view() const {
-  const wire::ReceivedVolume& v = core_.probe_volume();
-  return {core_.scene().dynamic_rays.get(), v.epoch != 0 && v.has_sh ? &v.volume : nullptr};
+  return {core_.scene().dynamic_rays.get(), core_.probe_volume().lit()};
 }
 
 ImageRGB ViewClient::compose(const CameraPose& camera, int width, int height) const {

@@ -60,8 +60,9 @@ ImageRGB compose(const World& world, const RayScene& rays, const Atlas& atlas,
     });
   });
   if (dynamic && dynamic->rays)
-    for (const DynamicPixel& d : trace_dynamic(world, rays, *dynamic, camera, width, height))
+    trace_dynamic(world, rays, *dynamic, camera, width, height, [&](const DynamicPixel& d) {
       image.pixels[d.index] = d.shade.diffuse + d.shade.emission;
+    });
   if (stats) {
     stats->rays = static_cast<std::uint64_t>(width) * height;
     stats->seconds =

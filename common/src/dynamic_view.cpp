@@ -1,7 +1,5 @@
 #include "irradcast/common/dynamic_view.h"
 
-#include <mutex>
-
 #include "irradcast/common/error.h"
 #include "irradcast/common/primary_hits.h"
 #include "irradcast/common/sampling.h"
@@ -23,16 +21,12 @@ HitShade shade_dynamic(const World& world, const IrradianceVolume* volume, glm::
   return s;
 }
 
-std::vector<DynamicPixel> trace_dynamic(const World& world, const RayScene& static_rays,
-                                        const DynamicView& view, const CameraPose& camera,
-                                        int width, int height) {
+void trace_dynamic(const World& world, const RayScene& static_rays, const DynamicView& view,
+                   const CameraPose& camera, int width, int height,
+                   const std::function<void(const DynamicPixel&)>& out) {
   if (width <= 0 || height <= 0) throw Error("image size must be positive");
-  std::vector<DynamicPixel> out;
-  if (!view.rays) return out;
-  std::mutex lock;
+  if (!view.rays) return;
   trace_primary_blocks(*view.rays, camera, width, height, [&](const PrimaryBlock& b) {
-    DynamicPixel local[PrimaryBlock::kLanes];
-    int count = 0;
     for (int k = 0; k < PrimaryBlock::kLanes; ++k) {
       if (!b.active[k] || !b.hit(k)) continue;
       Ray ray;
@@ -42,31 +36,20 @@ std::vector<DynamicPixel> trace_dynamic(const World& world, const RayScene& stat
       if (static_rays.occluded(ray)) continue;  // a static surface is nearer
       const Hit h = b.hit_at(k);
       const WorldObject& o = world.objects[static_cast<std::size_t>(h.object)];
-      DynamicPixel& px = local[count++];
+      DynamicPixel px;
       px.index = static_cast<std::size_t>(b.y(k)) * static_cast<std::size_t>(width) +
                  static_cast<std::size_t>(b.x(k));
       px.position = ray.origin + h.t * ray.direction;
+      // The shading normal (on the geometric normal's side) turned with the geometric normal
+      // towards the eye, as the path tracer turns it: at a smooth mesh's silhouette the
+      // interpolated normal may face away while the triangle faces the eye.
       px.normal = o.shading_normal(h.triangle, h.u, h.v);
-      if (glm::dot(px.normal, ray.direction) > 0.0f) px.normal = -px.normal;
+      if (glm::dot(o.geometric_normal(h.triangle), ray.direction) > 0.0f) px.normal = -px.normal;
       px.depth = std::max(glm::dot(px.position - camera.eye, camera.forward), 1e-30f);
       px.shade = shade_dynamic(world, view.volume, ray.direction, h, px.position, px.normal);
+      out(px);
     }
-    if (count == 0) return;
-    const std::lock_guard<std::mutex> g(lock);
-    out.insert(out.end(), local, local + count);
   });
-  return out;
-}
-
-std::vector<Bounds> dynamic_bounds(const World& world) {
-  std::vector<Bounds> boxes;
-  for (const WorldObject& o : world.objects) {
-    if (!o.dynamic || !o.visible) continue;
-    Bounds b;
-    for (const glm::vec3& p : o.positions) b.extend(p);
-    boxes.push_back(b);
-  }
-  return boxes;
 }
 
 }  // namespace irradcast

@@ -84,7 +84,7 @@ glm::vec3 IrradianceVolume::irradiance(glm::vec3 p, glm::vec3 n) const {
     // the surface so much that a point reads the light half a spacing out along its normal
     // (spheres near walls and openings 5-10 % off against the path tracer; docs/DYNAMIC.md).
     const float facing = 0.5f * (glm::dot(dir, n) + 1.0f);
-    float w = std::sqrt(facing) + 0.2f;
+    float w = std::sqrt(std::max(facing, 0.0f)) + 0.2f;  // a dot a hair under -1: no NaN
     // Chebyshev: how likely the probe sees q, from its distance moments towards q.
     const glm::vec2 m = moments(i, -dir);
     if (dist > m.x) {

@@ -12,6 +12,7 @@ import { createRequire } from 'node:module';
 import { decodeTile, packRgb9e5, unpackRgb9e5, TILE_RGB9E5_ZSTD, TILE_HALF_ZSTD, TILE_RGB9E5_DELTA_ZSTD }
   from '../../web/src/codec.js';
 import { sha256 } from '../../web/src/sha256.js';
+import { applyProbeVolume, halfToFloat } from '../../web/src/volume.js';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const require = createRequire(path.join(here, '..', '..', 'web', 'package.json'));
@@ -109,4 +110,39 @@ assert.equal(w.idle_timeout_ms, 0);
 assert.deepEqual([...w.scene_hash], []);
 assert.throws(() => page.decode(new Uint8Array([0x0a, 0x05, 0x08])), /truncated/);
 assert.throws(() => page.decode(new Uint8Array([0xff, 0xff, 0xff, 0xff])), /proto:/);
+// The probe volume (web/src/volume.js, as wire::apply_probe_volume): a layout and its SH, a later
+// version without the layout, another epoch's without a layout ignored; non-finite halves, a cut
+// payload, a zero count and too many probes refused, the held volume unchanged.
+{
+  const half = (x) => { const f = new Float32Array([x]), u = new Uint32Array(f.buffer)[0];
+    return ((u >> 16) & 0x8000) | ((((u >> 23) & 255) - 112) << 10) | ((u >> 13) & 1023); };
+  const probes = 2, layout = new Uint8Array(probes * 7 + probes * 256 * 4), sh = new Uint8Array(probes * 27 * 2);
+  const put = (b, at, x) => { const h = x === 0 ? 0 : half(x); b[at] = h & 255; b[at + 1] = h >> 8; };
+  put(layout, 0, 0.25); layout[6] = 1;  // probe 0: offset x 0.25, on; probe 1 off
+  for (let i = 0; i < probes * 256; ++i) { put(layout, 14 + 4 * i, 0.5); put(layout, 14 + 4 * i + 2, 0.25); }
+  for (let i = 0; i < probes * 27; ++i) put(sh, 2 * i, 1 + i / 64);
+  const msg = { epoch: 3, version: 7, origin: [0, 0, 0], spacing: 0.5, counts: [2, 1, 1], layout: zstdRaw(layout), sh: zstdRaw(sh) };
+  const v = applyProbeVolume(msg, null);
+  assert.equal(v.probes, 2);
+  assert.equal(v.offsets[0], 0.25);
+  assert.equal(v.offsets[3], 1);
+  assert.equal(v.offsets[7], 0);
+  assert.equal(halfToFloat(v.sh[5]), 1 + 5 / 64);
+  assert.equal(halfToFloat(v.depth[1]), 0.25);
+  const later = applyProbeVolume({ ...msg, version: 8, layout: new Uint8Array(0) }, v);
+  assert.equal(later.version, 8);
+  assert.equal(later.offsets, v.offsets);
+  assert.equal(applyProbeVolume({ ...msg, epoch: 4, layout: new Uint8Array(0) }, v), v);
+  const nan = new Uint8Array(sh); nan[1] = 0x7e;
+  const refused = [
+    [{ ...msg, sh: zstdRaw(nan) }, /not finite/],
+    [{ ...msg, sh: zstdRaw(sh.subarray(0, 10)) }, /holds 10 bytes/],
+    [{ ...msg, counts: [0, 1, 1] }, /a count of 0/],
+    [{ ...msg, counts: [65536, 2, 1] }, /more than 65536/],
+    [{ ...msg, spacing: NaN }, /not finite/],
+    [{ ...msg, origin: [0, 0] }, /3 origin/],
+  ];
+  for (const [m, why] of refused) assert.throws(() => applyProbeVolume(m, v), why);
+}
+
 console.log('ok: tile codec, RGB9E5 packing, SHA-256, protocol codec');

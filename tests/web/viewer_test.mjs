@@ -223,7 +223,44 @@ async function tabs(o) {
   }
 }
 
-const CASES = { image, errors, edits, tabs };
+// A dynamic object (docs/DYNAMIC.md): the Cornell box's short block made dynamic is drawn by the
+// page from the probe volume in 3-D textures, as irradcast-view draws it; the same bounds as
+// `image`, and the block's own region compared on its own.
+async function dynamic(o) {
+  const server = await startServer(o.server, [...SERVER, '--dynamic', 'short_block']);
+  const b = await browser(o);
+  try {
+    const page = await openConverged(b, server.url + query({ width: W, height: H, ui: 0, converge: 0 }), W, H);
+    const shot = path.join(tmpDir, 'page-dynamic.png');
+    await page.screenshot({ path: shot });
+    const volumes = await page.evaluate(() => window.irradcast.conn.counters.volumes);
+    console.log(`page (dynamic): ${volumes} probe volume versions received`);
+    assert.ok(volumes > 0, 'page (dynamic): no probe volume arrived');
+    await page.close();
+    const reference = await viewPng(o, server, { width: W, height: H }, 'view-dynamic');
+    compare(shot, reference, 'page (dynamic)');
+    // The block: the lower right of the default view. Its mean level must agree too, and it must
+    // not be black (unlit).
+    const a = readPng(shot), v = readPng(reference);
+    const region = (img) => {
+      let sum = 0, n = 0;
+      for (let y = Math.floor(0.62 * H); y < Math.floor(0.9 * H); ++y)
+        for (let x = Math.floor(0.52 * W); x < Math.floor(0.72 * W); ++x) {
+          for (let c = 0; c < 3; ++c) sum += img.rgb[3 * (y * img.width + x) + c];
+          n += 3;
+        }
+      return sum / n;
+    };
+    console.log(`page (dynamic): the block's region, mean level ${region(a).toFixed(1)} / ${region(v).toFixed(1)}`);
+    assert.ok(region(v) > 20, "page (dynamic): irradcast-view's block is black");
+    assert.ok(Math.abs(region(a) - region(v)) <= 2, "page (dynamic): the block differs from irradcast-view's");
+  } finally {
+    await b.close();
+    await server.stop();
+  }
+}
+
+const CASES = { image, errors, edits, tabs, dynamic };
 const o = options(process.argv);
 try {
   if (!o.cases.length || o.cases.some((c) => !CASES[c])) throw new Error(`cases: ${Object.keys(CASES).join(', ')}`);

@@ -8,6 +8,7 @@ import { decode, encode, num, PROTOCOL_VERSION, decodeSceneData, ERROR_NAMES } f
 import { sha256 } from './sha256.js';
 import { decodeTile, inflateUpTo } from './codec.js';
 import { readScene } from './scene.js';
+import { applyProbeVolume } from './volume.js';
 
 const MAX_SCENE_BYTES = 1 << 30;
 const equalBytes = (a, b) => a && b && a.length === b.length && a.every((x, i) => x === b[i]);
@@ -20,9 +21,10 @@ export class Connection {
     this.options = options;
     this.h = handlers;
     this.scene = null;         // { model, hash, welcome }
+    this.volume = null;        // the probe volume held (volume.js)
     this.versions = null;      // per lightmap, per tile: version held (0 = none)
     this.epoch = 0;
-    this.counters = { bytes: 0, tiles: 0, frames: 0, edits: 0, connections: 0, byEncoding: [0, 0, 0] };
+    this.counters = { bytes: 0, tiles: 0, frames: 0, edits: 0, volumes: 0, connections: 0, byEncoding: [0, 0, 0] };
     this.backoff = 250;
     this.connect();
   }
@@ -89,6 +91,7 @@ export class Connection {
       case 'scene_chunk': return this.onChunk(env.scene_chunk);
       case 'tile_update': return this.onTile(env.tile_update);
       case 'scene_edit': return this.onEdit(env.scene_edit);
+      case 'probe_volume': return this.onVolume(env.probe_volume);
       case 'stats': return this.h.stats(env.stats);
       case 'error': {
         const name = ERROR_NAMES[env.error.code] || env.error.code;
@@ -175,6 +178,16 @@ export class Connection {
     ++this.counters.tiles;
     ++this.counters.byEncoding[t.encoding];
     this.h.tile(t.lightmap, x0, y0, tw, th, words);
+  }
+
+  // The probe volume (volume.js): a bad one ends the connection like a bad tile.
+  onVolume(m) {
+    if (this.phase !== 'streaming') throw new Error('a ProbeVolume before the subscription');
+    const v = applyProbeVolume(m, this.volume);
+    if (v === this.volume) return undefined;  // another epoch's, without its layout
+    this.volume = v;
+    ++this.counters.volumes;
+    return this.h.volume(v);
   }
 
   onEdit(m) {

@@ -67,6 +67,7 @@ function handlers(ctx) {
     sceneReady(model, welcome) {
       if (state.view) state.view.dispose();
       state.view = new SceneView(ctx.renderer, model, welcome, ctx.finish);
+      if (ctx.conn.volume) state.view.setVolume(ctx.conn.volume);
       const base = state.camera ? state.camera.pose : defaultCamera(model, state.view.bounds);
       let pose = base;
       if (!state.camera && params.camera) {
@@ -83,6 +84,10 @@ function handlers(ctx) {
       state.dirty = true;
     },
     tileBase: (lightmap, x0, y0, w, h) => state.view.tileWords(lightmap, x0, y0, w, h),
+    volume(v) {
+      if (!state.view.setVolume(v)) overlay.error('the probe volume exceeds this GPU\'s 3-D texture size: dynamic objects stay unlit');
+      state.dirty = true;
+    },
     edit(m) {
       try {
         const c = applyEdit(state.view.scene, m);
@@ -151,7 +156,9 @@ function frame(ctx, now) {
   // for after the last draw count.
   const { held, total } = conn.tilesHeld(), s = state.stats;
   if (drew) state.stats = null;
-  const converged = !drew && !state.dirty && !!(state.view && total > 0 && held === total && s && num(s.queue_depth) === 0 &&
+  // A scene with dynamic objects also waits for the probe volume that lights them.
+  const lit = !state.view || !state.view.scene.objects.some((o) => o.dynamic) || !!conn.volume;
+  const converged = !drew && !state.dirty && lit && !!(state.view && total > 0 && held === total && s && num(s.queue_depth) === 0 &&
     (s.engine_idle || s.convergence <= params.converge));
   if (converged !== state.converged) {
     state.converged = converged;

@@ -2,9 +2,12 @@
 // coordinates, one RGB9_E5 texture per lightmap updated tile by tile with texSubImage2D, and
 // irradcast's shading (common/src/compositor.cpp): albedo / pi * E + emission, then the
 // exposure and tone map of irradcast-view (common/src/tonemap.cpp) and the sRGB transfer
-// function. The sky (common/src/sky.cpp) is the background.
+// function. The sky (common/src/sky.cpp) is the background. Dynamic objects (docs/DYNAMIC.md) have
+// no lightmap: their E comes from the probe volume, held in 3-D textures and looked up as
+// IrradianceVolume::irradiance does (common/src/irradiance_volume.cpp).
 import * as THREE from 'three';
 import { placeNodes } from './scene.js';
+import { DEPTH_SIZE } from './volume.js';
 
 export const TONE_OPS = { reinhard: 0, aces: 1, clamp: 2 };
 
@@ -27,28 +30,119 @@ vec3 finish(vec3 c) {
 }`;
 
 const surfaceVertex = `
-in vec3 position; in vec2 uv0; in vec2 uv1; in vec2 luv;
+in vec3 position; in vec3 normal; in vec2 uv0; in vec2 uv1; in vec2 luv;
 uniform mat4 modelMatrix, viewMatrix, projectionMatrix;
-out vec2 vUv0; out vec2 vUv1; out vec2 vLuv;
+out vec2 vUv0; out vec2 vUv1; out vec2 vLuv; out vec3 vWorld; out vec3 vNormal;
 void main() {
   vUv0 = uv0; vUv1 = uv1; vLuv = luv;
-  gl_Position = projectionMatrix * viewMatrix * modelMatrix * vec4(position, 1.0);
+  vec4 w = modelMatrix * vec4(position, 1.0);
+  vWorld = w.xyz;
+  vNormal = transpose(inverse(mat3(modelMatrix))) * normal;  // zero: the mesh has none
+  gl_Position = projectionMatrix * viewMatrix * w;
+}`;
+
+// IrradianceVolume::irradiance (common/src/irradiance_volume.cpp), the same steps in the same
+// order: the 8 probes around p, trilinear x facing x Chebyshev visibility (cubed, crushed below
+// 0.2), SH L2 irradiance clamped at 0.
+const volumeGlsl = `
+uniform int volOn;
+uniform highp sampler3D volProbes;  // per probe: offset xyz, active
+uniform highp sampler3D volSh;      // per probe 7 texels: 27 SH values (RGB per coefficient)
+uniform highp sampler3D volDepth;   // per probe ${DEPTH_SIZE} x ${DEPTH_SIZE}: distance moments / far
+uniform vec3 volOrigin; uniform float volSpacing; uniform ivec3 volCounts; uniform float volFar;
+vec2 octEncode(vec3 d) {
+  d /= (abs(d.x) + abs(d.y) + abs(d.z));
+  vec2 e = d.xy;
+  if (d.z < 0.0) e = (1.0 - abs(d.yx)) * vec2(d.x >= 0.0 ? 1.0 : -1.0, d.y >= 0.0 ? 1.0 : -1.0);
+  return 0.5 * e + 0.5;
+}
+vec2 probeMoments(ivec3 c, vec3 d) {
+  const float n = float(${DEPTH_SIZE});
+  vec2 f = clamp(octEncode(d) * n - 0.5, vec2(0.0), vec2(n - 1.0));
+  ivec2 a = ivec2(f), b = min(a + 1, ivec2(${DEPTH_SIZE - 1}));
+  vec2 t = f - vec2(a);
+  ivec3 o = ivec3(c.x * ${DEPTH_SIZE}, c.y * ${DEPTH_SIZE}, c.z);
+  vec2 m00 = texelFetch(volDepth, o + ivec3(a.x, a.y, 0), 0).rg, m10 = texelFetch(volDepth, o + ivec3(b.x, a.y, 0), 0).rg;
+  vec2 m01 = texelFetch(volDepth, o + ivec3(a.x, b.y, 0), 0).rg, m11 = texelFetch(volDepth, o + ivec3(b.x, b.y, 0), 0).rg;
+  return mix(mix(m00, m10, t.x), mix(m01, m11, t.x), t.y) * vec2(volFar, volFar * volFar);
+}
+vec3 probeIrradiance(ivec3 c, vec3 n) {
+  float s[28];
+  for (int k = 0; k < 7; ++k) {
+    vec4 v = texelFetch(volSh, ivec3(c.x * 7 + k, c.y, c.z), 0);
+    s[4 * k] = v.x; s[4 * k + 1] = v.y; s[4 * k + 2] = v.z; s[4 * k + 3] = v.w;
+  }
+  float y[9] = float[9](0.282095, 0.488603 * n.y, 0.488603 * n.z, 0.488603 * n.x, 1.092548 * n.x * n.y,
+    1.092548 * n.y * n.z, 0.315392 * (3.0 * n.z * n.z - 1.0), 1.092548 * n.x * n.z, 0.546274 * (n.x * n.x - n.y * n.y));
+  vec3 e = vec3(0.0);
+  for (int j = 0; j < 9; ++j) e += y[j] * vec3(s[3 * j], s[3 * j + 1], s[3 * j + 2]);
+  return max(e, vec3(0.0));
+}
+vec3 volumeIrradiance(vec3 p, vec3 n) {
+  if (volOn == 0) return vec3(0.0);
+  vec3 q = p + n * (0.05 * volSpacing);
+  vec3 g = (q - volOrigin) / volSpacing;
+  ivec3 base; vec3 f;
+  for (int a = 0; a < 3; ++a) {
+    int last = max(volCounts[a] - 2, 0);
+    base[a] = int(clamp(floor(g[a]), 0.0, float(last)));
+    f[a] = volCounts[a] > 1 ? clamp(g[a] - float(base[a]), 0.0, 1.0) : 0.0;
+  }
+  vec3 sum = vec3(0.0);
+  float weights = 0.0;
+  for (int corner = 0; corner < 8; ++corner) {
+    ivec3 o = ivec3(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
+    ivec3 c = min(base + o, volCounts - 1);
+    vec4 pr = texelFetch(volProbes, c, 0);
+    if (pr.w < 0.5) continue;
+    vec3 tri = mix(1.0 - f, f, vec3(o));
+    float trilinear = tri.x * tri.y * tri.z;
+    if (trilinear <= 0.0) continue;
+    vec3 toProbe = volOrigin + volSpacing * vec3(c) + pr.xyz - q;
+    float dist = length(toProbe);
+    vec3 dir = dist > 0.0 ? toProbe / dist : n;
+    float w = sqrt(max(0.5 * (dot(dir, n) + 1.0), 0.0)) + 0.2;
+    vec2 m = probeMoments(c, -dir);
+    if (dist > m.x) {
+      float variance = abs(m.y - m.x * m.x) + 1e-6 * volSpacing * volSpacing;
+      float d = dist - m.x, ch = variance / (variance + d * d);
+      w *= max(ch * ch * ch, 0.0);
+    }
+    if (w < 0.2) w *= w * w / (0.2 * 0.2);
+    w = max(w, 1e-6) * trilinear;
+    sum += w * probeIrradiance(c, n);
+    weights += w;
+  }
+  return weights > 0.0 ? sum / weights : vec3(0.0);
 }`;
 
 const surfaceFragment = `
 precision highp float;
 ${finishGlsl}
+${volumeGlsl}
+uniform int dynamicOn;
+uniform vec3 cameraPosition;
 uniform sampler2D lightmap;
 uniform vec3 baseColor; uniform float baseAlpha; uniform sampler2D baseTex; uniform int baseTexOn;
 uniform int baseUv; uniform int alphaMask; uniform float alphaCutoff;
 uniform vec3 emission; uniform sampler2D emTex; uniform int emTexOn; uniform int emUv;
 uniform int emDoubleSided; uniform int hdrOut;
-in vec2 vUv0; in vec2 vUv1; in vec2 vLuv;
+in vec2 vUv0; in vec2 vUv1; in vec2 vLuv; in vec3 vWorld; in vec3 vNormal;
 out vec4 fragColor;
 void main() {
   vec4 t = baseTexOn == 1 ? texture(baseTex, baseUv == 1 ? vUv1 : vUv0) : vec4(1.0);
   if (alphaMask == 1 && baseAlpha * t.a < alphaCutoff) discard;
-  vec3 e = texture(lightmap, vLuv / vec2(textureSize(lightmap, 0))).rgb;
+  vec3 e;
+  if (dynamicOn == 1) {
+    // The shading normal on the side of the eye, as irradcast-view's (dynamic_view.cpp).
+    vec3 ng = normalize(cross(dFdx(vWorld), dFdy(vWorld)));
+    if (dot(ng, cameraPosition - vWorld) < 0.0) ng = -ng;
+    vec3 n = dot(vNormal, vNormal) > 0.0 ? normalize(vNormal) : ng;
+    if (dot(n, ng) < 0.0) n = -n;
+    e = volumeIrradiance(vWorld, n);
+  } else {
+    e = texture(lightmap, vLuv / vec2(textureSize(lightmap, 0))).rgb;
+  }
   vec3 c = baseColor * t.rgb * e * 0.31830988618379067;
   if (any(greaterThan(emission, vec3(0.0))) && (emDoubleSided == 1 || gl_FrontFacing))
     c += emission * (emTexOn == 1 ? texture(emTex, emUv == 1 ? vUv1 : vUv0).rgb : vec3(1.0));
@@ -110,6 +204,7 @@ function objectGeometry(scene, obj) {
     ? mesh.triangleMaterial[t] : -1);
   const order = [...Array(tris).keys()].sort((a, b) => matOf(a) - matOf(b));
   const pos = new Float32Array(9 * tris), uv0 = new Float32Array(6 * tris), uv1 = new Float32Array(6 * tris);
+  const nrm = new Float32Array(9 * tris);
   const luv = new Float32Array(6 * tris);
   const g = new THREE.BufferGeometry(), groups = [];
   order.forEach((t, k) => {
@@ -119,6 +214,7 @@ function objectGeometry(scene, obj) {
     for (let c = 0; c < 3; ++c) {
       const v = mesh.triangles[3 * t + c], o = 3 * k + c;
       for (let a = 0; a < 3; ++a) pos[3 * o + a] = mesh.positions[3 * v + a];
+      if (mesh.normals) for (let a = 0; a < 3; ++a) nrm[3 * o + a] = mesh.normals[3 * v + a];
       for (let a = 0; a < 2; ++a) {
         if (mesh.uv0) uv0[2 * o + a] = mesh.uv0[2 * v + a];
         if (mesh.uv1) uv1[2 * o + a] = mesh.uv1[2 * v + a];
@@ -127,6 +223,7 @@ function objectGeometry(scene, obj) {
     }
   });
   g.setAttribute('position', new THREE.BufferAttribute(pos, 3));
+  g.setAttribute('normal', new THREE.BufferAttribute(nrm, 3));
   g.setAttribute('uv0', new THREE.BufferAttribute(uv0, 2));
   g.setAttribute('uv1', new THREE.BufferAttribute(uv1, 2));
   g.setAttribute('luv', new THREE.BufferAttribute(luv, 2));
@@ -150,6 +247,7 @@ export class SceneView {
         texture: rgb9e5Texture(Math.max(1, o.width), Math.max(1, o.height), words, THREE.LinearFilter) };
     });
     this.tileSize = welcome.tile_size;
+    this.volumeUniforms = this.emptyVolume();
     this.materials = [];  // per scene material, the ShaderMaterials that show it
     this.meshes = scene.objects.map((o, i) => this.buildObject(o, i));
     this.buildSky();
@@ -166,7 +264,8 @@ export class SceneView {
       const mat = new THREE.RawShaderMaterial({
         glslVersion: THREE.GLSL3, vertexShader: surfaceVertex, fragmentShader: surfaceFragment,
         side: THREE.DoubleSide,
-        uniforms: { ...this.finish, lightmap: { value: this.lightmaps[index].texture } },
+        uniforms: { ...this.finish, ...this.volumeUniforms, lightmap: { value: this.lightmaps[index].texture },
+          dynamicOn: { value: obj.dynamic ? 1 : 0 } },
       });
       mat.sceneMaterial = gr.material;
       this.setMaterial(mat, gr.material);
@@ -206,10 +305,71 @@ export class SceneView {
     this.scene.objects.forEach((o, i) => {
       this.meshes[i].matrix.copy(world[o.node]);
       this.meshes[i].matrixWorldNeedsUpdate = true;
-      // A dynamic object has no lightmap: not drawn until the probe volume lights it (as in
-      // irradcast-view).
-      this.meshes[i].visible = visible[o.node] && !o.dynamic;
+      this.meshes[i].visible = visible[o.node];
     });
+  }
+
+  // The volume's uniforms, shared by every material (a 1-texel stand-in until a volume comes).
+  emptyVolume() {
+    const dummy = (data, format) => {
+      const t = new THREE.Data3DTexture(data, 1, 1, 1);
+      t.format = format;
+      t.type = THREE.HalfFloatType;
+      t.minFilter = t.magFilter = THREE.NearestFilter;
+      t.unpackAlignment = 1;
+      t.needsUpdate = true;
+      return t;
+    };
+    return { volOn: { value: 0 }, volProbes: { value: dummy(new Uint16Array(4), THREE.RGBAFormat) },
+      volSh: { value: dummy(new Uint16Array(4), THREE.RGBAFormat) }, volDepth: { value: dummy(new Uint16Array(2), THREE.RGFormat) },
+      volOrigin: { value: new THREE.Vector3() }, volSpacing: { value: 1 }, volCounts: { value: new THREE.Vector3(1, 1, 1) },
+      volFar: { value: 1 } };
+  }
+
+  // A probe volume (volume.js) into the 3-D textures; false when a side exceeds the GPU's 3-D
+  // texture size (the dynamic objects then stay unlit).
+  setVolume(v) {
+    const u = this.volumeUniforms, [nx, ny, nz] = v.counts;
+    const gl = this.renderer.getContext(), max = gl.getParameter(gl.MAX_3D_TEXTURE_SIZE);
+    if (Math.max(nx * 7, nx * DEPTH_SIZE, ny * DEPTH_SIZE, nz) > max) return false;
+    const tex3d = (data, w, h, d, format) => {
+      const t = new THREE.Data3DTexture(data, w, h, d);
+      t.format = format;
+      t.type = data instanceof Float32Array ? THREE.FloatType : THREE.HalfFloatType;
+      t.minFilter = t.magFilter = THREE.NearestFilter;
+      t.unpackAlignment = 1;
+      t.needsUpdate = true;
+      return t;
+    };
+    const replace = (name, t) => {
+      if (u[name].value) u[name].value.dispose();
+      u[name].value = t;
+    };
+    if (v !== this.volume && (!this.volume || v.offsets !== this.volume.offsets)) {
+      replace('volProbes', tex3d(v.offsets, nx, ny, nz, THREE.RGBAFormat));
+      // Per probe its 16 x 16 moments, probe (x, y, z) at (16 x, 16 y, z).
+      const S = DEPTH_SIZE, W = nx * S, H = ny * S, depth = new Uint16Array(2 * W * H * nz);
+      for (let i = 0; i < v.probes; ++i) {
+        const cx = i % nx, cy = Math.floor(i / nx) % ny, cz = Math.floor(i / (nx * ny));
+        for (let t = 0; t < S * S; ++t) {
+          const at = 2 * ((cz * H + cy * S + Math.floor(t / S)) * W + cx * S + (t % S));
+          depth[at] = v.depth[2 * (i * S * S + t)];
+          depth[at + 1] = v.depth[2 * (i * S * S + t) + 1];
+        }
+      }
+      replace('volDepth', tex3d(depth, W, H, nz, THREE.RGFormat));
+    }
+    // 27 SH halves per probe padded to 28: 7 RGBA texels in a row.
+    const sh = new Uint16Array(28 * v.probes);
+    for (let i = 0; i < v.probes; ++i) sh.set(v.sh.subarray(27 * i, 27 * i + 27), 28 * i);
+    replace('volSh', tex3d(sh, nx * 7, ny, nz, THREE.RGBAFormat));
+    u.volOrigin.value.set(v.origin[0], v.origin[1], v.origin[2]);
+    u.volSpacing.value = v.spacing;
+    u.volCounts.value.set(nx, ny, nz);
+    u.volFar.value = v.far;
+    u.volOn.value = 1;
+    this.volume = v;
+    return true;
   }
 
   buildSky() {
@@ -265,6 +425,7 @@ export class SceneView {
       for (const mat of m.material) mat.dispose();
     }
     for (const t of [...this.textures, ...this.lightmaps.map((l) => l.texture), this.white]) t.dispose();
+    for (const k of ['volProbes', 'volSh', 'volDepth']) this.volumeUniforms[k].value.dispose();
     if (this.skyUniforms.skyMap.value !== this.white) this.skyUniforms.skyMap.value.dispose();
     this.sky.geometry.dispose();
     this.sky.material.dispose();

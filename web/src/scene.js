@@ -94,7 +94,9 @@ function readMesh(m, i) {
     if (a && a.length && a.length !== 2 * n) fail(`mesh ${i} has ${a.length / 2} ${what} for ${n} vertices`);
     return a && a.length ? a : null;
   };
-  return { name: nameOf(m.name), positions, uv0: uv(m.uv0, 'TEXCOORD_0'), uv1: uv(m.uv1, 'TEXCOORD_1'),
+  const normals = m.normals && m.normals.length ? m.normals : null;
+  if (normals && normals.length !== 3 * n) fail(`mesh ${i} has ${normals.length / 3} normals for ${n} vertices`);
+  return { name: nameOf(m.name), positions, normals, uv0: uv(m.uv0, 'TEXCOORD_0'), uv1: uv(m.uv1, 'TEXCOORD_1'),
     triangles: tris, triangleMaterial: m.triangle_material || [] };
 }
 

@@ -126,6 +126,10 @@ bool apply_probe_volume(const ProbeVolume& m, ReceivedVolume& into) {
       !std::isfinite(g.origin.y) || !std::isfinite(g.origin.z))
     throw irradcast::Error(
         "probe volume: a spacing or origin that is not finite (or a spacing under 1e-6)");
+  // Every probe position (and a look-up's arithmetic around it) stays finite.
+  for (int a = 0; a < 3; ++a)
+    if (std::fabs(g.origin[a]) + float(g.counts[a] + 2) * g.spacing > 1e18f)
+      throw irradcast::Error("probe volume: the grid reaches past 1e18 from the origin");
   if (!layout && g.probe_count() != into.volume.probe_count())
     throw irradcast::Error("probe volume: the grid differs from its epoch's layout");
   const std::string sh = decompress(m.sh(), probes * kShBytesPerProbe, "SH data");

@@ -8,13 +8,13 @@
 #include <cstdint>
 #include <vector>
 
+#include "irradcast/client/reprojection.h"
+#include "irradcast/client/ssao.h"
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/dynamic_view.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/lightmap.h"
 #include "irradcast/common/ray_scene.h"
-#include "irradcast/client/reprojection.h"
-#include "irradcast/client/ssao.h"
 #include "irradcast/common/world.h"
 
 namespace irradcast {
@@ -45,8 +45,9 @@ class ClientPasses {
   explicit ClientPasses(ClientPassOptions options = {});
   // The next frame. Linear radiance like irradcast::compose(); with `dynamic`, the dynamic
   // objects drawn too (dynamic_view.h). SSAO sees them (contact shadows), and where one moved
-  // since the last frame, the history of what it covers and shadows (its old and new boxes
-  // grown by the SSAO radius) is forgotten, so a moving object leaves no ghost.
+  // (its transform or visibility changed) since the last frame, the history of what it covers
+  // and shadows (its old and new boxes grown by the SSAO radius) is forgotten, so a moving
+  // object leaves no ghost; past 64 moved objects at once the whole history goes.
   ImageRGB compose(const World& world, const RayScene& rays, const Atlas& atlas,
                    const std::vector<Lightmap>& lightmaps, const CameraPose& camera, int width,
                    int height, ClientFrameStats* stats = nullptr,
@@ -64,7 +65,18 @@ class ClientPasses {
   std::vector<float> visibility_;
   std::vector<std::uint8_t> compute_;
   std::uint32_t frame_ = 0;
-  std::vector<Bounds> dynamic_boxes_;  // where the dynamic objects were in the last frame
+  // Per world object, a dynamic one's pose at the last frame and its box there.
+  struct DynamicState {
+    bool known = false;
+    bool visible = false;
+    glm::mat4 transform{1.0f};
+    Bounds box;
+  };
+  std::vector<DynamicState> dynamic_state_;
+  static constexpr std::size_t kMaxForgetRegions = 64;
+  // The old and new boxes (grown by `margin`) of the dynamic objects whose transform or
+  // visibility changed since the last frame; updates dynamic_state_.
+  std::vector<Bounds> moved_dynamic_objects(const World& world, float margin);
 };
 
 }  // namespace irradcast

@@ -7,7 +7,7 @@
 #pragma once
 
 #include <cstddef>
-#include <vector>
+#include <functional>
 
 #include <glm/glm.hpp>
 
@@ -34,20 +34,18 @@ struct DynamicPixel {
 };
 
 // The shade of a dynamic object at hit h of a ray along `direction`, whose point is p and whose
-// shading normal, turned towards the ray's origin, is n: albedo (textures included) / pi x the
-// volume's E(p, n), and the emission (one-sided unless the material is double-sided).
+// shading normal is n (on the side of the ray's origin, as the path tracer turns it): albedo
+// (textures included) / pi x the volume's E(p, n), and the emission (one-sided unless the material
+// is double-sided).
 HitShade shade_dynamic(const World& world, const IrradianceVolume* volume, glm::vec3 direction,
                        const Hit& h, glm::vec3 p, glm::vec3 n);
 
-// The pixels of a camera_ray() image (one ray through each pixel centre, as compose()) whose ray
-// hits a dynamic object before any surface of `static_rays`, in no particular order. Empty when
-// view.rays is null. Throws irradcast::Error on a bad image size.
-std::vector<DynamicPixel> trace_dynamic(const World& world, const RayScene& static_rays,
-                                        const DynamicView& view, const CameraPose& camera,
-                                        int width, int height);
-
-// The world-space boxes of the visible dynamic objects, one per object (for a viewer's history:
-// what moved since the last frame).
-std::vector<Bounds> dynamic_bounds(const World& world);
+// out(pixel) for every pixel of a camera_ray() image (one ray through each pixel centre, as
+// compose()) whose ray hits a dynamic object before any surface of `static_rays`; called
+// concurrently for different pixels, in no particular order. Nothing when view.rays is null.
+// Throws irradcast::Error on a bad image size.
+void trace_dynamic(const World& world, const RayScene& static_rays, const DynamicView& view,
+                   const CameraPose& camera, int width, int height,
+                   const std::function<void(const DynamicPixel&)>& out);
 
 }  // namespace irradcast

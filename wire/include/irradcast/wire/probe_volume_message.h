@@ -32,6 +32,8 @@ struct ReceivedVolume {
   std::uint64_t version = 0;
   bool has_sh = false;  // irradiance received for this epoch
   IrradianceVolume volume;
+  // The volume to light with: null before one with irradiance has come.
+  const IrradianceVolume* lit() const { return epoch != 0 && has_sh ? &volume : nullptr; }
 };
 // Applies a message from the server. Throws irradcast::Error with a clear message on a grid that
 // is not valid (a count of 0, over kMaxWireProbes, a spacing or origin that is not finite) or
