@@ -1,23 +1,30 @@
 #include "irradcast/common/dynamic_view.h"
 
 #include "irradcast/common/error.h"
+#include "irradcast/common/lights.h"
 #include "irradcast/common/primary_hits.h"
 #include "irradcast/common/sampling.h"
 
 namespace irradcast {
 
-HitShade shade_dynamic(const World& world, const IrradianceVolume* volume, glm::vec3 direction,
-                       const Hit& h, glm::vec3 p, glm::vec3 n) {
+HitShade shade_dynamic(const World& world, const RayScene& static_rays,
+                       const IrradianceVolume* volume, glm::vec3 direction, const Hit& h,
+                       glm::vec3 p, glm::vec3 n) {
   HitShade s;
   const Material& m = world.material(h.object, h.triangle);
-  if (m.is_emissive()) {
-    const glm::vec3 ng =
-        world.objects[static_cast<std::size_t>(h.object)].geometric_normal(h.triangle);
-    if (m.double_sided || glm::dot(ng, direction) < 0.0f)
-      s.emission = world.emission(h.object, h.triangle, h.u, h.v);
+  glm::vec3 ng = world.objects[static_cast<std::size_t>(h.object)].geometric_normal(h.triangle);
+  if (m.is_emissive() && (m.double_sided || glm::dot(ng, direction) < 0.0f))
+    s.emission = world.emission(h.object, h.triangle, h.u, h.v);
+  if (glm::dot(ng, direction) > 0.0f) ng = -ng;  // the side the ray came from, as n
+  glm::vec3 e = volume && volume->probe_count() > 0 ? volume->irradiance(p, n) : glm::vec3(0.0f);
+  // The punctual lights as the path tracer's next-event estimation sees them (lights.h).
+  for (const WorldLight& light : world.lights) {
+    LightSampler::ShadowSample shadow;
+    if (LightSampler::punctual_sample(static_rays, light, p, n, ng, shadow) &&
+        !static_rays.occluded(shadow.shadow))
+      e += shadow.irradiance;
   }
-  if (volume && volume->probe_count() > 0)
-    s.diffuse = world.albedo(h.object, h.triangle, h.u, h.v) * kInvPi * volume->irradiance(p, n);
+  s.diffuse = world.albedo(h.object, h.triangle, h.u, h.v) * kInvPi * e;
   return s;
 }
 
@@ -46,7 +53,8 @@ void trace_dynamic(const World& world, const RayScene& static_rays, const Dynami
       px.normal = o.shading_normal(h.triangle, h.u, h.v);
       if (glm::dot(o.geometric_normal(h.triangle), ray.direction) > 0.0f) px.normal = -px.normal;
       px.depth = std::max(glm::dot(px.position - camera.eye, camera.forward), 1e-30f);
-      px.shade = shade_dynamic(world, view.volume, ray.direction, h, px.position, px.normal);
+      px.shade =
+          shade_dynamic(world, static_rays, view.volume, ray.direction, h, px.position, px.normal);
       out(px);
     }
   });

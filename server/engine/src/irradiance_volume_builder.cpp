@@ -1,5 +1,6 @@
 // The irradiance volume's probes: placement (out of geometry, distance moments) and refinement
-// from the lightmaps (SH L2 of the radiance around each probe, direct light of punctual lights).
+// from the lightmaps (SH L2 of the radiance around each probe; the punctual lights' direct light
+// is left to the viewers, who trace it: dynamic_view.h).
 #include "irradcast/engine/irradiance_volume_builder.h"
 
 #include <algorithm>
@@ -85,7 +86,8 @@ VolumeGrid probe_grid_for(const Bounds& bounds, const IrradianceVolumeOptions& o
   const float largest = bounds.max_extent();
   float spacing = options.spacing > 0.0f
                       ? options.spacing
-                      : options.spacing_fraction * (largest > 0.0f ? largest : 1.0f);
+                      : std::min(options.spacing_fraction * (largest > 0.0f ? largest : 1.0f),
+                                 options.max_default_spacing);
   if (!(spacing > 0.0f) || !std::isfinite(spacing))
     throw Error("irradiance volume: the probe spacing must be a finite distance above 0");
   VolumeGrid g;
@@ -210,20 +212,6 @@ void IrradianceVolumeBuilder::refine(const std::vector<Lightmap>& lightmaps) {
             for (int c = 0; c < kShCoefficients; ++c)
               radiance[static_cast<std::size_t>(c)] +=
                   (weight * y[static_cast<std::size_t>(c)]) * l;
-          }
-          // The punctual lights: a delta of radiance towards each, where it is not in shadow.
-          for (const WorldLight& light : world_.lights) {
-            const glm::vec3 wi = light.type == Light::Type::Directional
-                                     ? -light.direction
-                                     : glm::normalize(light.position - p);
-            if (!std::isfinite(wi.x)) continue;
-            LightSampler::ShadowSample s;
-            if (!LightSampler::punctual_sample(rays_, light, p, wi, wi, s)) continue;
-            if (rays_.occluded(s.shadow)) continue;
-            const auto y = sh_basis(wi);
-            for (int c = 0; c < kShCoefficients; ++c)
-              radiance[static_cast<std::size_t>(c)] +=
-                  y[static_cast<std::size_t>(c)] * s.irradiance;
           }
           ShIrradiance& e = volume_.sh[i];
           for (int c = 0; c < kShCoefficients; ++c) {

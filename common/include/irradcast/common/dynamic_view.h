@@ -3,7 +3,10 @@
 // (RaySceneContent::Dynamic, moved by refitting one object's BVH) and keeps a hit where no static
 // surface is nearer. A hit is shaded like a static one, albedo / pi x E + emission, with E read
 // from the irradiance volume the server streams (irradiance_volume.h) at the hit's position and
-// normal instead of from a lightmap. Used by compose() and by the client passes' G-buffer.
+// normal instead of from a lightmap, plus the direct light of the scene's punctual lights (sun,
+// lamps), which the viewer traces itself: one shadow ray per light against the static scene,
+// since a probe grid cannot follow their sharp shadow edges. Used by compose() and by the client
+// passes' G-buffer.
 #pragma once
 
 #include <cstddef>

@@ -2,8 +2,10 @@
 // places the probes (a grid over the scene's bounds; probes inside geometry moved out or switched
 // off; their distance moments), then refines their irradiance from the engine's lightmaps: rays
 // from each probe read the radiance of the surfaces they hit (albedo / pi x the lightmap's
-// irradiance, plus emission) or the sky, and the punctual lights add their direct light, all
-// projected onto SH L2 and blended into a running mean. Embree on the CPU, probes in parallel.
+// irradiance, plus emission) or the sky, projected onto SH L2 and blended into a running mean.
+// The punctual lights' direct light is not in it: a sun's or a lamp's shadow edge is far sharper
+// than a probe grid, so the viewers add it themselves with a shadow ray (dynamic_view.h). Embree on
+// the CPU, probes in parallel.
 #pragma once
 
 #include <cstddef>
@@ -20,9 +22,12 @@ namespace irradcast {
 
 struct IrradianceVolumeOptions {
   // Distance between probes in scene units (metres); 0: `spacing_fraction` of the static scene's
-  // largest extent.
+  // largest extent, at most `max_default_spacing` metres (a fraction alone grows with the world:
+  // 4.35 m in the Sponza, where a sphere in the shaded gallery read 37 % bright; 13 % at 1 m,
+  // docs/DYNAMIC.md).
   float spacing = 0.0f;
   float spacing_fraction = 0.125f;
+  float max_default_spacing = 1.0f;
   // Fewer probes than this: the spacing grows until the grid fits.
   std::size_t max_probes = std::size_t{1} << 16;
   int rays_per_probe = 192;  // per refine()
