@@ -19,7 +19,7 @@ if [ ! -f "$dir/CMakeCache.txt" ]; then
     -DCMAKE_C_FLAGS="-fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer" \
     -DCMAKE_CXX_FLAGS="-fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer"
 fi
-targets=(fuzz_frame_decoder fuzz_tile_decoder fuzz_websocket fuzz_client_address)
+targets=(fuzz_frame_decoder fuzz_tile_decoder fuzz_probe_volume fuzz_websocket fuzz_client_address)
 cmake --build "$dir" --parallel "$(nproc)" --target "${targets[@]}"
 echo "fuzz.sh: build done at ${SECONDS} s; CPU (user system) of the shell, then of its commands:"; times
 
