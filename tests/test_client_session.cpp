@@ -5,9 +5,11 @@
 #include <gtest/gtest.h>
 
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
+#include "dynamic_scenes.h"
 #include "irradcast/client/client_session.h"
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/builtin.h"
@@ -15,6 +17,7 @@
 #include "irradcast/common/world.h"
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/frame.h"
+#include "irradcast/wire/pose_message.h"
 #include "irradcast/wire/scene_package.h"
 #include "irradcast/wire/tile_codec.h"
 
@@ -28,8 +31,7 @@ constexpr std::uint32_t kTile = 32;
 
 // What a server would hold: the package and the Welcome describing it.
 struct FakeServer {
-  FakeServer() {
-    const Scene scene = make_cornell_box();
+  explicit FakeServer(const Scene& scene = make_cornell_box()) {
     const World world = World::build(scene);
     AtlasOptions ao;
     ao.texels_per_scene = 48.0f;
@@ -345,6 +347,55 @@ TEST(ClientSession, FollowsBroadcastEditsInOrder) {
   s.on_frame(FakeServer::edit(3, "no_such_node", true));
   EXPECT_EQ(s.revision(), 2u);
   EXPECT_TRUE(s.take_reload());
+}
+
+// Poses (docs/DYNAMIC.md#poses): applied as they come; a complete set puts every node posed
+// before and not in it back where the package places it; a hostile pose fails the session and
+// leaves the scene as it was.
+TEST(ClientSession, FollowsPosesAndACompleteSetPutsTheRestBack) {
+  const FakeServer server(test::cornell_with_prop());
+  ClientSession s(options());
+  ASSERT_EQ(connect_and_download(s, server).event, Event::SessionReady);
+  const auto prop = static_cast<std::size_t>(make_cornell_box().nodes.size()) + 1;
+  const Node loaded = s.scene().unpacked.scene.nodes[prop];
+  const auto poses = [](std::uint64_t sequence, bool complete, std::vector<wire::NodePose> list) {
+    wire::Envelope e;
+    e.mutable_poses()->set_sequence(sequence);
+    e.mutable_poses()->set_complete(complete);
+    for (const wire::NodePose& p : list) *e.mutable_poses()->add_poses() = p;
+    return e;
+  };
+  glm::mat4 moved = loaded.local;
+  moved[3].x += 0.3f;
+  s.on_frame(poses(4, false, {wire::node_pose_to_proto(prop, moved, false)}));
+  EXPECT_EQ(s.pose_sequence(), 4u);
+  EXPECT_FLOAT_EQ(s.scene().unpacked.scene.nodes[prop].local[3].x, moved[3].x);
+  EXPECT_FALSE(s.scene().unpacked.scene.nodes[prop].visible);
+  EXPECT_EQ(s.revision(), 0u);  // not a revision
+  // The prop's object (and its child's) moved in the client's world.
+  const World expected = World::build(s.scene().unpacked.scene);
+  ASSERT_EQ(s.scene().world.objects.size(), expected.objects.size());
+  for (std::size_t o = 0; o < expected.objects.size(); ++o) {
+    EXPECT_EQ(s.scene().world.objects[o].transform, expected.objects[o].transform) << o;
+    EXPECT_EQ(s.scene().world.objects[o].visible, expected.objects[o].visible) << o;
+  }
+  // Hostile: a static node, a NaN: the session fails, the scene stays.
+  EXPECT_EQ(
+      kind_of([&] { s.on_frame(poses(5, false, {wire::node_pose_to_proto(0, moved, true)})); }),
+      "protocol");
+  glm::mat4 nan = moved;
+  nan[3].y = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_EQ(
+      kind_of([&] { s.on_frame(poses(5, false, {wire::node_pose_to_proto(prop, nan, true)})); }),
+      "protocol");
+  EXPECT_FLOAT_EQ(s.scene().unpacked.scene.nodes[prop].local[3].x, moved[3].x);
+  EXPECT_FALSE(s.scene().unpacked.scene.nodes[prop].visible);
+  EXPECT_EQ(s.pose_sequence(), 4u);
+  // A new server's complete set without the prop: back as the package places it.
+  s.on_frame(poses(1, true, {}));
+  EXPECT_EQ(s.scene().unpacked.scene.nodes[prop].local, loaded.local);
+  EXPECT_TRUE(s.scene().unpacked.scene.nodes[prop].visible);
+  EXPECT_EQ(s.pose_sequence(), 1u);
 }
 
 TEST(ClientSession, IgnoresEditsWhenNotFollowing) {

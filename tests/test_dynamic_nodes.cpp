@@ -7,9 +7,11 @@
 #include <atomic>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <thread>
 
 #include "cli.h"
+#include "dynamic_scenes.h"
 #include "engine_setup.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
@@ -22,71 +24,11 @@
 #include "service_fixture.h"
 
 using namespace irradcast;
+using test::cornell_with_prop;
+using test::move;
 namespace fs = std::filesystem;
 
 namespace {
-
-// A mesh of `s` on a new node under `parent` (-1: a root).
-int add_child_block(Scene& s, const std::string& name, int parent, glm::vec3 lo, glm::vec3 hi,
-                    std::uint32_t material) {
-  Scene tmp;
-  tmp.materials = s.materials;
-  test::add_block(tmp, name.c_str(), lo, hi, material);
-  Mesh merged;
-  merged.name = name;
-  for (const Mesh& m : tmp.meshes) {
-    const auto base = static_cast<std::uint32_t>(merged.positions.size());
-    merged.positions.insert(merged.positions.end(), m.positions.begin(), m.positions.end());
-    merged.normals.insert(merged.normals.end(), m.normals.begin(), m.normals.end());
-    merged.uv0.insert(merged.uv0.end(), m.uv0.begin(), m.uv0.end());
-    for (const glm::uvec3& t : m.triangles) merged.triangles.push_back(t + glm::uvec3(base));
-    merged.triangle_material.insert(merged.triangle_material.end(), m.triangle_material.begin(),
-                                    m.triangle_material.end());
-  }
-  s.meshes.push_back(std::move(merged));
-  Node n;
-  n.name = name;
-  n.parent = parent;
-  n.mesh = static_cast<int>(s.meshes.size() - 1);
-  return s.add_node(std::move(n));
-}
-
-// The Cornell box with a dynamic prop: a glowing block "prop" hanging in the room, a white
-// block under it, and a point light on the prop, all dynamic (the flag is on "prop" only).
-Scene cornell_with_prop() {
-  Scene s = make_cornell_box();
-  const std::uint32_t glow =
-      test::add_material(s, glm::vec3(0.5f), glm::vec3(4.0f, 2.0f, 1.0f), 1.0f);
-  const std::uint32_t white = test::add_material(s, glm::vec3(0.9f));
-  Node rig;  // a static node with no mesh: the prop hangs under it
-  rig.name = "rig";
-  const int rig_node = s.add_node(std::move(rig));
-  const int prop =
-      add_child_block(s, "prop", rig_node, {0.10f, 0.30f, 0.08f}, {0.20f, 0.40f, 0.16f}, glow);
-  s.nodes[static_cast<std::size_t>(prop)].dynamic = true;
-  add_child_block(s, "prop_base", prop, {0.08f, 0.25f, 0.06f}, {0.22f, 0.28f, 0.18f}, white);
-  Light bulb;
-  bulb.name = "bulb";
-  bulb.intensity = 5.0f;
-  s.lights.push_back(bulb);
-  Node lamp;
-  lamp.name = "lamp";
-  lamp.parent = prop;
-  lamp.light = static_cast<int>(s.lights.size() - 1);
-  lamp.local[3] = glm::vec4(0.15f, 0.45f, 0.12f, 1.0f);
-  s.add_node(std::move(lamp));
-  return s;
-}
-
-SceneEdit move(const std::string& node, glm::vec3 by) {
-  SceneEdit e;
-  EditOp op;
-  op.kind = EditOp::Kind::Move;
-  op.target = node;
-  op.vector = by;
-  e.ops.push_back(op);
-  return e;
-}
 
 std::vector<std::pair<std::uint64_t, std::string>> tile_state(const EngineHost& host) {
   std::vector<std::pair<std::uint64_t, std::string>> out;
@@ -169,20 +111,30 @@ TEST(DynamicNodes, MovingOneCostsTheEngineNothing) {
   EngineHost moved(cornell_with_prop(), "cornell", test::quick_host(0));
   EngineHost moved_static(cornell_with_prop(), "cornell", test::quick_host(0));
   for (EngineHost* h : {&still, &moved, &moved_static}) h->step();
-  EXPECT_EQ(moved.submit_edit(move("prop", {0.3f, -0.1f, 0.0f})), 1u);
+  // A pose: no revision, the first of the pose sequence.
+  const EditReceipt r = moved.submit(move("prop", {0.3f, -0.1f, 0.0f}), false);
+  EXPECT_EQ(r.revision, 0u);
+  EXPECT_EQ(r.pose_sequence, 1u);
   moved_static.submit_edit(move("tall_block", {0.05f, 0.0f, 0.0f}));
   const std::uint64_t epoch = still.tile_epoch();
+  const std::string package = still.package()->hash;
   for (EngineHost* h : {&still, &moved, &moved_static}) h->step();
-  EXPECT_EQ(moved.revision(), 1u);
+  EXPECT_EQ(moved.revision(), 0u);
   EXPECT_EQ(moved.tile_epoch(), epoch);
+  EXPECT_EQ(moved.package()->hash, package);  // the package places it as loaded
   EXPECT_EQ(moved.stats().stale_texels, still.stats().stale_texels);
   EXPECT_TRUE(tile_state(moved) == tile_state(still));
-  // The prop moved in the scene the viewers get.
-  const wire::UnpackedScene viewer = wire::open_scene_package(moved.package()->bytes, "");
-  EXPECT_EQ(viewer.revision, 1u);
+  // The prop's pose is on the board the viewers get their poses from.
   const int prop = static_cast<int>(make_cornell_box().nodes.size()) + 1;  // after the rig
-  EXPECT_FLOAT_EQ(viewer.scene.nodes[static_cast<std::size_t>(prop)].local[3].x, 0.3f);
-  EXPECT_TRUE(viewer.scene.nodes[static_cast<std::size_t>(prop)].dynamic);
+  ASSERT_NE(moved.poses(), nullptr);
+  std::uint64_t sequence = 0;
+  const std::map<int, NodePoseState> poses = moved.poses()->snapshot(&sequence);
+  EXPECT_EQ(sequence, 1u);
+  ASSERT_EQ(poses.size(), 1u);
+  ASSERT_EQ(poses.begin()->first, prop);
+  EXPECT_FLOAT_EQ(poses.begin()->second.local[3].x, 0.3f);
+  EXPECT_EQ(still.poses()->sequence(), 0u);
+  EXPECT_EQ(EngineHost(make_cornell_box(), "cornell", test::quick_host(0)).poses(), nullptr);
   // The control: a static move restarts texels under a new epoch.
   EXPECT_NE(moved_static.tile_epoch(), epoch);
   EXPECT_FALSE(tile_state(moved_static) == tile_state(still));
@@ -259,22 +211,21 @@ TEST(DynamicNodes, AConvergedHostStaysIdle) {
   const std::uint64_t updates = host.stats().updates;
   std::atomic<std::uint64_t> sent{0};
   host.set_edit_listener([&](const AppliedEdit& a) { sent = a.revision; });
-  host.submit_edit(move("prop", {0.0f, 0.1f, 0.0f}));
-  ASSERT_TRUE(test::eventually([&] { return host.stats().revision == 1; }));
+  EXPECT_EQ(host.submit(move("prop", {0.0f, 0.1f, 0.0f}), false).pose_sequence, 1u);
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   EXPECT_TRUE(host.stats().idle);
   EXPECT_EQ(host.stats().updates, updates);
   // Nor does a rig: a static node without a mesh whose children are dynamic.
-  host.submit_edit(move("rig", {0.1f, 0.0f, 0.0f}));
-  ASSERT_TRUE(test::eventually([&] { return host.stats().revision == 2; }));
+  EXPECT_EQ(host.submit(move("rig", {0.1f, 0.0f, 0.0f}), false).pose_sequence, 2u);
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
   EXPECT_TRUE(host.stats().idle);
   EXPECT_EQ(host.stats().updates, updates);
+  EXPECT_EQ(host.stats().revision, 0u);
   // A static move wakes it.
-  host.submit_edit(move("tall_block", {0.02f, 0.0f, 0.0f}));
+  EXPECT_EQ(host.submit_edit(move("tall_block", {0.02f, 0.0f, 0.0f})), 1u);
   EXPECT_TRUE(test::eventually([&] { return host.stats().updates > updates; }));
   host.stop();
-  EXPECT_EQ(sent, 3u);
+  EXPECT_EQ(sent, 1u);  // poses are not revisions: the one edit sent is the static move
 }
 
 // Through the server to a viewer: the viewer gets the scene with its dynamic nodes, the moved
@@ -316,9 +267,10 @@ TEST(DynamicNodes, AViewerGetsThePoseAndNoTile) {
   const auto [n0, x0] = glow(viewer.compose(camera, 64, 64));
   EXPECT_GT(n0, 10);  // the viewer draws the dynamic prop
   host.submit_edit(move("prop", {0.2f, 0.0f, 0.1f}));
-  while (std::chrono::steady_clock::now() < deadline && viewer.scene_revision() < 1)
+  while (std::chrono::steady_clock::now() < deadline && viewer.pose_sequence() < 1)
     viewer.poll(50ms);
-  ASSERT_EQ(viewer.scene_revision(), 1u);
+  ASSERT_EQ(viewer.pose_sequence(), 1u);
+  EXPECT_EQ(viewer.scene_revision(), 0u);  // a pose, not a revision
   viewer.poll(300ms);
   const int prop = static_cast<int>(make_cornell_box().nodes.size()) + 1;  // after the rig
   EXPECT_FLOAT_EQ(viewer.scene().nodes[static_cast<std::size_t>(prop)].local[3].x, 0.2f);

@@ -187,6 +187,20 @@ std::vector<Envelope> all_messages() {
     m->set_scene_hash(std::string(32, '\x5a'));
     m->set_applied(true);
     m->set_applied_us(1700000000000001ULL);
+    m->set_stream(true);
+    m->set_pose_sequence(11);
+    out.push_back(e);
+  }
+  {
+    Envelope e;
+    Poses* m = e.mutable_poses();
+    m->set_sequence(12);
+    NodePose* p = m->add_poses();
+    p->set_node(3);
+    for (int i = 0; i < 16; ++i) p->add_matrix(i % 5 == 0 ? 1.0f : 0.0f);
+    p->set_hidden(true);
+    m->set_complete(true);
+    m->set_posed_us(1700000000000002ULL);
     out.push_back(e);
   }
   {
@@ -217,6 +231,7 @@ std::vector<Envelope> all_messages() {
     out.push_back(e);
   }
   out.push_back(make_error(UNSUPPORTED_VERSION, "protocol version 9 is not supported"));
+  out.back().mutable_error()->set_request_id(13);
   out.push_back(make_bye("viewer closed"));
   return out;
 }

@@ -1,14 +1,15 @@
 // The client side of the protocol without I/O (client_session.h).
 #include "irradcast/client/client_session.h"
 
-#include "irradcast/wire/probe_volume_message.h"
-
 #include <algorithm>
+#include <set>
 
 #include "irradcast/common/log.h"
 #include "irradcast/common/scene_edit.h"
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/frame.h"
+#include "irradcast/wire/pose_message.h"
+#include "irradcast/wire/probe_volume_message.h"
 
 namespace irradcast {
 
@@ -80,6 +81,9 @@ ClientStep ClientSession::on_frame(const wire::Envelope& e) {
       break;
     case wire::Envelope::kBye:
       step.event = ClientStep::Event::Bye;
+      break;
+    case wire::Envelope::kPoses:
+      on_poses(e.poses());
       break;
     case wire::Envelope::kProbeVolume:
       try {
@@ -186,6 +190,8 @@ ClientStep ClientSession::install(std::shared_ptr<ClientScene> scene, bool from_
   revision_ = scene_->unpacked.revision;
   ++static_revision_;
   volume_ = wire::ReceivedVolume{};  // the old scene's; the server sends this one's on subscribe
+  package_poses_.clear();            // the new scene's nodes stand as its package places them
+  pose_sequence_ = 0;
   phase_ = Phase::Streaming;
   // Edits that arrived during the download, in order (those the package has are skipped).
   std::vector<wire::SceneEdit> pending;
@@ -264,6 +270,46 @@ void ClientSession::apply_scene_edit(const wire::SceneEdit& m) {
                                     "); loading the scene again");
     reload_ = true;
   }
+}
+
+void ClientSession::on_poses(const wire::Poses& m) {
+  if (!options_.follow_edits || phase_ != Phase::Streaming || !scene_) return;
+  ClientScene& s = *scene_;
+  Scene& scene = s.unpacked.scene;
+  try {
+    SceneEdit edit = wire::pose_edit(m, scene);
+    std::map<int, NodePoseState> before;  // the package's pose of nodes posed for the first time
+    for (const wire::NodePose& p : m.poses()) {
+      const int n = static_cast<int>(p.node());
+      if (!package_poses_.count(n))
+        before.emplace(n, NodePoseState{scene.nodes[n].local, scene.nodes[n].visible});
+    }
+    if (m.complete()) {  // nodes posed before and not now: back where the package places them
+      std::set<int> listed;
+      for (const wire::NodePose& p : m.poses()) listed.insert(static_cast<int>(p.node()));
+      for (const auto& [n, pose] : package_poses_) {
+        if (listed.count(n)) continue;
+        EditOp op;
+        op.kind = EditOp::Kind::SetTransform;
+        op.target = "#" + std::to_string(n);
+        op.matrix = pose.local;
+        edit.ops.push_back(op);
+        op.kind = pose.visible ? EditOp::Kind::Show : EditOp::Kind::Hide;
+        edit.ops.push_back(op);
+      }
+    }
+    if (!edit.ops.empty()) {
+      apply_edit(scene, edit);  // validates first: unchanged on bad numbers
+      const std::vector<int> changed = s.world.update(scene);
+      if (s.rays) s.rays->update(changed);
+      if (s.dynamic_rays) s.dynamic_rays->update(changed);
+    }
+    package_poses_.merge(before);
+  } catch (const Error& ex) {
+    throw ClientSessionFailure("protocol", ex.what());
+  }
+  pose_sequence_ = m.sequence();
+  ++counters_.poses_applied;
 }
 
 bool ClientSession::take_reload() {

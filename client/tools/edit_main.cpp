@@ -7,17 +7,25 @@
 // between edits moves on to the next; an edit whose answer was cut off is not sent again (edits
 // are not idempotent: a move twice moves twice), the error says so. --export FILE.glb writes the
 // server's current scene, every edit applied, as glTF 2.0 (the control token is needed too).
+// --stream [FILE] sends poses of dynamic nodes as they come, one edit per line
+// (docs/DYNAMIC.md#poses). An edit that only moves dynamic nodes makes no revision: it prints
+// "poses N applied".
 #include <CLI/CLI.hpp>
 #include <asio.hpp>
 
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <csignal>
 #include <cstdio>
+#include <deque>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -50,6 +58,8 @@ struct Options {
   std::vector<std::string> move, rotate, scale, show, hide, light_color, light_intensity, albedo,
       emission;
   std::string export_path;  // --export FILE.glb|.gltf
+  bool stream = false;      // --stream [FILE]: one edit per line, sent as streamed poses
+  std::string stream_path;  // empty: stdin
   bool no_wait = false;
   int timeout_ms = 10000;
   std::string name = "irradcast-edit";
@@ -63,9 +73,10 @@ struct Lost : irradcast::Error {
 
 // The server answered with an Error frame.
 struct Refused : irradcast::Error {
-  Refused(irradcast::wire::ErrorCode c, const std::string& message)
-      : irradcast::Error(message), code(c) {}
+  Refused(irradcast::wire::ErrorCode c, const std::string& message, std::uint64_t request = 0)
+      : irradcast::Error(message), code(c), request_id(request) {}
   irradcast::wire::ErrorCode code;
+  std::uint64_t request_id;  // the request it answers (0: none)
 };
 
 float number(const std::string& text, const std::string& flag) {
@@ -149,6 +160,11 @@ std::vector<irradcast::EditStep> steps_of(const Options& o) {
     text << f.rdbuf();
     steps = irradcast::parse_edit_script(text.str());
   }
+  if (o.stream) {
+    if (sources != 0 || !o.export_path.empty())
+      throw irradcast::Error("--stream reads its edits from a file or stdin: give no other edit");
+    return steps;
+  }
   if (!o.export_path.empty()) {
     if (sources != 0) throw irradcast::Error("give --export or an edit, not both");
     const std::string ext = std::filesystem::path(o.export_path).extension().string();
@@ -212,7 +228,8 @@ class Connection {
       if (st == irradcast::wire::DecodeStatus::Frame) {
         if (e.has_error() && irradcast::server_error_is_transient(e.error().code()))
           throw Lost("the server says: " + e.error().message());
-        if (e.has_error()) throw Refused(e.error().code(), e.error().message());
+        if (e.has_error())
+          throw Refused(e.error().code(), e.error().message(), e.error().request_id());
         if (e.has_ping()) {
           irradcast::wire::Envelope pong;
           pong.mutable_pong()->set_nonce(e.ping().nonce());
@@ -280,6 +297,7 @@ class Connection {
   }
 
   std::chrono::milliseconds ping_every{10000};  // a third of the server's idle timeout
+  Clock::time_point last_send() const { return last_send_; }
 
  private:
   asio::io_context io_;
@@ -346,9 +364,10 @@ class Session {
   std::unique_ptr<Connection> c_;
 };
 
-// Sends one edit and returns the revision of its acknowledgement. A connection lost before the
-// edit was written moves to the next server and sends it there.
-std::uint64_t send_edit(Session& session, const irradcast::wire::Envelope& e, std::uint64_t id) {
+// Sends one edit and returns its acknowledgement. A connection lost before the edit was written
+// moves to the next server and sends it there.
+irradcast::wire::SceneEdit send_edit(Session& session, const irradcast::wire::Envelope& e,
+                                     std::uint64_t id) {
   using namespace irradcast;
   try {
     session.connection().send(e);
@@ -361,7 +380,7 @@ std::uint64_t send_edit(Session& session, const irradcast::wire::Envelope& e, st
     for (;;) {
       wire::Envelope a = session.connection().expect("acknowledgement");
       if (a.has_scene_edit() && !a.scene_edit().applied() && a.scene_edit().request_id() == id)
-        return a.scene_edit().revision();
+        return a.scene_edit();
     }
   } catch (const Lost& lost) {
     throw Error("edit " + std::to_string(id) + ": " + session.server().text() + ": " + lost.what() +
@@ -420,9 +439,160 @@ int run_export(const Options& o, const std::string& token) {
   return 0;
 }
 
+// The lines of a file or stdin, read on their own thread so that the connection is served (pings,
+// refusals) while no line comes.
+class LineReader {
+ public:
+  explicit LineReader(const std::string& path) {
+    if (!path.empty()) {
+      file_.open(path);
+      if (!file_) throw irradcast::Error("--stream: cannot read '" + path + "'");
+    }
+    std::istream& in = path.empty() ? std::cin : file_;
+    thread_ = std::thread([this, &in] {
+      std::string line;
+      while (std::getline(in, line)) {
+        std::unique_lock lock(mutex_);
+        // A bounded backlog: a file is read no faster than the poses go out.
+        cv_.wait(lock, [&] { return lines_.size() < 1024; });
+        lines_.push_back(std::move(line));
+        cv_.notify_all();
+      }
+      std::lock_guard lock(mutex_);
+      done_ = true;
+      cv_.notify_all();
+    });
+    thread_.detach();  // stdin may block forever after the last line the tool needs
+  }
+  // The next line within `wait`; nullopt when none came (`ended`: none will).
+  std::optional<std::string> next(std::chrono::milliseconds wait, bool& ended) {
+    std::unique_lock lock(mutex_);
+    cv_.wait_for(lock, wait, [&] { return !lines_.empty() || done_; });
+    ended = lines_.empty() && done_;
+    if (lines_.empty()) return std::nullopt;
+    std::string line = std::move(lines_.front());
+    lines_.pop_front();
+    cv_.notify_all();
+    return line;
+  }
+
+ private:
+  std::ifstream file_;
+  std::thread thread_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::deque<std::string> lines_;
+  bool done_ = false;
+};
+
+// --stream: every line an edit of dynamic nodes (JSON, as --json; blank lines and lines starting
+// with '#' are skipped), sent as a streamed pose as soon as it comes, but no more than
+// kStreamRate times a second per node (a faster line waits). Refusals name their line; they do
+// not stop the stream, except a refused token.
+int run_stream(const Options& o, const std::string& token) {
+  using namespace irradcast;
+  constexpr auto kGap = std::chrono::microseconds(1000000 / 60);  // PoseBoard::kStreamRate
+  LineReader reader(o.stream_path);
+  Session session(o, tools::start_run(o.log_level, o.connect));
+  std::map<std::string, Clock::time_point> last_sent;  // per target
+  std::uint64_t line_no = 0, sent = 0, refused = 0, refused_by_server = 0;
+  const auto began = Clock::now();
+  // Reads what the server sent until `until`: refusals are printed, the rest dropped.
+  const auto serve = [&](Clock::time_point until) {
+    for (;;) {
+      try {
+        Connection& c = session.connection();
+        if (Clock::now() - c.last_send() >= c.ping_every) {
+          wire::Envelope p;
+          p.mutable_ping()->set_nonce(1);
+          c.send(p);
+        }
+        // At least one look at the socket: refusals must not pile up unread.
+        if (!c.read(std::max(until, Clock::now() + std::chrono::milliseconds(1)))) return;
+      } catch (const Refused& r) {
+        if (r.code == wire::PERMISSION_DENIED) throw;
+        ++refused;
+        ++refused_by_server;
+        std::fprintf(stderr, "irradcast-edit: line %llu: %s\n",
+                     static_cast<unsigned long long>(r.request_id), r.what());
+      }
+    }
+  };
+  for (;;) {
+    bool ended = false;
+    std::optional<std::string> line = reader.next(std::chrono::milliseconds(50), ended);
+    if (ended) break;
+    if (!line) {
+      serve(Clock::now());
+      continue;
+    }
+    ++line_no;
+    const std::size_t first = line->find_first_not_of(" \t\r");
+    if (first == std::string::npos || (*line)[first] == '#') continue;
+    SceneEdit edit;
+    try {
+      edit = parse_edit_json(*line);
+    } catch (const Error& e) {
+      ++refused;
+      std::fprintf(stderr, "irradcast-edit: line %llu: %s\n",
+                   static_cast<unsigned long long>(line_no), e.what());
+      continue;
+    }
+    Clock::time_point at = Clock::now();
+    for (const EditOp& op : edit.ops)
+      if (auto it = last_sent.find(op.target); it != last_sent.end())
+        at = std::max(at, it->second + kGap);
+    serve(at);  // waits for the node's rate, serving the connection meanwhile
+    wire::Envelope e;
+    wire::to_proto(edit, e.mutable_scene_edit());
+    e.mutable_scene_edit()->set_token(token);
+    e.mutable_scene_edit()->set_request_id(line_no);
+    e.mutable_scene_edit()->set_stream(true);
+    try {
+      session.connection().send(e);
+    } catch (const Lost& lost) {
+      log::warn("edit", session.server().text() + ": " + lost.what() + "; line " +
+                            std::to_string(line_no) + " may be lost; trying the next server");
+      session.connect();
+      continue;
+    }
+    ++sent;
+    const auto now = Clock::now();
+    for (const EditOp& op : edit.ops) last_sent[op.target] = now;
+  }
+  // Every refusal is in before the answer to a ping sent after the last pose.
+  wire::Envelope ping;
+  ping.mutable_ping()->set_nonce(0x5157);
+  session.connection().send(ping);
+  const auto deadline = Clock::now() + std::chrono::milliseconds(o.timeout_ms);
+  for (bool ponged = false; !ponged;) {
+    std::optional<wire::Envelope> a;
+    try {
+      a = session.connection().read(deadline);
+    } catch (const Refused& r) {
+      if (r.code == wire::PERMISSION_DENIED) throw;
+      ++refused;
+      ++refused_by_server;
+      std::fprintf(stderr, "irradcast-edit: line %llu: %s\n",
+                   static_cast<unsigned long long>(r.request_id), r.what());
+      continue;
+    }
+    if (!a) throw Error("no answer from the server within " + std::to_string(o.timeout_ms) + " ms");
+    ponged = a->has_pong() && a->pong().nonce() == 0x5157;
+  }
+  session.connection().close();
+  std::printf("streamed %llu poses from %llu lines in %.2f s, %llu refused\n",
+              static_cast<unsigned long long>(sent - refused_by_server),
+              static_cast<unsigned long long>(line_no),
+              std::chrono::duration<double>(Clock::now() - began).count(),
+              static_cast<unsigned long long>(refused));
+  return refused == 0 ? 0 : 1;
+}
+
 int run(const Options& o, const std::vector<irradcast::EditStep>& steps, const std::string& token) {
   using namespace irradcast;
   if (!o.export_path.empty()) return run_export(o, token);
+  if (o.stream) return run_stream(o, token);
   Session session(o, tools::start_run(o.log_level, o.connect));
   for (std::size_t i = 0; i < steps.size(); ++i) {
     if (steps[i].after_ms > 0.0) {
@@ -441,7 +611,16 @@ int run(const Options& o, const std::vector<irradcast::EditStep>& steps, const s
     m->set_token(token);
     m->set_request_id(i + 1);
     const auto sent = Clock::now();
-    const std::uint64_t revision = send_edit(session, e, i + 1);
+    const wire::SceneEdit ack = send_edit(session, e, i + 1);
+    const std::uint64_t revision = ack.revision();
+    if (revision == 0) {
+      // Poses only (docs/DYNAMIC.md#poses): on the viewers' way as acknowledged, no engine work.
+      std::printf("poses %llu applied in %.1f ms\n",
+                  static_cast<unsigned long long>(ack.pose_sequence()),
+                  std::chrono::duration<double, std::milli>(Clock::now() - sent).count());
+      std::fflush(stdout);
+      continue;
+    }
     if (o.no_wait) {
       std::printf("revision %llu queued\n", static_cast<unsigned long long>(revision));
       std::fflush(stdout);
@@ -505,6 +684,11 @@ int main(int argc, char** argv) {
   app.add_option("--export", o.export_path,
                  "FILE.glb or FILE.gltf: write the server's current scene (every edit applied) "
                  "as glTF 2.0 instead of editing (needs the token too)");
+  app.add_option("--stream", o.stream_path,
+                 "[FILE] stream poses of dynamic nodes: one JSON edit per line from FILE or "
+                 "stdin, each sent as it comes, at most 60 a second per node; refusals name "
+                 "their line (docs/DYNAMIC.md#poses)")
+      ->expected(0, 1);
   app.add_flag("--no-wait", o.no_wait, "return once the server queued each edit");
   app.add_option("--timeout-ms", o.timeout_ms, "how long to wait for each answer")
       ->check(CLI::Range(1, 3600000));
@@ -529,6 +713,7 @@ int main(int argc, char** argv) {
     }
   };
   return irradcast::tools::parse_and_run(app, argc, argv, run_edits, [&] {
+    o.stream = app.count("--stream") > 0;
     steps = steps_of(o);
     token = token_of(o);
   });

@@ -288,29 +288,61 @@ void validate_edit_ops(const Scene& scene, const SceneEdit& edit) {
              "edit op " + std::to_string(i + 1) + " (" + edit_kind_name(edit.ops[i].kind) + ")");
 }
 
-bool edit_changes_static_scene(const Scene& scene, const SceneEdit& edit) {
-  const std::vector<bool> dynamic = scene.dynamic_nodes();
-  // Whether node n's subtree holds a static mesh or light (a rig of dynamic children holds none).
-  const auto holds_static = [&](int n) {
-    std::vector<int> stack{n};
-    std::vector<bool> seen(scene.nodes.size(), false);
-    while (!stack.empty()) {
-      const int i = stack.back();
-      stack.pop_back();
-      if (i < 0 || static_cast<std::size_t>(i) >= scene.nodes.size() || seen[i]) continue;
-      seen[i] = true;
-      const Node& node = scene.nodes[i];
-      if (!dynamic[i] && (node.mesh >= 0 || node.light >= 0)) return true;
-      stack.insert(stack.end(), node.children.begin(), node.children.end());
-    }
-    return false;
-  };
-  for (const EditOp& op : edit.ops) {
-    if (target_of(op.kind) != Target::Node) return true;
-    const int n = find(scene.nodes, op.target);
-    if (n < 0 || holds_static(n)) return true;
+namespace {
+
+// Whether node n's subtree holds a static mesh or light (a rig of dynamic children holds none).
+bool holds_static(const Scene& scene, const std::vector<bool>& dynamic, int n) {
+  std::vector<int> stack{n};
+  std::vector<bool> seen(scene.nodes.size(), false);
+  while (!stack.empty()) {
+    const int i = stack.back();
+    stack.pop_back();
+    if (i < 0 || static_cast<std::size_t>(i) >= scene.nodes.size() || seen[i]) continue;
+    seen[i] = true;
+    const Node& node = scene.nodes[i];
+    if (!dynamic[i] && (node.mesh >= 0 || node.light >= 0)) return true;
+    stack.insert(stack.end(), node.children.begin(), node.children.end());
   }
   return false;
+}
+
+bool pose_op(const Scene& scene, const std::vector<bool>& dynamic, const EditOp& op) {
+  if (target_of(op.kind) != Target::Node) return false;
+  const int n = find(scene.nodes, op.target);
+  return n >= 0 && !holds_static(scene, dynamic, n);
+}
+
+}  // namespace
+
+bool edit_changes_static_scene(const Scene& scene, const SceneEdit& edit) {
+  const std::vector<bool> dynamic = scene.dynamic_nodes();
+  for (const EditOp& op : edit.ops)
+    if (!pose_op(scene, dynamic, op)) return true;
+  return false;
+}
+
+bool is_pose_op(const Scene& scene, const EditOp& op) {
+  return pose_op(scene, scene.dynamic_nodes(), op);
+}
+
+std::pair<SceneEdit, SceneEdit> split_poses(const Scene& scene, const SceneEdit& edit) {
+  const std::vector<bool> dynamic = scene.dynamic_nodes();
+  std::pair<SceneEdit, SceneEdit> parts;
+  for (const EditOp& op : edit.ops)
+    (pose_op(scene, dynamic, op) ? parts.first : parts.second).ops.push_back(op);
+  return parts;
+}
+
+std::vector<bool> pose_nodes(const Scene& scene) {
+  const std::vector<bool> dynamic = scene.dynamic_nodes();
+  std::vector<bool> out(scene.nodes.size());
+  for (std::size_t i = 0; i < out.size(); ++i)
+    out[i] = !holds_static(scene, dynamic, static_cast<int>(i));
+  return out;
+}
+
+int pose_node(const Scene& scene, const EditOp& op) {
+  return is_pose_op(scene, op) ? find(scene.nodes, op.target) : -1;
 }
 
 void validate_edit(const Scene& scene, const SceneEdit& edit) {

@@ -227,7 +227,8 @@ async function tabs(o) {
 // page from the probe volume in 3-D textures, as irradcast-view draws it; the same bounds as
 // `image`, and the block's own region compared on its own.
 async function dynamic(o) {
-  const server = await startServer(o.server, [...SERVER, '--dynamic', 'short_block']);
+  const token = 'web-test-token-0123';
+  const server = await startServer(o.server, [...SERVER, '--dynamic', 'short_block', '--control-token', token]);
   const b = await browser(o);
   try {
     const page = await openConverged(b, server.url + query({ width: W, height: H, ui: 0, converge: 0 }), W, H);
@@ -236,7 +237,6 @@ async function dynamic(o) {
     const volumes = await page.evaluate(() => window.irradcast.conn.counters.volumes);
     console.log(`page (dynamic): ${volumes} probe volume versions received`);
     assert.ok(volumes > 0, 'page (dynamic): no probe volume arrived');
-    await page.close();
     const reference = await viewPng(o, server, { width: W, height: H }, 'view-dynamic');
     compare(shot, reference, 'page (dynamic)');
     // The block: the lower right of the default view. Its mean level must agree too, and it must
@@ -254,6 +254,22 @@ async function dynamic(o) {
     console.log(`page (dynamic): the block's region, mean level ${region(a).toFixed(1)} / ${region(v).toFixed(1)}`);
     assert.ok(region(v) > 20, "page (dynamic): irradcast-view's block is black");
     assert.ok(Math.abs(region(a) - region(v)) <= 2, "page (dynamic): the block differs from irradcast-view's");
+    // Poses streamed by irradcast-edit --stream (docs/DYNAMIC.md#poses) move the block in the
+    // page as in irradcast-view, which joins afterwards and gets them in its first Poses.
+    const lines = path.join(tmpDir, 'poses.jsonl');
+    const step = JSON.stringify({ op: 'move', node: 'short_block', by: [-0.01, 0, 0.005] });
+    writeFileSync(lines, `${step}\n`.repeat(12));
+    await run(o.edit, ['--connect', `127.0.0.1:${server.port}`, '--token', token, '--stream', lines]);
+    await page.waitForFunction(() => window.irradcast.conn.poseSequence === 12, { timeout: 30000 });
+    await new Promise((r) => setTimeout(r, 500));  // a few frames
+    const moved = path.join(tmpDir, 'page-dynamic-moved.png');
+    await page.screenshot({ path: moved });
+    await page.close();
+    const movedView = await viewPng(o, server, { width: W, height: H }, 'view-dynamic-moved');
+    compare(moved, movedView, 'page (dynamic, posed)');
+    const m = readPng(moved);
+    console.log(`page (dynamic, posed): the block's old region, mean level ${region(m).toFixed(1)} (was ${region(a).toFixed(1)})`);
+    assert.ok(Math.abs(region(m) - region(a)) > 2, 'page (dynamic, posed): the block did not move');
   } finally {
     await b.close();
     await server.stop();

@@ -24,7 +24,7 @@ export class Connection {
     this.volume = null;        // the probe volume held (volume.js)
     this.versions = null;      // per lightmap, per tile: version held (0 = none)
     this.epoch = 0;
-    this.counters = { bytes: 0, tiles: 0, frames: 0, edits: 0, volumes: 0, connections: 0, byEncoding: [0, 0, 0] };
+    this.counters = { bytes: 0, tiles: 0, frames: 0, edits: 0, volumes: 0, poses: 0, connections: 0, byEncoding: [0, 0, 0] };
     this.backoff = 250;
     this.connect();
   }
@@ -92,6 +92,7 @@ export class Connection {
       case 'tile_update': return this.onTile(env.tile_update);
       case 'scene_edit': return this.onEdit(env.scene_edit);
       case 'probe_volume': return this.onVolume(env.probe_volume);
+      case 'poses': return this.onPoses(env.poses);
       case 'stats': return this.h.stats(env.stats);
       case 'error': {
         const name = ERROR_NAMES[env.error.code] || env.error.code;
@@ -188,6 +189,14 @@ export class Connection {
     this.volume = v;
     ++this.counters.volumes;
     return this.h.volume(v);
+  }
+
+  // Poses of dynamic nodes (edits.js applyPoses): not revisions; the newest come.
+  onPoses(m) {
+    if (this.phase !== 'streaming') throw new Error('Poses before the subscription');
+    ++this.counters.poses;
+    this.poseSequence = num(m.sequence);
+    return this.h.poses(m);
   }
 
   onEdit(m) {

@@ -3,7 +3,7 @@
 // nothing the page draws (their light reaches it through the lightmaps). An edit that does not
 // resolve throws, and the page loads the scene again.
 import * as THREE from 'three';
-import { readSky } from './scene.js';
+import { placeNodes, readSky } from './scene.js';
 
 const KIND = { MOVE: 0, ROTATE: 1, SCALE: 2, SET_TRANSFORM: 3, SHOW: 4, HIDE: 5, LIGHT_COLOR: 6,
   LIGHT_INTENSITY: 7, MATERIAL_ALBEDO: 8, MATERIAL_EMISSION: 9, SKY: 10 };
@@ -69,4 +69,45 @@ export function applyEdit(scene, message) {
     }
   }
   return changed;
+}
+
+// Per node: whether a pose may move it (its subtree holds no static mesh or light; is_pose_op).
+function poseNodes(scene) {
+  const { dynamic } = placeNodes(scene);
+  const holdsStatic = (n, seen) => {
+    if (seen.has(n)) return false;
+    seen.add(n);
+    const node = scene.nodes[n];
+    if (!dynamic[n] && (node.mesh >= 0 || node.light >= 0)) return true;
+    return node.children.some((c) => holdsStatic(c, seen));
+  };
+  return scene.nodes.map((_, n) => !holdsStatic(n, new Set()));
+}
+
+// A Poses message (docs/DYNAMIC.md#poses) on the page's scene model, checked as
+// wire::pose_edit does: each node in range and dynamic, 16 finite numbers. `held` maps the nodes
+// posed so far to the pose the package gave them; a complete set puts those it does not list
+// back. Throws on a bad pose before anything changes.
+export function applyPoses(scene, message, held) {
+  const poses = message.poses || [];
+  const posable = poseNodes(scene);
+  const next = poses.map((p, i) => {
+    const n = p.node || 0;
+    if (n >= scene.nodes.length) throw new Error(`poses: pose ${i + 1} names node ${n} of a scene of ${scene.nodes.length} nodes`);
+    if (!posable[n]) throw new Error(`poses: pose ${i + 1} moves node '${scene.nodes[n].name}', which is not dynamic`);
+    if (!p.matrix || p.matrix.length !== 16 || !p.matrix.every(Number.isFinite))
+      throw new Error(`poses: pose ${i + 1} is not 16 finite numbers`);
+    return { n, local: new THREE.Matrix4().fromArray(p.matrix), hidden: !!p.hidden };
+  });
+  if (message.complete) {
+    const listed = new Set(next.map((p) => p.n));
+    held.forEach((pose, n) => { if (!listed.has(n)) next.push({ n, local: pose.local.clone(), hidden: pose.hidden }); });
+  }
+  for (const p of next) {
+    const node = scene.nodes[p.n];
+    if (!held.has(p.n)) held.set(p.n, { local: node.local.clone(), hidden: node.hidden });
+    node.local = p.local;
+    node.hidden = p.hidden;
+  }
+  return next.length > 0;
 }

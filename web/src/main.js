@@ -9,7 +9,7 @@ import { Connection } from './connection.js';
 import { SceneView, TONE_OPS } from './render.js';
 import { ViewCamera, attachControls, parseCamera, formatCamera } from './camera.js';
 import { defaultCamera } from './scene.js';
-import { applyEdit, KIND } from './edits.js';
+import { applyEdit, applyPoses, KIND } from './edits.js';
 import { Overlay } from './overlay.js';
 import { num } from './proto.js';
 
@@ -67,6 +67,7 @@ function handlers(ctx) {
     sceneReady(model, welcome) {
       if (state.view) state.view.dispose();
       state.view = new SceneView(ctx.renderer, model, welcome, ctx.finish);
+      state.posed = new Map();  // nodes posed so far, with their package pose
       if (ctx.conn.volume) state.view.setVolume(ctx.conn.volume);
       const base = state.camera ? state.camera.pose : defaultCamera(model, state.view.bounds);
       let pose = base;
@@ -97,6 +98,14 @@ function handlers(ctx) {
         state.dirty = true;
       } catch (e) {
         ctx.conn.reload(e.message);
+      }
+    },
+    poses(m) {
+      try {
+        if (applyPoses(state.view.scene, m, state.posed)) state.view.placeNodes();
+        state.dirty = true;
+      } catch (e) {
+        ctx.conn.fail(e.message);
       }
     },
     stats(s) { state.stats = s; state.pendingStats = false; },

@@ -127,6 +127,8 @@ const char* message_name(const Envelope& e) {
       return "pong";
     case Envelope::kError:
       return "error";
+    case Envelope::kPoses:
+      return "poses";
     case Envelope::kBye:
       return "bye";
     case Envelope::kSceneEdit:

@@ -105,6 +105,11 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
       wire::make_scene_package(p.scene(), p.atlas(), replayed));
   validation_scene_ = p.scene();
   {
+    const std::vector<bool> dynamic = prepared_.scene().dynamic_nodes();
+    has_dynamic_ = std::find(dynamic.begin(), dynamic.end(), true) != dynamic.end();
+  }
+  if (has_dynamic_ && journal_) restore_poses();
+  {
     const EngineParams& e = options_.engine;
     // Every engine parameter (engine_params.inc) changes the published lightmaps.
     std::string key = package_->hash + "|" + engine_params_key(e);
@@ -126,8 +131,7 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
     // Replayed edits: the tiles are not those of a host that applied them while it ran.
     if (replayed > 0) tile_epoch_ = digest64(std::to_string(tile_epoch_) + "|journal");
   }
-  const std::vector<bool> dynamic = prepared_.scene().dynamic_nodes();
-  if (std::find(dynamic.begin(), dynamic.end(), true) != dynamic.end()) {
+  if (has_dynamic_) {
     impl_->volume = std::make_unique<IrradianceVolumeBuilder>(
         prepared_.world(), prepared_.rays(), prepared_.atlas(), options_.probe_volume);
     impl_->volume_placed = true;
@@ -155,7 +159,8 @@ std::uint64_t EngineHost::replay_journal() {
   EditJournalOptions jo;
   jo.dir = options_.state_dir;
   jo.scene_id = scene_id_;
-  jo.scene_hash = wire::scene_content_hash(prepared_.scene());
+  scene_hash_ = wire::scene_content_hash(prepared_.scene());
+  jo.scene_hash = scene_hash_;
   jo.compact_after = options_.journal_compact_after;
   journal_ = std::make_unique<EditJournal>(jo);
   const std::uint64_t revision = journal_->replay_revision();
@@ -179,6 +184,53 @@ std::uint64_t EngineHost::replay_journal() {
   log::info("journal", scene_id_ + ": replayed " + std::to_string(report.applied) + " edits from " +
                            journal_->path().string() + ", revision " + std::to_string(revision));
   return revision;
+}
+
+void EngineHost::restore_poses() {
+  pose_file_ = std::make_unique<PoseFile>(options_.state_dir, scene_id_, scene_hash_);
+  const auto saved = pose_file_->read(validation_scene_);
+  if (saved && !saved->second.ops.empty()) {
+    try {
+      apply_edit(validation_scene_, saved->second);  // checked like any edit
+    } catch (const Error& e) {
+      throw Error("saved poses: " + pose_file_->path().string() + ": " + e.what() +
+                  "; move it away to start without the saved poses");
+    }
+    std::map<int, NodePoseState> poses;
+    for (const EditOp& op : saved->second.ops) {
+      const int n = std::stoi(op.target.substr(1));  // "#n", as pose_edit made it
+      poses[n] =
+          NodePoseState{validation_scene_.nodes[n].local, validation_scene_.nodes[n].visible};
+    }
+    log::info("journal", scene_id_ + ": restored the poses of " + std::to_string(poses.size()) +
+                             " nodes from " + pose_file_->path().string());
+    poses_.restore(std::move(poses), saved->first);
+  } else if (saved) {
+    poses_.restore({}, saved->first);
+  }
+  pose_saver_ = std::thread([this] {
+    set_thread_name("irradcast-pose");
+    save_poses();
+  });
+}
+
+void EngineHost::save_poses() {
+  std::unique_lock lock(saver_mutex_);
+  for (;;) {
+    saver_cv_.wait(lock, [&] { return poses_dirty_ || saver_stop_; });
+    if (!poses_dirty_) return;  // stopping, and everything saved
+    poses_dirty_ = false;
+    lock.unlock();
+    SavedPoses s;
+    s.poses = poses_.snapshot(&s.sequence);
+    try {
+      pose_file_->write(s);
+    } catch (const Error& e) {
+      log::error("journal", std::string("streamed poses not saved: ") + e.what());
+    }
+    lock.lock();
+    saver_cv_.wait_for(lock, kPoseSaveInterval, [&] { return saver_stop_; });
+  }
 }
 
 std::string EngineHost::method_summary() const {
@@ -213,7 +265,7 @@ void EngineHost::set_camera(std::uint64_t viewer, std::optional<CameraPose> pose
     cameras_.erase(viewer);
 }
 
-std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
+EditReceipt EngineHost::submit(const SceneEdit& edit, bool stream) {
   // The validation scene is the scene as every accepted edit will leave it: an edit is checked
   // against the transforms the edits before it lead to (13 edits of scale 1000 each are refused
   // like one edit of 13). Under its own lock, so validation order is revision order and the
@@ -221,12 +273,76 @@ std::uint64_t EngineHost::submit_edit(const SceneEdit& edit) {
   // Sky files are read before the lock: another edit's validation need not wait for them.
   const SceneEdit loaded = read_sky_files(edit, options_.sky_dir);
   std::lock_guard validation(validation_mutex_);
-  {
+  // Poses (docs/DYNAMIC.md#poses): with dynamic nodes, the ops that move, show or hide them are
+  // not revisions. The two parts are independent, so the poses go first.
+  auto [poses, rest] =
+      has_dynamic_ ? split_poses(validation_scene_, loaded) : std::make_pair(SceneEdit{}, loaded);
+  if (stream) {
+    if (!has_dynamic_) throw Error("a streamed pose moves dynamic nodes, and this scene has none");
+    for (std::size_t i = 0; i < loaded.ops.size(); ++i)
+      if (!is_pose_op(validation_scene_, loaded.ops[i]))
+        throw Error("edit op " + std::to_string(i + 1) + " (" + edit_kind_name(loaded.ops[i].kind) +
+                    "): a streamed pose moves, shows or hides dynamic nodes only, and '" +
+                    loaded.ops[i].target +
+                    "' is not one (an edit of the static scene is sent without --stream)");
+  }
+  if (!rest.ops.empty()) {
     std::lock_guard lock(mutex_);
     if (pending_edits_.size() >= kMaxPendingEdits)
       throw Error("the engine has " + std::to_string(pending_edits_.size()) +
                   " edits waiting; send this one again later");
   }
+  validate_edit(validation_scene_, loaded);  // the whole edit, in its order
+  std::vector<int> nodes;
+  for (const EditOp& op : poses.ops) nodes.push_back(pose_node(validation_scene_, op));
+  std::sort(nodes.begin(), nodes.end());
+  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  if (stream)
+    if (const std::optional<int> over =
+            poses_.admit_stream(nodes, std::chrono::steady_clock::now()))
+      throw PoseRateLimited("node '" + validation_scene_.nodes[*over].name +
+                            "' is posed more than " +
+                            std::to_string(static_cast<int>(PoseBoard::kStreamRate)) +
+                            " times a second; this pose was dropped");
+  EditReceipt receipt;
+  if (!poses.ops.empty()) {
+    std::vector<std::pair<int, NodePoseState>> before, after;
+    for (int n : nodes)
+      before.emplace_back(
+          n, NodePoseState{validation_scene_.nodes[n].local, validation_scene_.nodes[n].visible});
+    apply_edit(validation_scene_, poses);
+    for (int n : nodes)
+      after.emplace_back(
+          n, NodePoseState{validation_scene_.nodes[n].local, validation_scene_.nodes[n].visible});
+    if (pose_file_ && !stream) {
+      // On disk before the edit is acknowledged, like a revision.
+      SavedPoses saved;
+      saved.poses = poses_.snapshot(&saved.sequence);
+      ++saved.sequence;
+      for (const auto& [n, p] : after) saved.poses[n] = p;
+      try {
+        pose_file_->write(saved);
+      } catch (const Error&) {
+        for (const auto& [n, p] : before) {
+          validation_scene_.nodes[n].local = p.local;
+          validation_scene_.nodes[n].visible = p.visible;
+        }
+        throw;
+      }
+    }
+    receipt.pose_sequence = poses_.post(after, now_us());
+    if (pose_file_ && stream) {
+      std::lock_guard lock(saver_mutex_);
+      poses_dirty_ = true;
+      saver_cv_.notify_all();
+    }
+  }
+  if (rest.ops.empty()) return receipt;
+  receipt.revision = submit_revision(rest);
+  return receipt;
+}
+
+std::uint64_t EngineHost::submit_revision(const SceneEdit& loaded) {
   std::uint64_t revision = 0;
   {
     std::lock_guard lock(mutex_);
@@ -367,6 +483,14 @@ void EngineHost::publish_edits(QueuedEdits& queued, const EditReport& report, La
 
 EngineHost::~EngineHost() {
   stop();
+  if (pose_saver_.joinable()) {
+    {
+      std::lock_guard lock(saver_mutex_);
+      saver_stop_ = true;
+    }
+    saver_cv_.notify_all();
+    pose_saver_.join();  // after writing the newest poses
+  }
 }
 
 void EngineHost::set_listener(PublishListener listener) {

@@ -461,12 +461,13 @@ const TileStore& NatsGateway::tiles() const {
 
 // Forwards an edit (which the session accepted with the control token) to the origin and waits
 // for its answer: the revision, or why it refused.
-std::uint64_t NatsGateway::submit_edit(const SceneEdit& edit) {
+EditReceipt NatsGateway::submit(const SceneEdit& edit, bool stream) {
   Impl& im = *impl_;
   if (!im.conn->connected())
     throw Error("the gateway has lost NATS; the edit was not sent to the origin");
   wire::SceneEdit m;
   wire::to_proto(edit, &m);
+  m.set_stream(stream);
   // No token: the session checked it, and it never crosses NATS (NATS's permissions decide who
   // may publish req.edit).
   const std::string bytes = m.SerializeAsString();
@@ -488,8 +489,12 @@ std::uint64_t NatsGateway::submit_edit(const SceneEdit& edit) {
   const bool parsed = r.ParseFromString(nats_link::data_of(reply));
   natsMsg_Destroy(reply);
   if (!parsed) throw Error("the origin's answer to the edit does not parse");
+  if (!r.error().empty() && r.code() == wire::RATE_LIMITED) throw PoseRateLimited(r.error());
   if (!r.error().empty()) throw Error(r.error());
-  return r.revision();
+  EditReceipt receipt;
+  receipt.revision = r.revision();
+  receipt.pose_sequence = r.pose_sequence();
+  return receipt;
 }
 
 void NatsGateway::set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) {

@@ -500,7 +500,13 @@ void NatsOrigin::Impl::on_submit(natsConnection* nc, natsMsg* msg) {
   } else {
     im.count(&NatsOriginStats::edit_requests);
     try {
-      r.set_revision(im.host.submit_edit(wire::from_proto(m)));
+      const EditReceipt receipt = im.host.submit(wire::from_proto(m), m.stream());
+      r.set_revision(receipt.revision);
+      r.set_pose_sequence(receipt.pose_sequence);
+    } catch (const PoseRateLimited& e) {
+      im.count(&NatsOriginStats::edits_refused);
+      r.set_error(e.what());
+      r.set_code(wire::RATE_LIMITED);
     } catch (const Error& e) {
       im.count(&NatsOriginStats::edits_refused);
       r.set_error(e.what());

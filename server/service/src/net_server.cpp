@@ -84,6 +84,7 @@ struct Server::Impl {
   std::vector<std::uint8_t> publish_pending;
   std::vector<std::uint32_t> publish_list;
   bool publish_posted = false;
+  std::atomic<bool> poses_posted{false};  // a fan_out_poses is posted and has not run
 
   void listen(tcp::acceptor& a, std::uint16_t port);
   void accept(bool web);
@@ -94,6 +95,8 @@ struct Server::Impl {
   void on_publish(const std::vector<std::uint32_t>& tiles);
   void fan_out();
   void on_edit(const AppliedEdit& applied);
+  void on_poses();
+  void fan_out_poses();
   void remove(const std::shared_ptr<Session>& s) {
     std::lock_guard lock(sessions_mutex);
     sessions.erase(s);
@@ -268,6 +271,19 @@ void Server::Impl::on_edit(const AppliedEdit& applied) {
   for (const auto& s : sessions) s->edit_applied(frame);
 }
 
+// A poster's thread: the sessions hear of new poses once per fan-out, however many were posted
+// meanwhile (each sends the newest).
+void Server::Impl::on_poses() {
+  if (poses_posted.exchange(true)) return;
+  asio::post(io, [this] { fan_out_poses(); });
+}
+
+void Server::Impl::fan_out_poses() {
+  poses_posted = false;
+  std::lock_guard lock(sessions_mutex);
+  for (const auto& s : sessions) s->poses_changed();
+}
+
 Server::Server(TileSource& host, ServerOptions options)
     : impl_(std::make_shared<Impl>(host, std::move(options))) {
   Impl& im = *impl_;
@@ -321,6 +337,10 @@ void Server::start() {
   im.host.set_edit_listener([weak](const AppliedEdit& applied) {
     if (auto s = weak.lock()) s->on_edit(applied);
   });
+  if (PoseBoard* poses = im.host.poses())
+    poses->set_listener([weak] {
+      if (auto s = weak.lock()) s->on_poses();
+    });
   im.work.emplace(asio::make_work_guard(im.io));
   im.accept(false);
   if (im.options.http_port) im.accept(true);
@@ -340,6 +360,7 @@ void Server::stop() {
   if (im.stopping.exchange(true)) return;
   im.host.set_listener(nullptr);
   im.host.set_edit_listener(nullptr);
+  if (PoseBoard* poses = im.host.poses()) poses->set_listener(nullptr);
   if (im.threads.empty()) return;
   asio::post(im.io, [&im] {
     std::error_code ec;

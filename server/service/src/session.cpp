@@ -242,6 +242,14 @@ void Session::edit_applied(std::shared_ptr<const std::string> frame) {
   });
 }
 
+void Session::poses_changed() {
+  asio::post(strand_, [self = shared_from_this()] {
+    if (self->protocol_.closed()) return;
+    self->protocol_.poses_changed();
+    self->pump();
+  });
+}
+
 void Session::shutdown() {
   asio::post(strand_, [self = shared_from_this()] {
     self->protocol_.shutdown();

@@ -58,6 +58,7 @@ class Session : public std::enable_shared_from_this<Session> {
   // tile notifications, so it reaches the client before the tiles that show it (control frames
   // go first).
   void edit_applied(std::shared_ptr<const std::string> frame);
+  void poses_changed();
   // Server shutdown: an Error SERVER_SHUTDOWN, then close.
   void shutdown();
   std::size_t queue_depth() const { return protocol_.queue_depth(); }

@@ -223,6 +223,11 @@ void SessionProtocol::on_subscribe(const wire::Subscribe& s) {
   }
   queue_changed();
   offer_probe_volume();
+  poses_due_ = ctx_.host.poses() != nullptr;  // the first Poses: complete
+}
+
+void SessionProtocol::poses_changed() {
+  if (streaming_ && !closed_) poses_due_ = true;
 }
 
 void SessionProtocol::offer_probe_volume() {
@@ -299,19 +304,31 @@ void SessionProtocol::on_scene_export(const wire::SceneExportRequest& m) {
 
 void SessionProtocol::on_scene_edit(const wire::SceneEdit& m) {
   if (!token_accepted(m.token())) return;
-  std::uint64_t revision = 0;
+  EditReceipt receipt;
   try {
-    revision = ctx_.host.submit_edit(wire::from_proto(m));
+    receipt = ctx_.host.submit(wire::from_proto(m), m.stream());
+  } catch (const PoseRateLimited& e) {
+    ++ctx_.counters.poses_refused;
+    error(wire::RATE_LIMITED, e.what(), m.request_id(), log::Level::Debug);
+    return;
   } catch (const Error& e) {
-    error(wire::BAD_REQUEST, e.what());
+    if (m.stream()) ++ctx_.counters.poses_refused;
+    error(wire::BAD_REQUEST, e.what(), m.request_id());
     return;
   }
-  note(log::Level::Info, client_name_ + " submitted edit " + std::to_string(revision) + " (" +
-                             std::to_string(m.ops_size()) + " operations)");
+  if (m.stream()) {  // never acknowledged: the viewers' Poses show it
+    ++ctx_.counters.poses_streamed;
+    return;
+  }
+  note(log::Level::Info,
+       client_name_ + " submitted " +
+           (receipt.revision ? "edit " + std::to_string(receipt.revision) : std::string("poses")) +
+           " (" + std::to_string(m.ops_size()) + " operations)");
   wire::Envelope ack;
   wire::SceneEdit* a = ack.mutable_scene_edit();
   a->set_request_id(m.request_id());
-  a->set_revision(revision);
+  a->set_revision(receipt.revision);
+  a->set_pose_sequence(receipt.pose_sequence);
   a->set_applied(false);
   send(ack);
 }
@@ -384,10 +401,13 @@ void SessionProtocol::idle_timed_out() {
        "no frame for " + std::to_string(ctx_.options.idle_timeout.count()) + " ms");
 }
 
-void SessionProtocol::error(wire::ErrorCode code, const std::string& message) {
-  note(log::Level::Info, "error sent: " + log::quote(message, 200));
+void SessionProtocol::error(wire::ErrorCode code, const std::string& message,
+                            std::uint64_t request_id, log::Level level) {
+  note(level, "error sent: " + log::quote(message, 200));
   ++ctx_.counters.errors_sent;
-  send(wire::make_error(code, message));
+  wire::Envelope e = wire::make_error(code, message);
+  e.mutable_error()->set_request_id(request_id);
+  send(e);
 }
 
 void SessionProtocol::fail(wire::ErrorCode code, const std::string& message, CloseReason reason) {
@@ -427,6 +447,16 @@ SessionWrite SessionProtocol::next_write(Clock::time_point now) {
     return {Kind::Edit, std::move(frame)};
   }
   if (closing_) return {Kind::Close, nullptr};  // the reason fail() gave stands
+  if (poses_due_) {
+    poses_due_ = false;
+    // The newest pose of every node moved since the last frame: coalesced, never a queue.
+    if (PoseBoard* board = ctx_.host.poses()) {
+      const PoseBoard::Frame f = board->frame_since(poses_seen_, !poses_complete_);
+      poses_complete_ = true;
+      poses_seen_ = f.sequence;
+      if (f.frame) return {Kind::Edit, f.frame};
+    }
+  }
   if (volume_frame_) {
     volume_frame_has_layout_ = false;
     return {Kind::Control, std::exchange(volume_frame_, nullptr)};

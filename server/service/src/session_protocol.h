@@ -37,7 +37,7 @@ struct ServerCounters {
       frames_received{0}, tiles_sent{0}, tile_bytes_sent{0}, tiles_coalesced{0},
       scene_bytes_sent{0}, errors_sent{0}, peer_refused{0}, banned_refused{0}, accept_errors{0},
       token_failures{0}, edits_dropped{0}, log_lines_suppressed{0}, websocket_sessions{0},
-      http_requests{0};
+      http_requests{0}, poses_streamed{0}, poses_refused{0};
   std::atomic<std::int64_t> partial_bytes{0};  // incomplete frames in every session's decoder
   std::array<std::atomic<std::uint64_t>, kCloseReasons> sessions_closed{};
 };
@@ -102,6 +102,9 @@ class SessionProtocol {
   // none of its epoch.
   void offer_probe_volume();
   void edit_applied(std::shared_ptr<const std::string> frame);
+  // The host's poses changed (docs/DYNAMIC.md#poses): after Subscribe, the next write sends the
+  // newest pose of every node moved since the last Poses this client got.
+  void poses_changed();
 
   // The connection's timers and state.
   void penalty_ended() { penalty_ = false; }
@@ -157,8 +160,9 @@ class SessionProtocol {
   bool token_accepted(const std::string& presented);
   void send_stats();
   void queue_changed();
-  // A reply or notice; the connection stays open.
-  void error(wire::ErrorCode code, const std::string& message);
+  // A reply or notice (answering request `request_id`, 0: none); the connection stays open.
+  void error(wire::ErrorCode code, const std::string& message, std::uint64_t request_id = 0,
+             log::Level level = log::Level::Info);
   // An Error frame, then close once it is written (or after a grace period).
   void fail(wire::ErrorCode code, const std::string& message) {
     fail(code, message, reason_of(code));
@@ -187,6 +191,9 @@ class SessionProtocol {
   std::deque<std::string> control_;
   std::deque<std::shared_ptr<const std::string>> edits_;  // broadcasts not yet written
   std::shared_ptr<const std::string> volume_frame_;       // the probe volume, not yet written
+  bool poses_due_ = false;       // a Poses frame may be owed (poses_changed)
+  bool poses_complete_ = false;  // the first, complete Poses was written
+  std::uint64_t poses_seen_ = 0;  // the pose sequence the client stands at
   bool volume_frame_has_layout_ = false;
   std::uint64_t volume_layout_epoch_ = 0, volume_version_ = 0;  // queued or written
   std::shared_ptr<const wire::ScenePackage> package_;           // set by Hello

@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -25,6 +26,7 @@
 #include "irradcast/client/tile_cache.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/ray_scene.h"
+#include "irradcast/common/scene_edit.h"
 #include "irradcast/common/world.h"
 #include "irradcast/wire/probe_volume_message.h"
 #include "irradcast/wire/scene_package.h"
@@ -86,6 +88,7 @@ struct ClientSessionCounters {
   std::uint64_t scene_bytes_downloaded = 0;
   std::uint64_t errors_received = 0;
   std::uint64_t edits_applied = 0;  // scene edits applied to the client's copy of the scene
+  std::uint64_t poses_applied = 0;  // Poses messages applied (docs/DYNAMIC.md#poses)
   bool scene_from_cache = false;    // the last scene loaded came from use_cached_package
 };
 
@@ -147,6 +150,8 @@ class ClientSession {
   const std::string& scene_hash() const { return scene_hash_; }
   std::uint64_t tile_epoch() const { return tile_epoch_; }
   std::uint64_t revision() const { return revision_; }
+  // The server's pose sequence of the last Poses applied (docs/DYNAMIC.md#poses).
+  std::uint64_t pose_sequence() const { return pose_sequence_; }
   // Counts the changes to the static scene: a scene installed, or an applied edit that moved,
   // hid or changed static content (edit_changes_static_scene). Edits that only move dynamic
   // objects leave it (a viewer's history stays valid; client_passes.h).
@@ -166,6 +171,7 @@ class ClientSession {
   wire::Envelope subscribe();
   void on_scene_edit(const wire::SceneEdit& m);
   void apply_scene_edit(const wire::SceneEdit& m);
+  void on_poses(const wire::Poses& m);
 
   ClientSessionOptions options_;
   ClientSceneFactory factory_;
@@ -182,6 +188,9 @@ class ClientSession {
   wire::ReceivedVolume volume_;
   TileCache tiles_;
   std::vector<wire::SceneEdit> pending_edits_;  // arrived while the scene loads
+  // Nodes the server posed (docs/DYNAMIC.md#poses), with the pose the scene package gave them.
+  std::map<int, NodePoseState> package_poses_;
+  std::uint64_t pose_sequence_ = 0;
   bool reload_ = false;
   std::chrono::milliseconds ping_interval_;
   std::optional<wire::Stats> last_stats_;

@@ -119,6 +119,8 @@ class ViewClient {
   // The revision of the viewer's scene: the package's, plus the edits applied since (every
   // applied SceneEdit the server broadcasts, in order; docs/EDITS.md).
   std::uint64_t scene_revision() const { return core_.revision(); }
+  // The server's pose sequence of the last Poses applied (docs/DYNAMIC.md#poses).
+  std::uint64_t pose_sequence() const { return core_.pose_sequence(); }
   // Changes with each new scene and each edit of the static scene (not with dynamic moves).
   std::uint64_t static_revision() const { return core_.static_revision(); }
   std::uint64_t session() const { return core_.session(); }

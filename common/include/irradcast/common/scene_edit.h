@@ -8,6 +8,7 @@
 #include <memory>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -86,6 +87,23 @@ void validate_edit_ops(const Scene& scene, const SceneEdit& edit);
 // Ops whose target does not resolve count as static. A light, material or sky op always does
 // (even on a material only dynamic objects use).
 bool edit_changes_static_scene(const Scene& scene, const SceneEdit& edit);
+// A node's pose: its local transform and whether it is visible (docs/DYNAMIC.md#poses).
+struct NodePoseState {
+  glm::mat4 local{1.0f};
+  bool visible = true;
+};
+
+// A pose op (docs/DYNAMIC.md#poses): one that moves, shows or hides a node whose subtree holds
+// no static mesh or light (a dynamic node, or a rig of them). A server keeps such ops out of
+// the revisioned edits: they go to the viewers as the node's new pose.
+bool is_pose_op(const Scene& scene, const EditOp& op);
+// Per node: whether a pose op may move it (its subtree holds no static mesh or light).
+std::vector<bool> pose_nodes(const Scene& scene);
+// The node a pose op moves (-1: not a pose op).
+int pose_node(const Scene& scene, const EditOp& op);
+// The edit's pose ops and its other ops, each in the edit's order. The two parts are
+// independent: a pose op changes a node no other op of the edit can see through.
+std::pair<SceneEdit, SceneEdit> split_poses(const Scene& scene, const SceneEdit& edit);
 // Validates, then applies every operation in order. On an invalid edit it throws and the scene
 // is unchanged.
 EditEffect apply_edit(Scene& scene, const SceneEdit& edit);

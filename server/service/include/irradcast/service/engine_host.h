@@ -27,6 +27,8 @@
 #include "irradcast/engine/irradiance_volume_builder.h"
 #include "irradcast/engine/prepared_scene.h"
 #include "irradcast/service/edit_journal.h"
+#include "irradcast/service/pose_board.h"
+#include "irradcast/service/pose_file.h"
 #include "irradcast/service/tile_source.h"
 #include "irradcast/service/tile_store.h"
 #include "irradcast/wire/scene_package.h"
@@ -72,16 +74,24 @@ class EngineHost final : public TileSource {
   // Called on the engine thread after each publish with the tiles that got a new version.
   void set_listener(PublishListener listener) override;
 
-  // Scene edits (docs/EDITS.md). Validates `edit` against the scene and queues it; the engine
-  // thread applies queued edits before its next update (waking up if it was idle) and then
-  // refines the affected texels first. Returns the revision the scene will have once it is
-  // applied. Throws irradcast::Error with a clear message on an invalid edit (nothing queued).
-  // With a state folder the edit is appended to the journal and fsynced before this returns
-  // (an I/O failure throws, and refuses every later edit).
+  // Scene edits (docs/EDITS.md). Validates `edit` against the scene and accepts it. Its pose
+  // ops (moving, showing or hiding dynamic nodes) are posted to poses() at once, as the nodes'
+  // new poses: no revision, no engine work (docs/DYNAMIC.md#poses). Its other ops are queued as
+  // a revision: the engine thread applies queued edits before its next update (waking up if it
+  // was idle) and then refines the affected texels first. Returns the revision the scene will
+  // have once it is applied (0: poses only) and the pose sequence. Throws irradcast::Error with
+  // a clear message on an invalid edit (nothing queued or posted); PoseRateLimited on a streamed
+  // pose past its node's rate.
+  // With a state folder the revision is appended to the journal and fsynced before this
+  // returns (an I/O failure throws, and refuses every later edit), and so are the poses of an
+  // edit that is not streamed (DIR/poses); streamed poses are saved at most kPoseSaveInterval
+  // later.
   // A sky op that names a file gets its map here, read from options.sky_dir (validate_sky), and
   // carries it to the engine and, with the broadcast, to the viewers; a map in `edit` itself is
   // never used. Any thread.
-  std::uint64_t submit_edit(const SceneEdit& edit) override;
+  EditReceipt submit(const SceneEdit& edit, bool stream) override;
+  PoseBoard* poses() override { return has_dynamic_ ? &poses_ : nullptr; }
+  static constexpr std::chrono::milliseconds kPoseSaveInterval{100};
   // Called on the engine thread once per applied edit, before the tiles that show it are
   // published: the server sends the edit to every viewer from here.
   void set_edit_listener(EditListener listener) override;
@@ -137,6 +147,12 @@ class EngineHost final : public TileSource {
   // Constructor, with a state folder: opens the journal and applies its edits to the prepared
   // scene (before the engine exists); returns the journal's revision.
   std::uint64_t replay_journal();
+  // Constructor, with a state folder and dynamic nodes: the poses saved in it.
+  void restore_poses();
+  void save_poses();
+  // submit(): queues the edit's ops that are not poses as the next revision (validation_mutex_).
+  std::uint64_t submit_revision(
+      const SceneEdit& edit);  // the saver thread: streamed poses, at most every kPoseSaveInterval
   void run();
   void do_update();
   void apply_edits();  // engine thread: applies the queued edits
@@ -164,6 +180,16 @@ class EngineHost final : public TileSource {
   // or textures) that a compaction's snapshot starts from (validation_mutex_).
   std::unique_ptr<EditJournal> journal_;
   Scene loaded_state_;
+  std::string scene_hash_;  // wire::scene_content_hash of the scene as loaded (with a folder)
+  // The dynamic nodes' poses; with a state folder, saved in DIR/poses (synchronously for an
+  // edit, by pose_saver_ for streamed poses).
+  bool has_dynamic_ = false;
+  PoseBoard poses_;
+  std::unique_ptr<PoseFile> pose_file_;
+  std::thread pose_saver_;
+  std::mutex saver_mutex_;
+  std::condition_variable saver_cv_;
+  bool poses_dirty_ = false, saver_stop_ = false;                  // saver_mutex_
   static constexpr std::size_t kMaxPendingEdits = 4096;            // accepted, not yet applied
   std::deque<std::pair<std::uint64_t, SceneEdit>> pending_edits_;  // guarded by mutex_
   std::uint64_t revision_ = 0;                                     // applied; guarded by mutex_

@@ -66,7 +66,7 @@ class NatsGateway final : public TileSource {
   std::uint64_t tile_epoch() const override;
   std::uint64_t revision() const override;
   const TileStore& tiles() const override;  // only once ready
-  std::uint64_t submit_edit(const SceneEdit& edit) override;
+  EditReceipt submit(const SceneEdit& edit, bool stream) override;
   void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) override;
   EngineHostStats stats() const override;
 

@@ -78,7 +78,10 @@ class NatsOrigin final : public TileSource {
   std::uint64_t tile_epoch() const override { return host_.tile_epoch(); }
   std::uint64_t revision() const override { return host_.revision(); }
   const TileStore& tiles() const override { return host_.tiles(); }
-  std::uint64_t submit_edit(const SceneEdit& edit) override { return host_.submit_edit(edit); }
+  EditReceipt submit(const SceneEdit& edit, bool stream) override {
+    return host_.submit(edit, stream);
+  }
+  PoseBoard* poses() override { return host_.poses(); }
   void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) override {
     host_.set_camera(viewer, std::move(pose));
   }

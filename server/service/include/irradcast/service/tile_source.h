@@ -14,6 +14,7 @@
 
 #include "irradcast/common/scene_edit.h"
 #include "irradcast/common/world.h"
+#include "irradcast/service/pose_board.h"
 #include "irradcast/service/tile_store.h"
 #include "irradcast/wire/scene_package.h"
 
@@ -27,6 +28,12 @@ struct AppliedEdit {
   std::uint64_t tile_epoch = 0;                       // EngineHost::tile_epoch() after it
   std::uint64_t applied_us = 0;                       // system clock when the engine had applied it
   double apply_ms = 0.0;  // time to apply (scene, ray scene, G-buffers, engine)
+};
+
+// What a host made of an accepted edit (TileSource::submit).
+struct EditReceipt {
+  std::uint64_t revision = 0;       // the revision it will make (0: it only posed nodes)
+  std::uint64_t pose_sequence = 0;  // the pose sequence its pose ops made (0: none)
 };
 
 // One engine pass (direct, or a bounce's probe gather or scatter): the last update's time and
@@ -97,9 +104,15 @@ class TileSource {
   virtual std::uint64_t revision() const = 0;
   // The tiles; their layout never changes while a Server serves them.
   virtual const TileStore& tiles() const = 0;
-  // Validates and queues a scene edit (docs/EDITS.md); returns the revision it will make.
-  // Throws irradcast::Error with a clear message when it is refused. Any thread.
-  virtual std::uint64_t submit_edit(const SceneEdit& edit) = 0;
+  // Validates a scene edit (docs/EDITS.md) and accepts it: its ops that move, show or hide
+  // dynamic nodes are posted as poses (docs/DYNAMIC.md#poses; poses() then holds them), the
+  // others queued as a revision. `stream`: a streamed pose (irradcast-edit --stream), refused
+  // unless every op is a pose op, and past PoseBoard::kStreamRate per node (PoseRateLimited).
+  // Throws irradcast::Error with a clear message when it is refused (nothing changes). Any
+  // thread.
+  virtual EditReceipt submit(const SceneEdit& edit, bool stream) = 0;
+  // submit(edit, false).revision.
+  std::uint64_t submit_edit(const SceneEdit& edit) { return submit(edit, false).revision; }
   // A viewer's camera (`pose` empty: the viewer left). Any thread.
   virtual void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) = 0;
   // The engine's stats (a gateway: the origin's, as last published). Any thread.
@@ -108,6 +121,9 @@ class TileSource {
   // same update; null when there is none (a scene without dynamic nodes; a gateway, for now).
   // Any thread.
   virtual std::shared_ptr<const ProbeVolumeFrames> probe_volume() const { return nullptr; }
+  // The dynamic nodes' poses (docs/DYNAMIC.md#poses); null when the scene has no dynamic nodes
+  // (or a gateway, for now). Lives as long as the source.
+  virtual PoseBoard* poses() { return nullptr; }
 };
 
 }  // namespace irradcast
