@@ -497,6 +497,7 @@ int run_stream(const Options& o, const std::string& token) {
   std::map<std::string, Clock::time_point> last_sent;  // per target
   std::uint64_t line_no = 0, sent = 0, refused = 0, refused_by_server = 0;
   const auto began = Clock::now();
+  Clock::time_point last_poll = began;
   // Reads what the server sent until `until`: refusals are printed, the rest dropped.
   const auto serve = [&](Clock::time_point until) {
     for (;;) {
@@ -507,8 +508,12 @@ int run_stream(const Options& o, const std::string& token) {
           p.mutable_ping()->set_nonce(1);
           c.send(p);
         }
-        // At least one look at the socket: refusals must not pile up unread.
-        if (!c.read(std::max(until, Clock::now() + std::chrono::milliseconds(1)))) return;
+        // A look at the socket at least every 20 ms, so that refusals do not pile up unread,
+        // but not a wait for every line of a fast stream.
+        const auto now = Clock::now();
+        if (until <= now && now - last_poll < std::chrono::milliseconds(20)) return;
+        last_poll = now;
+        if (!c.read(std::max(until, now + std::chrono::milliseconds(1)))) return;
       } catch (const Refused& r) {
         if (r.code == wire::PERMISSION_DENIED) throw;
         ++refused;

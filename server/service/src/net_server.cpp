@@ -85,6 +85,11 @@ struct Server::Impl {
   std::vector<std::uint32_t> publish_list;
   bool publish_posted = false;
   std::atomic<bool> poses_posted{false};  // a fan_out_poses is posted and has not run
+  // Poses go out at most once per kPoseInterval: every node posed meanwhile in one frame per
+  // session (at 64 nodes streaming 60 poses a second, 125 frames a second, not 3840).
+  static constexpr std::chrono::milliseconds kPoseInterval{8};
+  asio::steady_timer pose_timer{io};
+  std::atomic<std::chrono::steady_clock::rep> last_pose_fan_out{0};  // time_since_epoch
 
   void listen(tcp::acceptor& a, std::uint16_t port);
   void accept(bool web);
@@ -275,10 +280,24 @@ void Server::Impl::on_edit(const AppliedEdit& applied) {
 // meanwhile (each sends the newest).
 void Server::Impl::on_poses() {
   if (poses_posted.exchange(true)) return;
-  asio::post(io, [this] { fan_out_poses(); });
+  asio::post(io, [this] {
+    // One handler at a time touches the timer: the next is posted only after fan_out_poses.
+    const auto due = std::chrono::steady_clock::time_point(
+                         std::chrono::steady_clock::duration(last_pose_fan_out.load())) +
+                     kPoseInterval;
+    if (std::chrono::steady_clock::now() >= due) {
+      fan_out_poses();
+      return;
+    }
+    pose_timer.expires_at(due);
+    pose_timer.async_wait([this](std::error_code ec) {
+      if (!ec) fan_out_poses();
+    });
+  });
 }
 
 void Server::Impl::fan_out_poses() {
+  last_pose_fan_out = std::chrono::steady_clock::now().time_since_epoch().count();
   poses_posted = false;
   std::lock_guard lock(sessions_mutex);
   for (const auto& s : sessions) s->poses_changed();

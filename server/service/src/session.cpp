@@ -318,6 +318,10 @@ void Session::on_read(std::error_code ec, std::size_t n) {
   }
   server_.context.counters.bytes_received += n;
   if (ws_) {
+    // After our close frame the handshake is over for us: what the peer sends (its close reply)
+    // is not handed to the WebSocket layer, which would answer a second, empty close frame
+    // (the peer would read status 1005 instead of ours).
+    if (ws_close_sent_) return;
     ws_->receive(buffer_.data(), n);  // complete messages go to the protocol as frames
     on_websocket_input();
   } else {

@@ -1,0 +1,191 @@
+// irradcast-bench-poses: poses of dynamic nodes streamed through one irradcast-server to many thin
+// viewers (issue 32 part 6, docs/BENCHMARKS.md "Dynamic objects"). One server child process on
+// the Cornell box with --nodes dynamic spheres (a glTF written here), converged and idle; --users
+// thin users (irradcast-load's generator, in this process); then, row by row, irradcast-edit
+// --stream moving 0, 1, 16 and 64 of the spheres (--moving) at 60 poses a second each for
+// --window-s seconds. Per row: the poses the server took per second, its network threads' CPU
+// (cores) and the bytes each viewer received per second, measured in the window; the first row
+// (nothing moving) is the baseline the others are read against, side by side in one run.
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "../fanout_common.h"
+#include "balls_scene.h"
+#include "bench_util.h"
+#include "irradcast/client/load_generator.h"
+#include "irradcast/common/error.h"
+
+using namespace irradcast;
+using namespace irradcast::bench;
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+struct Options {
+  int nodes = 64;
+  std::string moving = "0,1,16,64";
+  int users = 256;
+  double window_s = 4.0;
+  std::string out = "out/bench-poses";
+};
+
+const char* kToken = "bench-poses-token-0123456789";
+
+// `moving` spheres, each stepping 60 times a second for `seconds`, the lines interleaved.
+std::string pose_lines(int moving, double seconds) {
+  std::ostringstream out;
+  const int steps = static_cast<int>(60.0 * seconds);
+  for (int t = 0; t < steps; ++t)
+    for (int b = 0; b < moving; ++b)
+      out << R"({"op": "move", "node": "ball)" << b << R"(", "by": [)"
+          << (t % 120 < 60 ? 0.001 : -0.001) << ", 0, 0]}\n";
+  return out.str();
+}
+
+int run(const Options& o) {
+  std::vector<int> rows;
+  {
+    std::stringstream ss(o.moving);
+    std::string part;
+    while (std::getline(ss, part, ',')) rows.push_back(std::stoi(part));
+  }
+  for (int m : rows)
+    if (m < 0 || m > o.nodes)
+      throw Error("--moving: " + std::to_string(m) + " is not in 0.." + std::to_string(o.nodes));
+  fs::create_directories(o.out);
+  const fs::path gltf = fs::path(o.out) / "balls.glb";
+  write_balls_gltf(o.nodes, gltf.string());
+
+  fanout::Options fo;
+  fo.scene = gltf.string();
+  fo.out = o.out;
+  fo.server_args = {"--control-token", kToken, "--texels-per-scene", "32",  "--max-updates", "4",
+                    "--io-threads",    "2",    "--log-level",        "warn"};
+  const std::uint16_t port = fanout::free_port();
+  fanout::Child server(fanout::server_command(fo, port), fs::path(o.out) / "server.log");
+  fanout::wait_listening(port, 120.0, "irradcast-server");
+
+  nlohmann::json j;
+  j["bench"] = "irradcast-bench-poses";
+  j["machine"] = machine_json(0);
+  j["users"] = o.users;
+  j["nodes"] = o.nodes;
+  j["window_s"] = o.window_s;
+  std::printf(
+      "%d thin users of one irradcast-server, %d dynamic spheres; each row streams "
+      "poses of `moving` spheres at 60/s for %.1f s\n",
+      o.users, o.nodes, o.window_s);
+  std::printf("%-7s %12s %14s %18s %14s\n", "moving", "poses/s in", "server cores",
+              "bytes/viewer/s", "edit refused");
+  double base_cores = 0.0, base_bytes = 0.0;
+  for (std::size_t r = 0; r < rows.size(); ++r) {
+    const int moving = rows[r];
+    const fs::path lines = fs::path(o.out) / ("poses_" + std::to_string(moving) + ".jsonl");
+    std::ofstream(lines) << pose_lines(moving, o.window_s);
+    LoadOptions lo;
+    lo.port = port;
+    lo.users = o.users;
+    lo.ramp_s = 1.0;
+    const double start_s = 4.0;  // every user has its full image by then (a tiny scene)
+    lo.duration_s = start_s + o.window_s + 2.0;
+    lo.camera_hz = 1.0;
+    lo.name = "bench-poses";
+    std::mutex mutex;
+    std::vector<std::pair<double, std::uint64_t>> received;  // (elapsed s, bytes), each second
+    LoadReport report;
+    std::thread load([&] {
+      report = run_load(lo, [&](const LoadProgress& p) {
+        std::lock_guard lock(mutex);
+        received.emplace_back(p.elapsed_s, p.bytes_received);
+      });
+    });
+    const auto t0 = Clock::now();
+    std::this_thread::sleep_until(t0 + std::chrono::milliseconds(static_cast<int>(1e3 * start_s)));
+    const fanout::ThreadCpu cpu0 = fanout::thread_cpu(server.pid());
+    const auto w0 = Clock::now();
+    std::string edit_output = "no poses";
+    if (moving > 0) {
+      const std::string cmd = std::string(IRRADCAST_EDIT_EXE) +
+                              " --connect 127.0.0.1:" + std::to_string(port) + " --token " +
+                              kToken + " --stream " + lines.string() + " 2>&1";
+      FILE* p = popen(cmd.c_str(), "r");
+      if (!p) throw Error("cannot run irradcast-edit");
+      char buf[512];
+      edit_output.clear();
+      while (std::fgets(buf, sizeof buf, p)) edit_output += buf;
+      pclose(p);
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int>(1e3 * o.window_s)));
+    }
+    const auto w1 = Clock::now();
+    const fanout::ThreadCpu cpu1 = fanout::thread_cpu(server.pid());
+    load.join();
+    const double window = std::chrono::duration<double>(w1 - w0).count();
+    const double from = std::chrono::duration<double>(w0 - t0).count(), to = from + window;
+    // Bytes all users received in the window, from the once-a-second progress (interpolated).
+    const auto bytes_at = [&](double t) {
+      std::lock_guard lock(mutex);
+      for (std::size_t i = 1; i < received.size(); ++i)
+        if (received[i].first >= t) {
+          const auto& [ta, ba] = received[i - 1];
+          const auto& [tb, bb] = received[i];
+          const double f = tb > ta ? (t - ta) / (tb - ta) : 1.0;
+          return double(ba) + f * (double(bb) - double(ba));
+        }
+      return received.empty() ? 0.0 : double(received.back().second);
+    };
+    const double bytes_per_viewer = (bytes_at(to) - bytes_at(from)) / window / o.users;
+    const double cores = (cpu1.io - cpu0.io) / window;
+    unsigned long long taken = 0, refused = 0;
+    if (const auto at = edit_output.find("streamed "); at != std::string::npos)
+      std::sscanf(edit_output.c_str() + at, "streamed %llu poses from %*u lines in %*f s, %llu",
+                  &taken, &refused);
+    const double poses_per_s = static_cast<double>(taken) / window;
+    if (r == 0) {
+      base_cores = cores;
+      base_bytes = bytes_per_viewer;
+    }
+    std::printf("%-7d %12.0f %14.3f %18.0f %14llu\n", moving, poses_per_s, cores, bytes_per_viewer,
+                refused);
+    std::fflush(stdout);
+    j["rows"].push_back({{"moving", moving},
+                         {"poses_per_s", poses_per_s},
+                         {"server_network_cores", cores},
+                         {"server_network_cores_over_baseline", cores - base_cores},
+                         {"bytes_per_viewer_per_s", bytes_per_viewer},
+                         {"bytes_per_viewer_per_s_over_baseline", bytes_per_viewer - base_bytes},
+                         {"poses_refused", refused},
+                         {"users_failed", report.failed},
+                         {"window_s", window}});
+  }
+  const std::string path = (fs::path(o.out) / "poses.json").string();
+  write_json(path, j);
+  std::printf("wrote %s\n", path.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  CLI::App app{"irradcast-bench-poses: poses streamed through one server to many thin viewers"};
+  app.add_option("--nodes", o.nodes, "dynamic spheres in the scene");
+  app.add_option("--moving", o.moving,
+                 "spheres streaming per row, comma-separated (first: baseline)");
+  app.add_option("--users", o.users, "thin viewers");
+  app.add_option("--window-s", o.window_s, "seconds of streaming per row");
+  app.add_option("--out", o.out, "output directory");
+  CLI11_PARSE(app, argc, argv);
+  return run_guarded("irradcast-bench-poses: ", [&] { return run(o); });
+}
