@@ -122,8 +122,8 @@ class NatsProcess {
 // irradcast-server --nats in the process: cornell, small, final after `updates` updates.
 struct NatsOriginNode {
   NatsOriginNode(const std::string& url, std::uint32_t updates, const std::string& token = "",
-                 const NatsCredentials& credentials = {})
-      : host(make_cornell_box(), "cornell", small_host(updates)),
+                 const NatsCredentials& credentials = {}, Scene scene = make_cornell_box())
+      : host(std::move(scene), "cornell", small_host(updates)),
         origin(host,
                [&] {
                  NatsOriginOptions o;

@@ -20,6 +20,7 @@
 #include "irradcast/service/nats_subjects.h"
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/tile_codec.h"
+#include "dynamic_scenes.h"
 #include "irradcast_nats.pb.h"
 #include "nats_fixture.h"
 
@@ -187,6 +188,72 @@ TEST(Nats, AnEditSentThroughAGatewayReachesEveryViewer) {
   EXPECT_EQ(late.scene_revision(), 1u);
   EXPECT_EQ(late.scene_hash(), origin.host.package()->hash);
   EXPECT_EQ(origin.origin.nats_stats().edit_requests, 1u);
+}
+
+// Dynamic objects behind a gateway (docs/DYNAMIC.md): the gateway serves the origin's probe
+// volume (its chunks reassembled and checked) and the origin's poses, and a pose streamed through
+// the gateway reaches the origin, which takes it, and every viewer.
+TEST(Nats, GatewaysServeTheProbeVolumeAndThePoses) {
+  IRRADCAST_NEED_NATS();
+  test::NatsProcess nats;
+  test::NatsOriginNode origin(nats.url(), 2, kToken, {}, test::cornell_with_prop());
+  test::NatsGatewayNode gw(nats.url(), kToken);
+  ASSERT_TRUE(origin.settle());
+  ViewClient direct(viewer_of(origin.server, "direct"));
+  ViewClient via(viewer_of(*gw.server, "via"));
+  direct.connect();
+  via.connect();
+  const auto wanted = origin.host.probe_volume();
+  ASSERT_NE(wanted, nullptr);
+  for (ViewClient* v : {&direct, &via}) {
+    EXPECT_TRUE(test::eventually([&] {
+      v->poll(20ms);
+      return v->probe_volume().lit() && v->probe_volume().epoch == wanted->epoch &&
+             v->probe_volume().version == wanted->version;
+    })) << (v == &direct ? "direct" : "via") << ": " << v->probe_volume().version << " of " << wanted->version
+        << "; the gateway got " << gw.gateway.nats_stats().volumes_received << " volumes, "
+        << "the origin published " << origin.origin.nats_stats().volumes_published;
+  }
+  ASSERT_TRUE(via.probe_volume().lit() && direct.probe_volume().lit());
+  // The same volume, bit for bit, through NATS.
+  const IrradianceVolume& a = direct.probe_volume().volume;
+  const IrradianceVolume& b = via.probe_volume().volume;
+  ASSERT_EQ(a.sh.size(), b.sh.size());
+  ASSERT_EQ(a.grid.counts, b.grid.counts);
+  for (float x : {0.1f, 0.25f, 0.4f})
+    for (const glm::vec3 n : {glm::vec3(0, 1, 0), glm::vec3(0, -1, 0), glm::vec3(1, 0, 0)}) {
+      const glm::vec3 p(x, 0.2f, 0.3f);
+      EXPECT_EQ(a.irradiance(p, n), b.irradiance(p, n)) << x;
+      EXPECT_GT(a.irradiance(p, n).x, 0.0f);
+    }
+  EXPECT_GE(gw.gateway.nats_stats().volumes_received, 1u);
+
+  // A pose streamed to the gateway: the origin takes it, both viewers show it.
+  test::RawConnection editor(gw.server->port());
+  ASSERT_TRUE(editor.join("editor"));
+  wire::Envelope e;
+  wire::to_proto(parse_edit_json(R"({"op": "move", "node": "prop", "by": [0.1, 0, 0]})"),
+                 e.mutable_scene_edit());
+  e.mutable_scene_edit()->set_token(kToken);
+  e.mutable_scene_edit()->set_request_id(3);
+  e.mutable_scene_edit()->set_stream(true);
+  editor.send(e);
+  const auto prop = static_cast<std::size_t>(make_cornell_box().nodes.size()) + 1;
+  for (ViewClient* v : {&direct, &via})
+    EXPECT_TRUE(test::eventually([&] {
+      v->poll(20ms);
+      return v->pose_sequence() >= 1 &&
+             std::abs(v->scene().nodes[prop].local[3].x - 0.1f) < 1e-6f;
+    }));
+  EXPECT_EQ(origin.host.poses()->sequence(), 1u);
+  EXPECT_EQ(origin.host.revision(), 0u);
+  // A viewer joining the gateway now gets the pose in its first Poses.
+  ViewClient late(viewer_of(*gw.server, "late"));
+  late.connect();
+  EXPECT_TRUE(test::eventually([&] {
+    late.poll(20ms);
+    return std::abs(late.scene().nodes[prop].local[3].x - 0.1f) < 1e-6f;
+  }));
 }
 
 // The control token never crosses NATS: a gateway's session checks it and forwards the edit

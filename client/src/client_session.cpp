@@ -191,6 +191,7 @@ ClientStep ClientSession::install(std::shared_ptr<ClientScene> scene, bool from_
   ++static_revision_;
   volume_ = wire::ReceivedVolume{};  // the old scene's; the server sends this one's on subscribe
   package_poses_.clear();            // the new scene's nodes stand as its package places them
+  posable_.clear();
   pose_sequence_ = 0;
   phase_ = Phase::Streaming;
   // Edits that arrived during the download, in order (those the package has are skipped).
@@ -276,38 +277,49 @@ void ClientSession::on_poses(const wire::Poses& m) {
   if (!options_.follow_edits || phase_ != Phase::Streaming || !scene_) return;
   ClientScene& s = *scene_;
   Scene& scene = s.unpacked.scene;
+  if (posable_.size() != scene.nodes.size()) posable_ = pose_nodes(scene);
+  SceneEdit edit;
+  std::map<int, NodePoseState> before;  // the package's pose of nodes posed for the first time
   try {
-    SceneEdit edit = wire::pose_edit(m, scene);
-    std::map<int, NodePoseState> before;  // the package's pose of nodes posed for the first time
-    for (const wire::NodePose& p : m.poses()) {
-      const int n = static_cast<int>(p.node());
-      if (!package_poses_.count(n))
-        before.emplace(n, NodePoseState{scene.nodes[n].local, scene.nodes[n].visible});
-    }
-    if (m.complete()) {  // nodes posed before and not now: back where the package places them
-      std::set<int> listed;
-      for (const wire::NodePose& p : m.poses()) listed.insert(static_cast<int>(p.node()));
-      for (const auto& [n, pose] : package_poses_) {
-        if (listed.count(n)) continue;
-        EditOp op;
-        op.kind = EditOp::Kind::SetTransform;
-        op.target = "#" + std::to_string(n);
-        op.matrix = pose.local;
-        edit.ops.push_back(op);
-        op.kind = pose.visible ? EditOp::Kind::Show : EditOp::Kind::Hide;
-        edit.ops.push_back(op);
-      }
-    }
-    if (!edit.ops.empty()) {
-      apply_edit(scene, edit);  // validates first: unchanged on bad numbers
-      const std::vector<int> changed = s.world.update(scene);
-      if (s.rays) s.rays->update(changed);
-      if (s.dynamic_rays) s.dynamic_rays->update(changed);
-    }
-    package_poses_.merge(before);
+    edit = wire::pose_edit(m, scene, posable_);  // nodes and shapes: a bad one is hostile
   } catch (const Error& ex) {
     throw ClientSessionFailure("protocol", ex.what());
   }
+  for (const wire::NodePose& p : m.poses()) {
+    const int n = static_cast<int>(p.node());
+    if (!package_poses_.count(n))
+      before.emplace(n, NodePoseState{scene.nodes[n].local, scene.nodes[n].visible});
+  }
+  if (m.complete()) {  // nodes posed before and not now: back where the package places them
+    std::set<int> listed;
+    for (const wire::NodePose& p : m.poses()) listed.insert(static_cast<int>(p.node()));
+    for (const auto& [n, pose] : package_poses_) {
+      if (listed.count(n)) continue;
+      EditOp op;
+      op.kind = EditOp::Kind::SetTransform;
+      op.target = "#" + std::to_string(n);
+      op.matrix = pose.local;
+      edit.ops.push_back(op);
+      op.kind = pose.visible ? EditOp::Kind::Show : EditOp::Kind::Hide;
+      edit.ops.push_back(op);
+    }
+  }
+  if (!edit.ops.empty()) {
+    try {
+      apply_edit(scene, edit);  // validates first: unchanged on bad numbers
+    } catch (const Error& ex) {
+      // The server's scene may have moved on (a revision not applied here yet): a pose it took
+      // need not fit this copy. Loaded again, as for an edit that does not apply.
+      log::warn(options_.log_tag, std::string("poses do not apply to this scene (") + ex.what() +
+                                      "); loading the scene again");
+      reload_ = true;
+      return;
+    }
+    const std::vector<int> changed = s.world.update(scene);
+    if (s.rays) s.rays->update(changed);
+    if (s.dynamic_rays) s.dynamic_rays->update(changed);
+  }
+  package_poses_.merge(before);
   pose_sequence_ = m.sequence();
   ++counters_.poses_applied;
 }

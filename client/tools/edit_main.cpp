@@ -440,49 +440,61 @@ int run_export(const Options& o, const std::string& token) {
 }
 
 // The lines of a file or stdin, read on their own thread so that the connection is served (pings,
-// refusals) while no line comes.
+// refusals) while no line comes. The thread is detached (stdin may block for good after the last
+// line the tool needs) and shares the lines with the reader: it may outlive it.
 class LineReader {
  public:
-  explicit LineReader(const std::string& path) {
+  explicit LineReader(const std::string& path) : shared_(std::make_shared<Shared>()) {
+    auto in = std::make_shared<std::ifstream>();
     if (!path.empty()) {
-      file_.open(path);
-      if (!file_) throw irradcast::Error("--stream: cannot read '" + path + "'");
+      in->open(path);
+      if (!*in) throw irradcast::Error("--stream: cannot read '" + path + "'");
     }
-    std::istream& in = path.empty() ? std::cin : file_;
-    thread_ = std::thread([this, &in] {
+    std::thread([shared = shared_, in, use_stdin = path.empty()] {
+      std::istream& from = use_stdin ? std::cin : *in;
       std::string line;
-      while (std::getline(in, line)) {
-        std::unique_lock lock(mutex_);
+      while (std::getline(from, line)) {
+        std::unique_lock lock(shared->mutex);
         // A bounded backlog: a file is read no faster than the poses go out.
-        cv_.wait(lock, [&] { return lines_.size() < 1024; });
-        lines_.push_back(std::move(line));
-        cv_.notify_all();
+        shared->cv.wait(lock, [&] { return shared->lines.size() < 1024 || shared->abandoned; });
+        if (shared->abandoned) return;
+        shared->lines.push_back(std::move(line));
+        shared->cv.notify_all();
       }
-      std::lock_guard lock(mutex_);
-      done_ = true;
-      cv_.notify_all();
-    });
-    thread_.detach();  // stdin may block forever after the last line the tool needs
+      std::lock_guard lock(shared->mutex);
+      shared->done = true;
+      shared->cv.notify_all();
+    }).detach();
   }
+  ~LineReader() {
+    std::lock_guard lock(shared_->mutex);
+    shared_->abandoned = true;
+    shared_->cv.notify_all();
+  }
+  LineReader(const LineReader&) = delete;
+  LineReader& operator=(const LineReader&) = delete;
+
   // The next line within `wait`; nullopt when none came (`ended`: none will).
   std::optional<std::string> next(std::chrono::milliseconds wait, bool& ended) {
-    std::unique_lock lock(mutex_);
-    cv_.wait_for(lock, wait, [&] { return !lines_.empty() || done_; });
-    ended = lines_.empty() && done_;
-    if (lines_.empty()) return std::nullopt;
-    std::string line = std::move(lines_.front());
-    lines_.pop_front();
-    cv_.notify_all();
+    Shared& s = *shared_;
+    std::unique_lock lock(s.mutex);
+    s.cv.wait_for(lock, wait, [&] { return !s.lines.empty() || s.done; });
+    ended = s.lines.empty() && s.done;
+    if (s.lines.empty()) return std::nullopt;
+    std::string line = std::move(s.lines.front());
+    s.lines.pop_front();
+    s.cv.notify_all();
     return line;
   }
 
  private:
-  std::ifstream file_;
-  std::thread thread_;
-  std::mutex mutex_;
-  std::condition_variable cv_;
-  std::deque<std::string> lines_;
-  bool done_ = false;
+  struct Shared {
+    std::mutex mutex;
+    std::condition_variable cv;
+    std::deque<std::string> lines;
+    bool done = false, abandoned = false;
+  };
+  std::shared_ptr<Shared> shared_;
 };
 
 // --stream: every line an edit of dynamic nodes (JSON, as --json; blank lines and lines starting
@@ -496,30 +508,63 @@ int run_stream(const Options& o, const std::string& token) {
   Session session(o, tools::start_run(o.log_level, o.connect));
   std::map<std::string, Clock::time_point> last_sent;  // per target
   std::uint64_t line_no = 0, sent = 0, refused = 0, refused_by_server = 0;
+  // Lines sent since the server last answered (a ping's pong), and those that a lost connection
+  // may have taken with it.
+  std::uint64_t sent_since_answer = 0, answered = 0, lost_lines = 0, lost_unsent = 0;
   const auto began = Clock::now();
-  Clock::time_point last_poll = began;
+  Clock::time_point last_poll = began, last_mark = began;
+  constexpr std::uint64_t kMark = std::uint64_t{1} << 62;  // our pings' nonces: kMark | sent
+  std::map<std::uint64_t, std::uint64_t> marks;            // sent count at a ping -> its line
   // Reads what the server sent until `until`: refusals are printed, the rest dropped.
   const auto serve = [&](Clock::time_point until) {
     for (;;) {
       try {
         Connection& c = session.connection();
-        if (Clock::now() - c.last_send() >= c.ping_every) {
+        // A ping every 250 ms while lines go out (and as the idle timeout needs): its pong
+        // says the server read every line sent before it.
+        if (Clock::now() - last_mark >= std::chrono::milliseconds(250) ||
+            Clock::now() - c.last_send() >= c.ping_every) {
           wire::Envelope p;
-          p.mutable_ping()->set_nonce(1);
+          p.mutable_ping()->set_nonce(kMark | sent);
           c.send(p);
+          marks[sent] = line_no;
+          last_mark = Clock::now();
         }
         // A look at the socket at least every 20 ms, so that refusals do not pile up unread,
         // but not a wait for every line of a fast stream.
         const auto now = Clock::now();
         if (until <= now && now - last_poll < std::chrono::milliseconds(20)) return;
         last_poll = now;
-        if (!c.read(std::max(until, now + std::chrono::milliseconds(1)))) return;
+        const std::optional<wire::Envelope> a =
+            c.read(std::max(until, now + std::chrono::milliseconds(1)));
+        if (!a) return;
+        if (a->has_pong() && (a->pong().nonce() & kMark)) {
+          const std::uint64_t at = a->pong().nonce() & ~kMark;
+          if (auto it = marks.find(at); it != marks.end()) {
+            answered = it->second;
+            sent_since_answer = sent - at;
+            marks.erase(marks.begin(), std::next(it));
+          }
+        }
       } catch (const Refused& r) {
         if (r.code == wire::PERMISSION_DENIED) throw;
         ++refused;
         ++refused_by_server;
         std::fprintf(stderr, "irradcast-edit: line %llu: %s\n",
                      static_cast<unsigned long long>(r.request_id), r.what());
+      } catch (const Lost& lost) {
+        // Poses written since the last answer may be lost with the connection: said, not
+        // counted as taken.
+        std::fprintf(stderr,
+                     "irradcast-edit: %s: %s; poses sent after line %llu may be lost; trying the "
+                     "next server\n",
+                     session.server().text().c_str(), lost.what(),
+                     static_cast<unsigned long long>(answered));
+        lost_lines += sent_since_answer;
+        sent_since_answer = 0;
+        marks.clear();
+        session.connect();
+        return;
       }
     }
   };
@@ -556,12 +601,21 @@ int run_stream(const Options& o, const std::string& token) {
     try {
       session.connection().send(e);
     } catch (const Lost& lost) {
-      log::warn("edit", session.server().text() + ": " + lost.what() + "; line " +
-                            std::to_string(line_no) + " may be lost; trying the next server");
+      std::fprintf(stderr,
+                   "irradcast-edit: %s: %s; line %llu and those sent after line %llu may be "
+                   "lost; trying the next server\n",
+                   session.server().text().c_str(), lost.what(),
+                   static_cast<unsigned long long>(line_no),
+                   static_cast<unsigned long long>(answered));
+      lost_lines += sent_since_answer;
+      ++lost_unsent;
+      sent_since_answer = 0;
+      marks.clear();
       session.connect();
       continue;
     }
     ++sent;
+    ++sent_since_answer;
     const auto now = Clock::now();
     for (const EditOp& op : edit.ops) last_sent[op.target] = now;
   }
@@ -586,12 +640,13 @@ int run_stream(const Options& o, const std::string& token) {
     ponged = a->has_pong() && a->pong().nonce() == 0x5157;
   }
   session.connection().close();
-  std::printf("streamed %llu poses from %llu lines in %.2f s, %llu refused\n",
-              static_cast<unsigned long long>(sent - refused_by_server),
+  std::printf("streamed %llu poses from %llu lines in %.2f s, %llu refused, %llu lost\n",
+              static_cast<unsigned long long>(sent - refused_by_server - lost_lines),
               static_cast<unsigned long long>(line_no),
               std::chrono::duration<double>(Clock::now() - began).count(),
-              static_cast<unsigned long long>(refused));
-  return refused == 0 ? 0 : 1;
+              static_cast<unsigned long long>(refused),
+              static_cast<unsigned long long>(lost_lines));
+  return refused == 0 && lost_lines == 0 ? 0 : 1;
 }
 
 int run(const Options& o, const std::vector<irradcast::EditStep>& steps, const std::string& token) {

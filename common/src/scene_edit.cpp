@@ -288,61 +288,63 @@ void validate_edit_ops(const Scene& scene, const SceneEdit& edit) {
              "edit op " + std::to_string(i + 1) + " (" + edit_kind_name(edit.ops[i].kind) + ")");
 }
 
-namespace {
-
-// Whether node n's subtree holds a static mesh or light (a rig of dynamic children holds none).
-bool holds_static(const Scene& scene, const std::vector<bool>& dynamic, int n) {
-  std::vector<int> stack{n};
-  std::vector<bool> seen(scene.nodes.size(), false);
-  while (!stack.empty()) {
-    const int i = stack.back();
-    stack.pop_back();
-    if (i < 0 || static_cast<std::size_t>(i) >= scene.nodes.size() || seen[i]) continue;
-    seen[i] = true;
+std::vector<bool> pose_nodes(const Scene& scene) {
+  // One pass: each node's own static content, then children's folded into parents, deepest
+  // first (breadth-first order from the parentless nodes, reversed). A node no root reaches
+  // (a cycle) counts as static.
+  const std::vector<bool> dynamic = scene.dynamic_nodes();
+  const std::size_t n = scene.nodes.size();
+  std::vector<bool> holds(n, false), reached(n, false);
+  std::vector<int> order;
+  order.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
     const Node& node = scene.nodes[i];
-    if (!dynamic[i] && (node.mesh >= 0 || node.light >= 0)) return true;
-    stack.insert(stack.end(), node.children.begin(), node.children.end());
+    holds[i] = !dynamic[i] && (node.mesh >= 0 || node.light >= 0);
+    if (node.parent < 0) {
+      reached[i] = true;
+      order.push_back(static_cast<int>(i));
+    }
   }
-  return false;
+  for (std::size_t k = 0; k < order.size(); ++k)
+    for (int c : scene.nodes[static_cast<std::size_t>(order[k])].children)
+      if (c >= 0 && static_cast<std::size_t>(c) < n && !reached[static_cast<std::size_t>(c)]) {
+        reached[static_cast<std::size_t>(c)] = true;
+        order.push_back(c);
+      }
+  for (auto it = order.rbegin(); it != order.rend(); ++it) {
+    const auto i = static_cast<std::size_t>(*it);
+    const int parent = scene.nodes[i].parent;
+    if (holds[i] && parent >= 0 && static_cast<std::size_t>(parent) < n)
+      holds[static_cast<std::size_t>(parent)] = true;
+  }
+  std::vector<bool> out(n);
+  for (std::size_t i = 0; i < n; ++i) out[i] = reached[i] && !holds[i];
+  return out;
 }
 
-bool pose_op(const Scene& scene, const std::vector<bool>& dynamic, const EditOp& op) {
-  if (target_of(op.kind) != Target::Node) return false;
+int pose_node(const Scene& scene, const std::vector<bool>& posable, const EditOp& op) {
+  if (target_of(op.kind) != Target::Node) return -1;
   const int n = find(scene.nodes, op.target);
-  return n >= 0 && !holds_static(scene, dynamic, n);
+  return n >= 0 && static_cast<std::size_t>(n) < posable.size() && posable[n] ? n : -1;
 }
-
-}  // namespace
 
 bool edit_changes_static_scene(const Scene& scene, const SceneEdit& edit) {
-  const std::vector<bool> dynamic = scene.dynamic_nodes();
+  const std::vector<bool> posable = pose_nodes(scene);
   for (const EditOp& op : edit.ops)
-    if (!pose_op(scene, dynamic, op)) return true;
+    if (pose_node(scene, posable, op) < 0) return true;
   return false;
 }
 
 bool is_pose_op(const Scene& scene, const EditOp& op) {
-  return pose_op(scene, scene.dynamic_nodes(), op);
+  return pose_node(scene, pose_nodes(scene), op) >= 0;
 }
 
-std::pair<SceneEdit, SceneEdit> split_poses(const Scene& scene, const SceneEdit& edit) {
-  const std::vector<bool> dynamic = scene.dynamic_nodes();
+std::pair<SceneEdit, SceneEdit> split_poses(const Scene& scene, const std::vector<bool>& posable,
+                                            const SceneEdit& edit) {
   std::pair<SceneEdit, SceneEdit> parts;
   for (const EditOp& op : edit.ops)
-    (pose_op(scene, dynamic, op) ? parts.first : parts.second).ops.push_back(op);
+    (pose_node(scene, posable, op) >= 0 ? parts.first : parts.second).ops.push_back(op);
   return parts;
-}
-
-std::vector<bool> pose_nodes(const Scene& scene) {
-  const std::vector<bool> dynamic = scene.dynamic_nodes();
-  std::vector<bool> out(scene.nodes.size());
-  for (std::size_t i = 0; i < out.size(); ++i)
-    out[i] = !holds_static(scene, dynamic, static_cast<int>(i));
-  return out;
-}
-
-int pose_node(const Scene& scene, const EditOp& op) {
-  return is_pose_op(scene, op) ? find(scene.nodes, op.target) : -1;
 }
 
 void validate_edit(const Scene& scene, const SceneEdit& edit) {

@@ -71,17 +71,24 @@ export function applyEdit(scene, message) {
   return changed;
 }
 
-// Per node: whether a pose may move it (its subtree holds no static mesh or light; is_pose_op).
+// Per node: whether a pose may move it (its subtree holds no static mesh or light), in one pass
+// as pose_nodes (common/src/scene_edit.cpp): breadth-first from the parentless nodes, children
+// folded into parents deepest first; a node no root reaches counts as static.
 function poseNodes(scene) {
   const { dynamic } = placeNodes(scene);
-  const holdsStatic = (n, seen) => {
-    if (seen.has(n)) return false;
-    seen.add(n);
-    const node = scene.nodes[n];
-    if (!dynamic[n] && (node.mesh >= 0 || node.light >= 0)) return true;
-    return node.children.some((c) => holdsStatic(c, seen));
-  };
-  return scene.nodes.map((_, n) => !holdsStatic(n, new Set()));
+  const n = scene.nodes.length;
+  const holds = scene.nodes.map((node, i) => !dynamic[i] && (node.mesh >= 0 || node.light >= 0));
+  const reached = new Array(n).fill(false);
+  const order = [];
+  scene.nodes.forEach((node, i) => { if (node.parent < 0) { reached[i] = true; order.push(i); } });
+  for (let k = 0; k < order.length; ++k)
+    for (const c of scene.nodes[order[k]].children)
+      if (c >= 0 && c < n && !reached[c]) { reached[c] = true; order.push(c); }
+  for (let k = order.length - 1; k >= 0; --k) {
+    const i = order[k], p = scene.nodes[i].parent;
+    if (holds[i] && p >= 0 && p < n) holds[p] = true;
+  }
+  return holds.map((h, i) => reached[i] && !h);
 }
 
 // A Poses message (docs/DYNAMIC.md#poses) on the page's scene model, checked as
@@ -90,7 +97,8 @@ function poseNodes(scene) {
 // back. Throws on a bad pose before anything changes.
 export function applyPoses(scene, message, held) {
   const poses = message.poses || [];
-  const posable = poseNodes(scene);
+  if (!scene.posable) scene.posable = poseNodes(scene);  // edits never change it
+  const posable = scene.posable;
   const next = poses.map((p, i) => {
     const n = p.node || 0;
     if (n >= scene.nodes.length) throw new Error(`poses: pose ${i + 1} names node ${n} of a scene of ${scene.nodes.length} nodes`);

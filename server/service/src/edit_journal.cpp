@@ -314,10 +314,14 @@ void EditJournal::read_existing() {
   if (fd_ < 0) throw Error("edit journal: cannot open " + path_.string() + ": " + errno_text());
 }
 
-void EditJournal::append(std::uint64_t revision, const SceneEdit& edit) {
+void EditJournal::check_usable() const {
   if (failed_)
     throw Error("the edit journal failed earlier (" + failure_ +
                 "); edits are refused until the server is restarted");
+}
+
+void EditJournal::append(std::uint64_t revision, const SceneEdit& edit) {
+  check_usable();
   if (revision != last_revision_ + 1)
     throw Error("edit journal: revision " + std::to_string(revision) + " after " +
                 std::to_string(last_revision_));

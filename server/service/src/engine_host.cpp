@@ -12,6 +12,7 @@
 #include "irradcast/engine/engine.h"
 #include "irradcast/service/thread_priority.h"
 #include "irradcast/wire/frame.h"
+#include "irradcast/wire/pose_message.h"
 #include "irradcast/wire/probe_volume_message.h"
 
 namespace irradcast {
@@ -107,6 +108,7 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
   {
     const std::vector<bool> dynamic = prepared_.scene().dynamic_nodes();
     has_dynamic_ = std::find(dynamic.begin(), dynamic.end(), true) != dynamic.end();
+    posable_ = pose_nodes(validation_scene_);
   }
   if (has_dynamic_ && journal_) restore_poses();
   {
@@ -145,6 +147,11 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
   revision_ = submitted_revision_ = stats_.revision = replayed;
   stats_.texels = impl_->engine->texel_count();
   stats_.tiles = tiles_->tile_count();
+  if (pose_file_)  // last: nothing after it throws, so no joinable thread meets a throw
+    pose_saver_ = std::thread([this] {
+      set_thread_name("irradcast-pose");
+      save_poses();
+    });
   log::info("engine", scene_id_ + ": method " + method_name(options_.engine.method) + ", " +
                           std::to_string(p.atlas().objects.size()) + " lightmaps, " +
                           std::to_string(impl_->engine->texel_count()) + " texels, " +
@@ -188,7 +195,7 @@ std::uint64_t EngineHost::replay_journal() {
 
 void EngineHost::restore_poses() {
   pose_file_ = std::make_unique<PoseFile>(options_.state_dir, scene_id_, scene_hash_);
-  const auto saved = pose_file_->read(validation_scene_);
+  const auto saved = pose_file_->read(validation_scene_, posable_);
   if (saved && !saved->second.ops.empty()) {
     try {
       apply_edit(validation_scene_, saved->second);  // checked like any edit
@@ -208,10 +215,6 @@ void EngineHost::restore_poses() {
   } else if (saved) {
     poses_.restore({}, saved->first);
   }
-  pose_saver_ = std::thread([this] {
-    set_thread_name("irradcast-pose");
-    save_poses();
-  });
 }
 
 void EngineHost::save_poses() {
@@ -223,12 +226,21 @@ void EngineHost::save_poses() {
     lock.unlock();
     SavedPoses s;
     s.poses = poses_.snapshot(&s.sequence);
+    bool saved = true;
     try {
       pose_file_->write(s);
     } catch (const Error& e) {
-      log::error("journal", std::string("streamed poses not saved: ") + e.what());
+      log::error("journal",
+                 std::string("streamed poses not saved (tried again in 1 s): ") + e.what());
+      saved = false;
     }
     lock.lock();
+    if (!saved) {
+      poses_dirty_ = true;
+      if (saver_stop_) return;  // no second try at a stop
+      saver_cv_.wait_for(lock, std::chrono::seconds(1), [&] { return saver_stop_; });
+      continue;
+    }
     saver_cv_.wait_for(lock, kPoseSaveInterval, [&] { return saver_stop_; });
   }
 }
@@ -273,14 +285,15 @@ EditReceipt EngineHost::submit(const SceneEdit& edit, bool stream) {
   // Sky files are read before the lock: another edit's validation need not wait for them.
   const SceneEdit loaded = read_sky_files(edit, options_.sky_dir);
   std::lock_guard validation(validation_mutex_);
-  // Poses (docs/DYNAMIC.md#poses): with dynamic nodes, the ops that move, show or hide them are
-  // not revisions. The two parts are independent, so the poses go first.
-  auto [poses, rest] =
-      has_dynamic_ ? split_poses(validation_scene_, loaded) : std::make_pair(SceneEdit{}, loaded);
+  if (journal_) journal_->check_usable();  // a failed journal refuses poses too
+  // Poses (docs/DYNAMIC.md#moving-them-poses): with dynamic nodes, the ops that move, show or
+  // hide them are not revisions. The two parts are independent, so the poses go first.
+  auto [poses, rest] = has_dynamic_ ? split_poses(validation_scene_, posable_, loaded)
+                                    : std::make_pair(SceneEdit{}, loaded);
   if (stream) {
     if (!has_dynamic_) throw Error("a streamed pose moves dynamic nodes, and this scene has none");
     for (std::size_t i = 0; i < loaded.ops.size(); ++i)
-      if (!is_pose_op(validation_scene_, loaded.ops[i]))
+      if (pose_node(validation_scene_, posable_, loaded.ops[i]) < 0)
         throw Error("edit op " + std::to_string(i + 1) + " (" + edit_kind_name(loaded.ops[i].kind) +
                     "): a streamed pose moves, shows or hides dynamic nodes only, and '" +
                     loaded.ops[i].target +
@@ -293,53 +306,71 @@ EditReceipt EngineHost::submit(const SceneEdit& edit, bool stream) {
                   " edits waiting; send this one again later");
   }
   validate_edit(validation_scene_, loaded);  // the whole edit, in its order
+  EditReceipt receipt;
+  if (!poses.ops.empty()) receipt.pose_sequence = post_poses(poses, stream);
+  if (!rest.ops.empty()) receipt.revision = submit_revision(rest);
+  return receipt;
+}
+
+// submit(): the pose ops of a validated edit, applied to the validation scene, then (each node
+// within its rate, the posed nodes within what a Poses message holds, an edit's poses on disk)
+// posted; on any refusal the validation scene is put back.
+std::uint64_t EngineHost::post_poses(const SceneEdit& poses, bool stream) {
   std::vector<int> nodes;
-  for (const EditOp& op : poses.ops) nodes.push_back(pose_node(validation_scene_, op));
+  for (const EditOp& op : poses.ops) nodes.push_back(pose_node(validation_scene_, posable_, op));
   std::sort(nodes.begin(), nodes.end());
   nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
-  if (stream)
-    if (const std::optional<int> over =
-            poses_.admit_stream(nodes, std::chrono::steady_clock::now()))
-      throw PoseRateLimited("node '" + validation_scene_.nodes[*over].name +
-                            "' is posed more than " +
-                            std::to_string(static_cast<int>(PoseBoard::kStreamRate)) +
-                            " times a second; this pose was dropped");
-  EditReceipt receipt;
-  if (!poses.ops.empty()) {
-    std::vector<std::pair<int, NodePoseState>> before, after;
-    for (int n : nodes)
-      before.emplace_back(
-          n, NodePoseState{validation_scene_.nodes[n].local, validation_scene_.nodes[n].visible});
-    apply_edit(validation_scene_, poses);
-    for (int n : nodes)
-      after.emplace_back(
-          n, NodePoseState{validation_scene_.nodes[n].local, validation_scene_.nodes[n].visible});
-    if (pose_file_ && !stream) {
-      // On disk before the edit is acknowledged, like a revision.
-      SavedPoses saved;
-      saved.poses = poses_.snapshot(&saved.sequence);
-      ++saved.sequence;
-      for (const auto& [n, p] : after) saved.poses[n] = p;
-      try {
-        pose_file_->write(saved);
-      } catch (const Error&) {
-        for (const auto& [n, p] : before) {
-          validation_scene_.nodes[n].local = p.local;
-          validation_scene_.nodes[n].visible = p.visible;
-        }
-        throw;
-      }
+  std::vector<std::pair<int, NodePoseState>> before, after;
+  for (int n : nodes)
+    before.emplace_back(
+        n, NodePoseState{validation_scene_.nodes[n].local, validation_scene_.nodes[n].visible});
+  apply_edit(validation_scene_, poses);
+  for (int n : nodes)
+    after.emplace_back(
+        n, NodePoseState{validation_scene_.nodes[n].local, validation_scene_.nodes[n].visible});
+  const auto put_back = [&] {
+    for (const auto& [n, p] : before) {
+      validation_scene_.nodes[n].local = p.local;
+      validation_scene_.nodes[n].visible = p.visible;
     }
-    receipt.pose_sequence = poses_.post(after, now_us());
-    if (pose_file_ && stream) {
-      std::lock_guard lock(saver_mutex_);
-      poses_dirty_ = true;
-      saver_cv_.notify_all();
+  };
+  std::uint64_t sequence = 0;
+  std::map<int, NodePoseState> held = poses_.snapshot(&sequence);
+  std::size_t posed = held.size();
+  for (int n : nodes) posed += held.count(n) ? 0 : 1;
+  if (posed > static_cast<std::size_t>(wire::kMaxWirePoses)) {
+    put_back();
+    throw Error("poses: " + std::to_string(posed) + " posed nodes would be more than a Poses " +
+                "message holds (" + std::to_string(wire::kMaxWirePoses) + ")");
+  }
+  // Every pose counts against its node's rate, streamed or not (an edit's is also an fsync).
+  if (const std::optional<int> over =
+          poses_.admit_stream(nodes, std::chrono::steady_clock::now())) {
+    put_back();
+    throw PoseRateLimited("node '" + validation_scene_.nodes[*over].name + "' is posed more than " +
+                          std::to_string(static_cast<int>(PoseBoard::kStreamRate)) +
+                          " times a second; this pose was dropped");
+  }
+  if (pose_file_ && !stream) {
+    // On disk before the edit is acknowledged, like a revision.
+    SavedPoses saved;
+    saved.poses = std::move(held);
+    saved.sequence = sequence + 1;
+    for (const auto& [n, p] : after) saved.poses[n] = p;
+    try {
+      pose_file_->write(saved);
+    } catch (const Error&) {
+      put_back();
+      throw;
     }
   }
-  if (rest.ops.empty()) return receipt;
-  receipt.revision = submit_revision(rest);
-  return receipt;
+  const std::uint64_t posted = poses_.post(after, now_us());
+  if (pose_file_ && stream) {
+    std::lock_guard lock(saver_mutex_);
+    poses_dirty_ = true;
+    saver_cv_.notify_all();
+  }
+  return posted;
 }
 
 std::uint64_t EngineHost::submit_revision(const SceneEdit& loaded) {
@@ -360,7 +391,9 @@ std::uint64_t EngineHost::submit_revision(const SceneEdit& loaded) {
     try {
       // The snapshot must replay: its absolute ops are checked like any edit's (a transform
       // that edits made singular cannot be set in one op; then the journal grows on).
-      const SceneEdit snapshot = state_edit(loaded_state_, validation_scene_);
+      // Poses are saved apart (DIR/poses): the package places dynamic nodes as loaded.
+      const SceneEdit snapshot =
+          split_poses(loaded_state_, posable_, state_edit(loaded_state_, validation_scene_)).second;
       if (!snapshot.ops.empty()) validate_edit_ops(loaded_state_, snapshot);
       journal_->compact(revision, snapshot);
     } catch (const Error& e) {

@@ -2,6 +2,7 @@
 // origin. See nats_gateway.h.
 #include "irradcast/service/nats_gateway.h"
 
+#include <cmath>
 #include <condition_variable>
 #include <map>
 #include <mutex>
@@ -14,6 +15,10 @@
 #include "irradcast/service/nats_subjects.h"
 #include "irradcast/service/thread_priority.h"
 #include "irradcast/wire/edit_message.h"
+#include "irradcast/wire/frame.h"
+#include "irradcast/wire/pose_message.h"
+#include "irradcast/wire/probe_volume_message.h"
+#include "irradcast/wire/scene_package.h"
 #include "irradcast_nats.pb.h"
 #include "nats_link.h"
 #include "session_messages.h"
@@ -32,6 +37,8 @@ constexpr std::uint64_t kMaxVersionLead = 1000;
 constexpr std::uint32_t kMaxLightmaps = 1u << 20;
 constexpr std::size_t kMaxCameras = 4096;
 constexpr auto kCameraKeepalive = std::chrono::seconds(2);
+constexpr std::uint32_t kMaxVolumeChunks = 1u << 9;   // 256 MiB at 512 KiB
+constexpr std::uint64_t kMaxVolumeBytes = 96u << 20;  // 2^16 probes' layout and SH, with room
 
 std::uint64_t now_us() {
   return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
@@ -47,8 +54,9 @@ std::string check_state(const wire::NatsSceneState& s) {
   if (s.tile_size() < 1 || s.tile_size() > 4096) return "tile size is out of range";
   if (s.lightmaps_size() == 0 || static_cast<std::uint32_t>(s.lightmaps_size()) > kMaxLightmaps)
     return "lightmap count is out of range";
+  // A dynamic object's lightmap is 0 x 0 (docs/DYNAMIC.md): it has no tiles.
   for (const wire::LightmapInfo& l : s.lightmaps())
-    if (l.width() < 1 || l.height() < 1 || l.width() > 65536 || l.height() > 65536)
+    if ((l.width() == 0) != (l.height() == 0) || l.width() > 65536 || l.height() > 65536)
       return "a lightmap size is out of range";
   return "";
 }
@@ -97,9 +105,13 @@ struct NatsGateway::Impl {
   std::map<std::uint32_t, wire::NatsPackageChunk> chunks;
   std::map<std::uint32_t, wire::NatsTile> early_tiles;  // before the first state
   std::size_t early_bytes = 0;
-  std::vector<std::uint64_t> tile_origin;  // the origin of each tile's version held
-  std::uint64_t reset_origin = 0;          // a new lineage: its tiles replace what is held
-  std::uint64_t last_edit = 0;             // the newest edit revision forwarded
+  std::vector<std::uint64_t> tile_origin;          // the origin of each tile's version held
+  std::uint64_t reset_origin = 0;                  // a new lineage: its tiles replace what is held
+  std::uint64_t last_edit = 0;                     // the newest edit revision forwarded
+  std::optional<wire::NatsVolume> pending_volume;  // waiting for its chunks
+  std::map<std::uint32_t, wire::NatsVolumeChunk> volume_chunks;
+  std::shared_ptr<const ProbeVolumeFrames> volume;  // the newest checked version (mutex)
+  PoseBoard poses;                                  // the origin's poses, as they come
 
   std::unique_ptr<nats_link::Connection> conn;
   nats_link::Subscription sub;  // the stream's; worker thread
@@ -118,6 +130,10 @@ struct NatsGateway::Impl {
   bool install(const wire::NatsTile& t);
   void on_edit(const std::string& data);
   void on_stats(const std::string& data);
+  void on_volume(const std::string& data);
+  void on_volume_chunk(const std::string& data);
+  void try_volume();
+  void on_poses(const std::string& data);
   void bad(const std::string& what) {
     {
       std::lock_guard lock(mutex);
@@ -150,6 +166,9 @@ void NatsGateway::Impl::handle(const std::string& kind, const std::string& data)
   if (kind == "state") return on_state(data);
   if (kind == "edit") return on_edit(data);
   if (kind == "stats") return on_stats(data);
+  if (kind == "volume") return on_volume(data);
+  if (kind == "poses") return on_poses(data);
+  if (kind.rfind("volchunk.", 0) == 0) return on_volume_chunk(data);
   if (kind.rfind("package.", 0) == 0) return on_chunk(data);
   if (kind.rfind("tile.", 0) == 0) {
     wire::NatsTile t;
@@ -314,6 +333,98 @@ void NatsGateway::Impl::on_stats(const std::string& data) {
   updates_seen = engine.updates;
 }
 
+void NatsGateway::Impl::on_volume(const std::string& data) {
+  wire::NatsVolume v;
+  if (!v.ParseFromString(data)) return bad("the probe volume's announcement does not parse");
+  if (v.hash().size() != 32 || v.chunks() == 0 || v.chunks() > kMaxVolumeChunks || v.bytes() == 0 ||
+      v.bytes() > kMaxVolumeBytes)
+    return bad("the probe volume's announcement is out of range");
+  pending_volume = std::move(v);
+  try_volume();
+}
+
+void NatsGateway::Impl::on_volume_chunk(const std::string& data) {
+  wire::NatsVolumeChunk c;
+  if (!c.ParseFromString(data) || c.index() >= kMaxVolumeChunks) return bad("a probe volume chunk");
+  // Bounded: chunks of older versions are dropped when the held bytes would pass twice a frame.
+  std::size_t held = 0;
+  for (const auto& [i, k] : volume_chunks) held += i == c.index() ? 0 : k.data().size();
+  if (held + c.data().size() > 2 * kMaxVolumeBytes) volume_chunks.clear();
+  volume_chunks[c.index()] = std::move(c);
+  try_volume();
+}
+
+// The announced volume once its chunks are there: the frame checked as a client checks it
+// (wire::apply_probe_volume), then served as the origin serves it.
+void NatsGateway::Impl::try_volume() {
+  if (!pending_volume) return;
+  const wire::NatsVolume& v = *pending_volume;
+  std::string frame;
+  for (std::uint32_t i = 0; i < v.chunks(); ++i) {
+    auto it = volume_chunks.find(i);
+    if (it == volume_chunks.end() || it->second.hash() != v.hash()) return;  // not yet
+    frame += it->second.data();
+    if (frame.size() > v.bytes()) break;
+  }
+  const wire::NatsVolume announced = std::move(*pending_volume);
+  pending_volume.reset();
+  if (frame.size() != announced.bytes() || wire::sha256(frame) != announced.hash())
+    return bad("the probe volume's chunks do not make the announced frame");
+  wire::FrameDecoder decoder(static_cast<std::size_t>(kMaxVolumeBytes));
+  decoder.feed(frame.data(), frame.size());
+  wire::Envelope e;
+  if (decoder.next(e) != wire::DecodeStatus::Frame || decoder.buffered() != 0 ||
+      !e.has_probe_volume() || e.probe_volume().layout().empty() ||
+      e.probe_volume().epoch() != announced.epoch() ||
+      e.probe_volume().version() != announced.version())
+    return bad("the probe volume's frame is not the announced ProbeVolume with its layout");
+  wire::ReceivedVolume check;
+  wire::apply_probe_volume(e.probe_volume(), check);  // throws on a bad volume: bad()
+  auto frames = std::make_shared<ProbeVolumeFrames>();
+  frames->epoch = announced.epoch();
+  frames->version = announced.version();
+  frames->with_layout = std::make_shared<const std::string>(std::move(frame));
+  e.mutable_probe_volume()->clear_layout();
+  frames->sh_only = std::make_shared<const std::string>(wire::encode_frame(e));
+  {
+    std::lock_guard lock(mutex);
+    volume = std::move(frames);
+    ++st.volumes_received;
+  }
+  listeners.tiles({});  // the sessions look at the volume in the fan-out
+}
+
+// The origin's poses: each node whose pose differs from the one held is posted to this
+// gateway's board (its sessions get them as from an origin's). Clients check them against the
+// scene; here the numbers and the count.
+void NatsGateway::Impl::on_poses(const std::string& data) {
+  wire::NatsPoses m;
+  if (!m.ParseFromString(data)) return bad("the poses do not parse");
+  if (m.poses().poses_size() > wire::kMaxWirePoses) return bad("too many poses");
+  const std::map<int, NodePoseState> held = poses.snapshot();
+  std::vector<std::pair<int, NodePoseState>> changed;
+  for (const wire::NodePose& p : m.poses().poses()) {
+    if (p.matrix_size() != 16 || p.node() >= (1u << 24)) return bad("a pose is out of range");
+    NodePoseState s;
+    for (int c = 0; c < 4; ++c)
+      for (int r = 0; r < 4; ++r) {
+        const float x = p.matrix(4 * c + r);
+        if (!std::isfinite(x)) return bad("a pose is not finite");
+        s.local[c][r] = x;
+      }
+    s.visible = !p.hidden();
+    const int node = static_cast<int>(p.node());
+    auto it = held.find(node);
+    if (it == held.end() || it->second.local != s.local || it->second.visible != s.visible)
+      changed.emplace_back(node, s);
+  }
+  {
+    std::lock_guard lock(mutex);
+    ++st.poses_received;
+  }
+  if (!changed.empty()) poses.post(changed, m.poses().posed_us());
+}
+
 void NatsGateway::Impl::run() {
   set_thread_name("irradcast-nats");
   std::uint64_t subscribed = 0;  // the connection generation the subscription belongs to
@@ -414,6 +525,15 @@ NatsGateway::~NatsGateway() {
   im.worker.join();
   im.sub.close();  // no handler runs after this: the state it uses can go
   im.conn.reset();
+}
+
+std::shared_ptr<const ProbeVolumeFrames> NatsGateway::probe_volume() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->volume;
+}
+
+PoseBoard* NatsGateway::poses() {
+  return &impl_->poses;
 }
 
 bool NatsGateway::wait_ready(std::chrono::milliseconds limit) const {

@@ -32,6 +32,9 @@ NatsSubjects nats_subjects(const std::string& scene_id) {
   s.tile_prefix = p + "s.tile.";
   s.edit = p + "s.edit";
   s.stats = p + "s.stats";
+  s.volume = p + "s.volume";
+  s.volume_prefix = p + "s.volchunk.";
+  s.poses = p + "s.poses";
   s.cameras = p + "req.cameras";
   s.submit = p + "req.edit";
   return s;

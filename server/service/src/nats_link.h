@@ -109,9 +109,10 @@ class Listeners {
     std::lock_guard lock(mutex_);
     edits_ = std::move(l);
   }
+  // An empty list too: the probe volume changed alone (the sessions look at it in the fan-out).
   void tiles(const std::vector<std::uint32_t>& changed) {
     std::lock_guard lock(mutex_);
-    if (tiles_ && !changed.empty()) tiles_(changed);
+    if (tiles_) tiles_(changed);
   }
   void edit(const AppliedEdit& applied) {
     std::lock_guard lock(mutex_);

@@ -17,6 +17,8 @@
 #include "irradcast/service/nats_subjects.h"
 #include "irradcast/service/thread_priority.h"
 #include "irradcast/wire/edit_message.h"
+#include "irradcast/wire/pose_message.h"
+#include "irradcast/wire/scene_package.h"
 #include "irradcast_nats.pb.h"
 #include "nats_link.h"
 #include "session_messages.h"
@@ -76,11 +78,22 @@ struct NatsOrigin::Impl {
   std::optional<AppliedEdit> last_edit;  // the newest edit published
   Clock::time_point next_stats{};
   Clock::time_point next_check{};
+  std::shared_ptr<const ProbeVolumeFrames> published_volume;  // the newest volume published
+  std::uint64_t published_poses = 0;                          // the pose sequence published
+  Clock::time_point poses_published_at{};
+
+  // The host's poses changed (mutex): published at most every kPoseEvery.
+  static constexpr auto kPoseEvery = std::chrono::milliseconds(16);
+  bool poses_dirty = false;
+  int pose_listener = 0;
 
   void on_tiles(const std::vector<std::uint32_t>& tiles);
   void on_edit(const AppliedEdit& applied);
   void run();
-  bool round(bool full, const std::vector<std::uint32_t>& tiles, std::deque<AppliedEdit>& eds);
+  bool round(bool full, const std::vector<std::uint32_t>& tiles, std::deque<AppliedEdit>& eds,
+             bool poses);
+  bool publish_volume(bool full);
+  bool publish_poses(bool full);
   bool ensure_stream();
   bool stream_allows(std::uint64_t revision);
   bool stream_intact();
@@ -136,7 +149,13 @@ void NatsOrigin::Impl::run() {
   set_thread_name("irradcast-nats");
   std::unique_lock lock(mutex);
   while (!stopping) {
-    cv.wait_for(lock, std::chrono::milliseconds(100));
+    auto wait = std::chrono::milliseconds(100);
+    if (poses_dirty) {  // the next pose set is due kPoseEvery after the last
+      const auto due = poses_published_at + kPoseEvery, now = Clock::now();
+      wait = due > now ? std::chrono::ceil<std::chrono::milliseconds>(due - now)
+                       : std::chrono::milliseconds(0);
+    }
+    if (wait.count() > 0) cv.wait_for(lock, wait);
     if (stopping) break;
     if (!conn->connected() || !refusal.empty()) continue;
     const std::uint64_t generation = conn->generation();
@@ -146,15 +165,17 @@ void NatsOrigin::Impl::run() {
     for (std::uint32_t t : tiles) dirty[t] = 0;
     std::deque<AppliedEdit> eds;
     eds.swap(edits);
+    const bool poses = poses_dirty && Clock::now() >= poses_published_at + kPoseEvery;
+    if (poses) poses_dirty = false;
     lock.unlock();
-    const bool ok = round(full, tiles, eds);
+    const bool ok = round(full, tiles, eds, poses);
     lock.lock();
     if (ok && full) published_generation = generation;
     if (!ok) {
       ++st.publish_errors;
       published_generation = 0;  // publish everything again next round
     }
-    idle = ok && dirty_list.empty() && edits.empty();
+    idle = ok && dirty_list.empty() && edits.empty() && !poses_dirty;
     cv.notify_all();
   }
 }
@@ -162,7 +183,7 @@ void NatsOrigin::Impl::run() {
 // One round of the worker: everything after a (re)connection, then the queued edits (with the
 // package they made) and tiles, the stats when due; waits for JetStream's acknowledgements.
 bool NatsOrigin::Impl::round(bool full, const std::vector<std::uint32_t>& tiles,
-                             std::deque<AppliedEdit>& eds) {
+                             std::deque<AppliedEdit>& eds, bool poses) {
   bool ok = true;
   if (!full && Clock::now() >= next_check) {
     next_check = Clock::now() + options.stats_every;
@@ -183,6 +204,8 @@ bool NatsOrigin::Impl::round(bool full, const std::vector<std::uint32_t>& tiles,
   if (full) ok = publish_everything(eds);
   if (ok) ok = publish_edits(eds);
   for (std::size_t i = 0; ok && i < tiles.size(); ++i) ok = publish_tile(tiles[i]);
+  if (ok) ok = publish_volume(full);
+  if (ok && (poses || full)) ok = publish_poses(full);
   if (ok && Clock::now() >= next_stats) {
     ok = publish_stats();
     next_stats = Clock::now() + options.stats_every;
@@ -266,6 +289,7 @@ bool NatsOrigin::Impl::stream_intact() {
   } else {
     return true;  // no answer now: nothing to conclude
   }
+  if (why.empty()) return true;  // our own state: intact
   log::warn("nats", "the stream " + subjects.stream + " " + why + "; publishing everything again");
   return false;
 }
@@ -400,6 +424,71 @@ bool NatsOrigin::Impl::publish_edit(const AppliedEdit& a, bool names_package) {
   m->set_applied_us(a.applied_us);
   if (!publish(subjects.edit, e)) return false;
   count(&NatsOriginStats::edits_published);
+  return true;
+}
+
+// The probe volume's newest version when it is not published yet (or after a reconnection): its
+// frame with the layout in chunks, then the announcement (a gateway has the chunks when it comes).
+bool NatsOrigin::Impl::publish_volume(bool full) {
+  const std::shared_ptr<const ProbeVolumeFrames> v = host.probe_volume();
+  if (!v || (!full && v == published_volume)) return true;
+  const std::string& frame = *v->with_layout;
+  const std::string hash = wire::sha256(frame);
+  const std::int64_t max_payload = natsConnection_GetMaxPayload(conn->nc());
+  const std::size_t chunk_bytes =
+      static_cast<std::size_t>(std::clamp<std::int64_t>(max_payload - 4096, 4096, 512 << 10));
+  const std::vector<std::string> chunks = wire::chunk(frame, chunk_bytes);
+  for (std::size_t i = 0; i < chunks.size(); ++i) {
+    wire::NatsVolumeChunk c;
+    c.set_hash(hash);
+    c.set_index(static_cast<std::uint32_t>(i));
+    c.set_data(chunks[i]);
+    if (!publish(subjects.volume_chunk(static_cast<std::uint32_t>(i)), c)) return false;
+  }
+  wire::NatsVolume m;
+  m.set_origin(origin);
+  m.set_epoch(v->epoch);
+  m.set_version(v->version);
+  m.set_hash(hash);
+  m.set_bytes(frame.size());
+  m.set_chunks(static_cast<std::uint32_t>(chunks.size()));
+  if (!publish(subjects.volume, m)) return false;
+  published_volume = v;
+  count(&NatsOriginStats::volumes_published);
+  return true;
+}
+
+// Every posed node's newest pose, when the sequence moved (or after a reconnection).
+bool NatsOrigin::Impl::publish_poses(bool full) {
+  PoseBoard* board = host.poses();
+  if (!board) return true;
+  std::uint64_t sequence = 0;
+  const std::map<int, NodePoseState> poses = board->snapshot(&sequence);
+  if (!full && sequence == published_poses) return true;
+  wire::NatsPoses m;
+  m.set_origin(origin);
+  wire::Poses* p = m.mutable_poses();
+  p->set_sequence(sequence);
+  p->set_complete(true);
+  p->set_posed_us(
+      static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
+                                     std::chrono::system_clock::now().time_since_epoch())
+                                     .count()));
+  for (const auto& [node, pose] : poses)
+    *p->add_poses() =
+        wire::node_pose_to_proto(static_cast<std::uint32_t>(node), pose.local, pose.visible);
+  if (static_cast<std::int64_t>(m.ByteSizeLong()) >
+      natsConnection_GetMaxPayload(conn->nc()) - 1024) {
+    log::warn("nats", std::to_string(poses.size()) +
+                          " posed nodes are more than one NATS message holds: the gateways' "
+                          "viewers do not get them");
+    published_poses = sequence;
+    return true;
+  }
+  if (!publish(subjects.poses, m)) return false;
+  published_poses = sequence;
+  poses_published_at = Clock::now();
+  count(&NatsOriginStats::poses_published);
   return true;
 }
 
@@ -538,6 +627,15 @@ NatsOrigin::NatsOrigin(EngineHost& host, NatsOriginOptions options)
   }
   host.set_listener([&im](const std::vector<std::uint32_t>& tiles) { im.on_tiles(tiles); });
   host.set_edit_listener([&im](const AppliedEdit& applied) { im.on_edit(applied); });
+  if (PoseBoard* board = host.poses())
+    im.pose_listener = board->add_listener([&im] {
+      {
+        std::lock_guard lock(im.mutex);
+        im.poses_dirty = true;
+        im.idle = false;
+      }
+      im.cv.notify_all();
+    });
   im.worker = std::thread([&im] { im.run(); });
   log::info("nats", "publishing scene '" + host.scene_id() + "' to " + im.conn->url() + " (" +
                         im.options.credentials.describe(im.options.url) + ")" + " (stream " +
@@ -555,6 +653,8 @@ NatsOrigin::~NatsOrigin() {
   Impl& im = *impl_;
   host_.set_listener(nullptr);
   host_.set_edit_listener(nullptr);
+  if (PoseBoard* board = host_.poses(); board && im.pose_listener)
+    board->remove_listener(im.pose_listener);
   {
     std::lock_guard lock(im.mutex);
     im.stopping = true;

@@ -15,6 +15,7 @@
 #include <optional>
 #include <set>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "client_address.h"
@@ -89,6 +90,7 @@ struct Server::Impl {
   // session (at 64 nodes streaming 60 poses a second, 125 frames a second, not 3840).
   static constexpr std::chrono::milliseconds kPoseInterval{8};
   asio::steady_timer pose_timer{io};
+  int pose_listener = 0;                                             // on host.poses()
   std::atomic<std::chrono::steady_clock::rep> last_pose_fan_out{0};  // time_since_epoch
 
   void listen(tcp::acceptor& a, std::uint16_t port);
@@ -357,7 +359,7 @@ void Server::start() {
     if (auto s = weak.lock()) s->on_edit(applied);
   });
   if (PoseBoard* poses = im.host.poses())
-    poses->set_listener([weak] {
+    im.pose_listener = poses->add_listener([weak] {
       if (auto s = weak.lock()) s->on_poses();
     });
   im.work.emplace(asio::make_work_guard(im.io));
@@ -379,7 +381,8 @@ void Server::stop() {
   if (im.stopping.exchange(true)) return;
   im.host.set_listener(nullptr);
   im.host.set_edit_listener(nullptr);
-  if (PoseBoard* poses = im.host.poses()) poses->set_listener(nullptr);
+  if (PoseBoard* poses = im.host.poses(); poses && im.pose_listener)
+    poses->remove_listener(std::exchange(im.pose_listener, 0));
   if (im.threads.empty()) return;
   asio::post(im.io, [&im] {
     std::error_code ec;

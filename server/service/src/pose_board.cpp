@@ -25,7 +25,7 @@ std::optional<int> PoseBoard::admit_stream(const std::vector<int>& nodes, Clock:
 
 std::uint64_t PoseBoard::post(const std::vector<std::pair<int, NodePoseState>>& poses,
                               std::uint64_t posed_us) {
-  std::function<void()> listener;
+  std::vector<std::function<void()>> listeners;
   std::uint64_t sequence = 0;
   {
     std::lock_guard lock(mutex_);
@@ -33,9 +33,9 @@ std::uint64_t PoseBoard::post(const std::vector<std::pair<int, NodePoseState>>& 
     for (const auto& [node, pose] : poses) entries_[node] = Entry{pose, sequence};
     posed_us_ = posed_us;
     frames_.clear();
-    listener = listener_;
+    for (const auto& [id, l] : listeners_) listeners.push_back(l);
   }
-  if (listener) listener();
+  for (const auto& l : listeners) l();
   return sequence;
 }
 
@@ -47,9 +47,15 @@ void PoseBoard::restore(std::map<int, NodePoseState> poses, std::uint64_t sequen
   frames_.clear();
 }
 
-void PoseBoard::set_listener(std::function<void()> listener) {
+int PoseBoard::add_listener(std::function<void()> listener) {
   std::lock_guard lock(mutex_);
-  listener_ = std::move(listener);
+  listeners_.emplace(next_listener_, std::move(listener));
+  return next_listener_++;
+}
+
+void PoseBoard::remove_listener(int id) {
+  std::lock_guard lock(mutex_);
+  listeners_.erase(id);
 }
 
 std::uint64_t PoseBoard::sequence() const {

@@ -38,7 +38,8 @@ PoseFile::PoseFile(std::filesystem::path dir, std::string scene_id, std::string 
       scene_id_(std::move(scene_id)),
       scene_hash_(std::move(scene_hash)) {}
 
-std::optional<std::pair<std::uint64_t, SceneEdit>> PoseFile::read(const Scene& scene) const {
+std::optional<std::pair<std::uint64_t, SceneEdit>> PoseFile::read(
+    const Scene& scene, const std::vector<bool>& posable) const {
   std::error_code ec;
   if (!std::filesystem::exists(path_, ec)) return std::nullopt;
   const std::string where = "saved poses: " + path_.string();
@@ -58,11 +59,14 @@ std::optional<std::pair<std::uint64_t, SceneEdit>> PoseFile::read(const Scene& s
     throw Error(where + " belongs to another scene (content hash " +
                 wire::hex(snapshot.scene_hash()) + ", this scene '" + scene_id_ + "' hashes to " +
                 wire::hex(scene_hash_) + "); give another --state-dir");
+  if (snapshot.sequence() > (std::uint64_t{1} << 62))
+    throw Error(where + " holds pose sequence " + std::to_string(snapshot.sequence()) +
+                ", more than a server reaches; move it away to start without the saved poses");
   wire::Poses poses;
   *poses.mutable_poses() = snapshot.poses();
   try {
     if (poses.poses_size() == 0) return std::make_pair(snapshot.sequence(), SceneEdit{});
-    return std::make_pair(snapshot.sequence(), wire::pose_edit(poses, scene));
+    return std::make_pair(snapshot.sequence(), wire::pose_edit(poses, scene, posable));
   } catch (const Error& e) {
     throw Error(where + ": " + e.what());
   }

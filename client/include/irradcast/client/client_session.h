@@ -190,6 +190,7 @@ class ClientSession {
   std::vector<wire::SceneEdit> pending_edits_;  // arrived while the scene loads
   // Nodes the server posed (docs/DYNAMIC.md#poses), with the pose the scene package gave them.
   std::map<int, NodePoseState> package_poses_;
+  std::vector<bool> posable_;  // pose_nodes() of the scene, computed at the first Poses
   std::uint64_t pose_sequence_ = 0;
   bool reload_ = false;
   std::chrono::milliseconds ping_interval_;

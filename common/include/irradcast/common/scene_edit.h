@@ -93,17 +93,20 @@ struct NodePoseState {
   bool visible = true;
 };
 
-// A pose op (docs/DYNAMIC.md#poses): one that moves, shows or hides a node whose subtree holds
-// no static mesh or light (a dynamic node, or a rig of them). A server keeps such ops out of
-// the revisioned edits: they go to the viewers as the node's new pose.
-bool is_pose_op(const Scene& scene, const EditOp& op);
-// Per node: whether a pose op may move it (its subtree holds no static mesh or light).
+// A pose op (docs/DYNAMIC.md#moving-them-poses): one that moves, shows or hides a node whose
+// subtree holds no static mesh or light (a dynamic node, or a rig of them). A server keeps such
+// ops out of the revisioned edits: they go to the viewers as the node's new pose.
+// Per node: whether a pose op may move it, in one pass over the hierarchy (a node no root reaches
+// counts as static). Edits never change it (they move and hide nodes, not reparent them), so a
+// holder of a scene computes it once.
 std::vector<bool> pose_nodes(const Scene& scene);
-// The node a pose op moves (-1: not a pose op).
-int pose_node(const Scene& scene, const EditOp& op);
+// The node a pose op moves (-1: not a pose op); `posable` is pose_nodes(scene).
+int pose_node(const Scene& scene, const std::vector<bool>& posable, const EditOp& op);
+bool is_pose_op(const Scene& scene, const EditOp& op);
 // The edit's pose ops and its other ops, each in the edit's order. The two parts are
 // independent: a pose op changes a node no other op of the edit can see through.
-std::pair<SceneEdit, SceneEdit> split_poses(const Scene& scene, const SceneEdit& edit);
+std::pair<SceneEdit, SceneEdit> split_poses(const Scene& scene, const std::vector<bool>& posable,
+                                            const SceneEdit& edit);
 // Validates, then applies every operation in order. On an invalid edit it throws and the scene
 // is unchanged.
 EditEffect apply_edit(Scene& scene, const SceneEdit& edit);

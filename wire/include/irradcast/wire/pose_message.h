@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include <glm/glm.hpp>
 
@@ -20,8 +21,10 @@ NodePose node_pose_to_proto(std::uint32_t node, const glm::mat4& local, bool vis
 // The absolute edit that gives each node of `m` its pose in `scene`: a transform op and a show
 // or hide op per node, targets by index ("#3"). Throws irradcast::Error with a clear message on a
 // node index out of range or a node that is not a pose node of `scene` (is_pose_op), a matrix
-// that is not 16 numbers, or more than kMaxWirePoses poses. The numbers themselves are checked
-// when the edit is applied (apply_edit: finite, affine, invertible, within bounds).
-irradcast::SceneEdit pose_edit(const Poses& m, const Scene& scene);
+// that is not 16 finite numbers, or more than kMaxWirePoses poses. The rest is checked when the
+// edit is applied (apply_edit: affine, invertible, within bounds).
+// `posable`: pose_nodes(scene), which its holder computes once.
+irradcast::SceneEdit pose_edit(const Poses& m, const Scene& scene,
+                               const std::vector<bool>& posable);
 
 }  // namespace irradcast::wire

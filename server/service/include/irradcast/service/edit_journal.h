@@ -72,6 +72,9 @@ class EditJournal {
   // failure; the journal then refuses every later append (the file's state is unknown after a
   // failed fsync), so no edit is acknowledged that would not survive.
   void append(std::uint64_t revision, const SceneEdit& edit);
+  // Throws the error append() would throw after an earlier failure (a host checks before it
+  // takes an edit's poses, which are saved apart: docs/DYNAMIC.md#moving-them-poses).
+  void check_usable() const;
   // Whether the journal holds compact_after edit records since its last snapshot, or
   // kCompactBytes.
   bool wants_compaction() const;

@@ -149,10 +149,12 @@ class EngineHost final : public TileSource {
   std::uint64_t replay_journal();
   // Constructor, with a state folder and dynamic nodes: the poses saved in it.
   void restore_poses();
+  // The saver thread: streamed poses, at most every kPoseSaveInterval.
   void save_poses();
   // submit(): queues the edit's ops that are not poses as the next revision (validation_mutex_).
-  std::uint64_t submit_revision(
-      const SceneEdit& edit);  // the saver thread: streamed poses, at most every kPoseSaveInterval
+  std::uint64_t submit_revision(const SceneEdit& edit);
+  // submit(): posts an edit's pose ops; returns the pose sequence (validation_mutex_).
+  std::uint64_t post_poses(const SceneEdit& poses, bool stream);
   void run();
   void do_update();
   void apply_edits();  // engine thread: applies the queued edits
@@ -184,6 +186,7 @@ class EngineHost final : public TileSource {
   // The dynamic nodes' poses; with a state folder, saved in DIR/poses (synchronously for an
   // edit, by pose_saver_ for streamed poses).
   bool has_dynamic_ = false;
+  std::vector<bool> posable_;  // pose_nodes() of the scene (edits never change it)
   PoseBoard poses_;
   std::unique_ptr<PoseFile> pose_file_;
   std::thread pose_saver_;

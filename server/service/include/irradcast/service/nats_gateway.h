@@ -43,6 +43,8 @@ struct NatsGatewayStats {
   // Seconds from the origin computing a tile version to its arrival here (the newest one).
   double lag_seconds = 0.0;
   std::uint64_t revision = 0;
+  std::uint64_t volumes_received = 0;  // complete, checked probe volume versions
+  std::uint64_t poses_received = 0;    // pose sets from the origin
 };
 
 class NatsGateway final : public TileSource {
@@ -67,6 +69,10 @@ class NatsGateway final : public TileSource {
   std::uint64_t revision() const override;
   const TileStore& tiles() const override;  // only once ready
   EditReceipt submit(const SceneEdit& edit, bool stream) override;
+  // The origin's probe volume and poses as they come through NATS (docs/DYNAMIC.md). The board
+  // is there from the start (empty until the origin posts poses).
+  std::shared_ptr<const ProbeVolumeFrames> probe_volume() const override;
+  PoseBoard* poses() override;
   void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) override;
   EngineHostStats stats() const override;
 

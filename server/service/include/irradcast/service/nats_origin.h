@@ -52,10 +52,12 @@ struct NatsOriginStats {
   std::uint64_t publish_errors = 0;
   std::uint64_t camera_requests = 0;
   std::uint64_t edit_requests = 0;
-  std::uint64_t edits_refused = 0;     // wrong token or invalid edit
-  std::uint64_t bad_requests = 0;      // requests that do not parse
-  std::uint64_t gateways_refused = 0;  // camera requests from a gateway beyond max_gateways
-  std::uint64_t stream_losses = 0;     // the stream was found deleted, purged or rewritten
+  std::uint64_t edits_refused = 0;      // wrong token or invalid edit
+  std::uint64_t bad_requests = 0;       // requests that do not parse
+  std::uint64_t gateways_refused = 0;   // camera requests from a gateway beyond max_gateways
+  std::uint64_t stream_losses = 0;      // the stream was found deleted, purged or rewritten
+  std::uint64_t volumes_published = 0;  // probe volume versions (docs/DYNAMIC.md)
+  std::uint64_t poses_published = 0;    // complete pose sets
   // The stream holds a newer revision from another origin: this one publishes nothing.
   bool refused_newer_stream = false;
 };
@@ -82,6 +84,9 @@ class NatsOrigin final : public TileSource {
     return host_.submit(edit, stream);
   }
   PoseBoard* poses() override { return host_.poses(); }
+  std::shared_ptr<const ProbeVolumeFrames> probe_volume() const override {
+    return host_.probe_volume();
+  }
   void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) override {
     host_.set_camera(viewer, std::move(pose));
   }

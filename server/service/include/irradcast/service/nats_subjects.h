@@ -20,12 +20,16 @@ struct NatsSubjects {
   std::string tile_prefix;     // irradcast.<token>.s.tile. + tile index: NatsTile
   std::string edit;            // irradcast.<token>.s.edit : NatsEdit (the last applied edit)
   std::string stats;           // irradcast.<token>.s.stats : wire::Stats (the engine's part)
+  std::string volume;          // irradcast.<token>.s.volume : NatsVolume (after its chunks)
+  std::string volume_prefix;   // irradcast.<token>.s.volchunk. + index: NatsVolumeChunk
+  std::string poses;           // irradcast.<token>.s.poses : NatsPoses
   // Requests to the origin (core NATS request/reply, not stored):
   std::string cameras;  // irradcast.<token>.req.cameras : NatsCameras -> NatsReply
   std::string submit;   // irradcast.<token>.req.edit : SceneEdit with the token -> NatsReply
 
   std::string package_chunk(std::uint32_t i) const { return package_prefix + std::to_string(i); }
   std::string tile(std::uint32_t i) const { return tile_prefix + std::to_string(i); }
+  std::string volume_chunk(std::uint32_t i) const { return volume_prefix + std::to_string(i); }
 };
 
 NatsSubjects nats_subjects(const std::string& scene_id);

@@ -49,8 +49,10 @@ class PoseBoard {
                      std::uint64_t posed_us);
   // At start (no listener is called): the poses saved before, at their sequence.
   void restore(std::map<int, NodePoseState> poses, std::uint64_t sequence);
-  // Called after every post, on the posting thread. Null removes it.
-  void set_listener(std::function<void()> listener);
+  // Called after every post, on the posting thread (the server's fan-out, a NATS origin's
+  // publisher). Returns an id for remove_listener.
+  int add_listener(std::function<void()> listener);
+  void remove_listener(int id);
 
   std::uint64_t sequence() const;
   // Every posed node's newest pose, and the sequence they stand at.
@@ -78,7 +80,8 @@ class PoseBoard {
   std::map<int, Bucket> buckets_;
   std::uint64_t sequence_ = 0;
   std::uint64_t posed_us_ = 0;
-  std::function<void()> listener_;
+  std::map<int, std::function<void()>> listeners_;
+  int next_listener_ = 1;
   // Frames encoded at the current sequence, by (since, complete).
   mutable std::map<std::pair<std::uint64_t, bool>, std::shared_ptr<const std::string>> frames_;
 };

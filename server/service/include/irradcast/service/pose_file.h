@@ -10,6 +10,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "irradcast/common/scene_edit.h"
 #include "irradcast/service/pose_board.h"
@@ -32,7 +33,9 @@ class PoseFile {
   // The poses saved before (nullopt: no file), as the absolute edit that gives each node its pose
   // (wire::pose_edit: targets by index; the host checks it like any edit). Throws
   // irradcast::Error with a clear message on a file that is damaged or another scene's.
-  std::optional<std::pair<std::uint64_t, SceneEdit>> read(const Scene& scene) const;
+  // `posable`: pose_nodes(scene).
+  std::optional<std::pair<std::uint64_t, SceneEdit>> read(const Scene& scene,
+                                                          const std::vector<bool>& posable) const;
   // Replaces the file with `poses`, unless it holds their sequence or a later one already (a
   // slower writer's older snapshot never replaces a newer one). Throws irradcast::Error on an I/O
   // failure. Any thread.
