@@ -59,6 +59,16 @@ function autoExposure(renderer, view, camera, w, h, finish) {
   return n === 0 ? 1 : 0.18 / Math.exp(sum / n);
 }
 
+// Something new to draw: the title says so at once (a test that waits for "converged" after an
+// edit must not see the title of the frame before it).
+function unconverge(state) {
+  state.dirty = true;
+  if (state.converged) {
+    state.converged = false;
+    document.title = 'irradcast';
+  }
+}
+
 // The connection's handlers: the scene into a SceneView, tiles into its textures, edits into its
 // model.
 function handlers(ctx) {
@@ -82,12 +92,12 @@ function handlers(ctx) {
     subscribed() { if (state.camera) state.camera.changed = true; },  // the server learns the camera again
     tile(lightmap, x0, y0, w, h, words) {
       state.view.applyTile(lightmap, x0, y0, w, h, words);
-      state.dirty = true;
+      unconverge(state);
     },
     tileBase: (lightmap, x0, y0, w, h) => state.view.tileWords(lightmap, x0, y0, w, h),
     volume(v) {
       if (!state.view.setVolume(v)) overlay.error('the probe volume exceeds this GPU\'s 3-D texture size: dynamic objects stay unlit');
-      state.dirty = true;
+      unconverge(state);
     },
     edit(m) {
       try {
@@ -95,7 +105,7 @@ function handlers(ctx) {
         if (c.nodes) state.view.placeNodes();
         if (c.materials) state.view.updateMaterials();
         if (c.sky) state.view.updateSky();
-        state.dirty = true;
+        unconverge(state);
       } catch (e) {
         ctx.conn.reload(e.message);
       }
@@ -103,7 +113,7 @@ function handlers(ctx) {
     poses(m) {
       try {
         if (applyPoses(state.view.scene, m, state.posed)) state.view.placeNodes();
-        state.dirty = true;
+        unconverge(state);
       } catch (e) {
         ctx.conn.fail(e.message);
       }
