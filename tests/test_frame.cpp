@@ -214,6 +214,7 @@ std::vector<Envelope> all_messages() {
     e.mutable_scene_export()->set_request_id(9);
     e.mutable_scene_export()->set_scene_hash(std::string(32, '\x3c'));
     e.mutable_scene_export()->set_scene_bytes(123456);
+    e.mutable_scene_export()->mutable_poses()->set_sequence(4);
     out.push_back(e);
   }
   {

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "cli.h"
+#include "dynamic_scenes.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/gltf.h"
 #include "irradcast/common/image.h"
@@ -95,6 +96,40 @@ TEST(SceneExport, NeedsTheTokenAndWritesTheEditedSceneAsGltf) {
   }
   // The state differs from the scene as loaded in exactly the four edits.
   EXPECT_EQ(state_edit(make_cornell_box(), back).ops.size(), 4u);
+}
+
+// Dynamic nodes are exported where their poses put them (the package places them as loaded;
+// docs/DYNAMIC.md#moving-them-poses), with their flag.
+TEST(SceneExport, HoldsThePosesOfDynamicNodes) {
+  EngineHost host(test::cornell_with_prop(), "cornell", test::small_host(1));
+  Server server(host, ExportServer::options());
+  server.start();
+  host.start();
+  host.submit(parse_edit_json(R"({"op": "move", "node": "prop", "by": [0.1, 0, 0]})"), false);
+  host.submit(parse_edit_json(R"({"op": "hide", "node": "prop_base"})"), false);
+  const fs::path out = fs::path(::testing::TempDir()) / "export_poses.glb";
+  fs::remove(out);
+  const test::CliResult r =
+      test::run_cli(IRRADCAST_EDIT_EXE, "--connect 127.0.0.1:" + std::to_string(server.port()) +
+                                            " --token " + kToken + " --export " + out.string());
+  server.stop();
+  host.stop();
+  ASSERT_EQ(r.status, 0) << r.output;
+  const Scene back = load_gltf(out.string());
+  const Scene loaded = test::cornell_with_prop();
+  ASSERT_EQ(back.nodes.size(), loaded.nodes.size());
+  const auto prop = static_cast<std::size_t>(make_cornell_box().nodes.size()) + 1;
+  EXPECT_TRUE(back.nodes[prop].dynamic);
+  EXPECT_FLOAT_EQ(back.nodes[prop].local[3].x, loaded.nodes[prop].local[3].x + 0.1f);
+  EXPECT_FALSE(back.nodes[prop + 1].visible);  // prop_base
+  // Of the nodes, exactly those two differ (glTF writes emission as a factor and a strength).
+  int node_ops = 0;
+  for (const EditOp& op : state_edit(loaded, back).ops)
+    node_ops += op.kind == EditOp::Kind::SetTransform || op.kind == EditOp::Kind::Show ||
+                        op.kind == EditOp::Kind::Hide
+                    ? 1
+                    : 0;
+  EXPECT_EQ(node_ops, 2) << edit_to_json(state_edit(loaded, back));
 }
 
 // What a viewer of the server sees against irradcast-bake of the export, and of the scene as

@@ -41,6 +41,7 @@
 #include "irradcast/common/scene_edit.h"
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/frame.h"
+#include "irradcast/wire/pose_message.h"
 #include "irradcast/wire/scene_package.h"
 #include "tool_main.h"
 
@@ -425,7 +426,9 @@ int run_export(const Options& o, const std::string& token) {
     if (a.has_scene_chunk()) assembler.add(a.scene_chunk());
   }
   c.close();
-  const wire::UnpackedScene u = wire::open_scene_package(assembler.bytes(), answer.scene_hash());
+  wire::UnpackedScene u = wire::open_scene_package(assembler.bytes(), answer.scene_hash());
+  if (answer.poses().poses_size() > 0)  // dynamic nodes where they are now, not as loaded
+    apply_edit(u.scene, wire::pose_edit(answer.poses(), u.scene, pose_nodes(u.scene)));
   save_gltf(u.scene, o.export_path);
   std::size_t triangles = 0;
   for (const Mesh& m : u.scene.meshes) triangles += m.triangles.size();

@@ -3,9 +3,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include "irradcast/common/error.h"
 #include "irradcast/wire/edit_message.h"
+#include "irradcast/wire/pose_message.h"
 #include "session_messages.h"
 
 namespace irradcast {
@@ -299,6 +301,16 @@ void SessionProtocol::on_scene_export(const wire::SceneExportRequest& m) {
   x->set_request_id(m.request_id());
   x->set_scene_hash(package_->hash);
   x->set_scene_bytes(package_->bytes.size());
+  if (PoseBoard* board = ctx_.host.poses()) {  // the package places dynamic nodes as loaded
+    std::uint64_t sequence = 0;
+    const std::map<int, NodePoseState> poses = board->snapshot(&sequence);
+    wire::Poses* p = x->mutable_poses();
+    p->set_sequence(sequence);
+    p->set_complete(true);
+    for (const auto& [node, pose] : poses)
+      *p->add_poses() =
+          wire::node_pose_to_proto(static_cast<std::uint32_t>(node), pose.local, pose.visible);
+  }
   send(e);
 }
 
