@@ -518,6 +518,14 @@ int run_stream(const Options& o, const std::string& token) {
   Clock::time_point last_poll = began, last_mark = began;
   constexpr std::uint64_t kMark = std::uint64_t{1} << 62;  // our pings' nonces: kMark | sent
   std::map<std::uint64_t, std::uint64_t> marks;            // sent count at a ping -> its line
+  // A refused line is printed with its number; a refused token ends the stream.
+  const auto refusal = [&](const Refused& r) {
+    if (r.code == wire::PERMISSION_DENIED) throw r;
+    ++refused;
+    ++refused_by_server;
+    std::fprintf(stderr, "irradcast-edit: line %llu: %s\n",
+                 static_cast<unsigned long long>(r.request_id), r.what());
+  };
   // Reads what the server sent until `until`: refusals are printed, the rest dropped.
   const auto serve = [&](Clock::time_point until) {
     for (;;) {
@@ -550,11 +558,7 @@ int run_stream(const Options& o, const std::string& token) {
           }
         }
       } catch (const Refused& r) {
-        if (r.code == wire::PERMISSION_DENIED) throw;
-        ++refused;
-        ++refused_by_server;
-        std::fprintf(stderr, "irradcast-edit: line %llu: %s\n",
-                     static_cast<unsigned long long>(r.request_id), r.what());
+        refusal(r);
       } catch (const Lost& lost) {
         // Poses written since the last answer may be lost with the connection: said, not
         // counted as taken.
@@ -632,11 +636,7 @@ int run_stream(const Options& o, const std::string& token) {
     try {
       a = session.connection().read(deadline);
     } catch (const Refused& r) {
-      if (r.code == wire::PERMISSION_DENIED) throw;
-      ++refused;
-      ++refused_by_server;
-      std::fprintf(stderr, "irradcast-edit: line %llu: %s\n",
-                   static_cast<unsigned long long>(r.request_id), r.what());
+      refusal(r);
       continue;
     }
     if (!a) throw Error("no answer from the server within " + std::to_string(o.timeout_ms) + " ms");
