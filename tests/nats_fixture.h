@@ -4,8 +4,12 @@
 // Server). Without nats-server the tests skip, or fail under IRRADCAST_TESTDATA_REQUIRED=1.
 #pragma once
 
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/socket.h>
+#include <sys/time.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -61,7 +65,17 @@ class NatsProcess {
         dir_(std::filesystem::temp_directory_path() /
              ("irradcast_nats_" + std::to_string(::getpid()) + "_" + std::to_string(port_))) {
     std::filesystem::create_directories(dir_);
-    start();
+    // Ports are picked free and released, so under ctest -j another test's server can take one
+    // before ours binds it (ours then fails, and the port answers as another NATS server's
+    // monitoring port): a launch that does not come up speaking NATS is tried on new ports.
+    for (int attempt = 1; !launch(); ++attempt) {
+      process_.reset();
+      if (attempt == 3) {
+        ADD_FAILURE() << "nats-server did not start on 3 pairs of ports";
+        break;
+      }
+      port_ = free_loopback_port();
+    }
   }
   ~NatsProcess() {
     process_.reset();
@@ -71,7 +85,10 @@ class NatsProcess {
   std::string url() const { return "nats://127.0.0.1:" + std::to_string(port_); }
   std::uint16_t port() const { return port_; }
   std::string output() const { return process_ ? process_->output() : ""; }
-  void start() {
+  // Starts it again on the same port and storage (after stop()).
+  void start() { EXPECT_TRUE(launch()) << output(); }
+  // Starts it; true once its port answers with a NATS INFO line.
+  bool launch() {
     std::vector<std::string> args{nats_server_exe(), "-p", std::to_string(port_), "-a",
                                   "127.0.0.1"};
     if (config_.empty()) {
@@ -96,8 +113,7 @@ class NatsProcess {
         args.push_back(a);
     }
     process_ = std::make_unique<Process>(args, dir_.string() + ".log");
-    EXPECT_TRUE(eventually([&] { return listening(); }, std::chrono::seconds(10)))
-        << process_->output();
+    return eventually([&] { return speaks_nats(); }, std::chrono::seconds(10));
   }
   void stop() {
     process_->signal(SIGTERM);
@@ -106,12 +122,26 @@ class NatsProcess {
   }
 
  private:
-  bool listening() const {
-    asio::io_context io;
-    asio::ip::tcp::socket s(io);
-    std::error_code ec;
-    s.connect({asio::ip::make_address("127.0.0.1"), port_}, ec);
-    return !ec;
+  // Our port accepts and greets with "INFO " (a NATS server's first line), within a second.
+  bool speaks_nats() const {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    if (fd < 0) return false;
+    timeval tv{1, 0};
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(port_);
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    char head[5] = {};
+    std::size_t got = 0;
+    if (::connect(fd, reinterpret_cast<const sockaddr*>(&a), sizeof a) == 0)
+      while (got < sizeof head) {
+        const ssize_t n = ::recv(fd, head + got, sizeof head - got, 0);
+        if (n <= 0) break;
+        got += static_cast<std::size_t>(n);
+      }
+    ::close(fd);
+    return got == sizeof head && std::string(head, sizeof head) == "INFO ";
   }
   std::string config_;
   std::uint16_t port_;
