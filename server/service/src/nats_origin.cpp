@@ -150,7 +150,9 @@ void NatsOrigin::Impl::run() {
   std::unique_lock lock(mutex);
   while (!stopping) {
     auto wait = std::chrono::milliseconds(100);
-    if (poses_dirty) {  // the next pose set is due kPoseEvery after the last
+    // Poses waiting are published kPoseEvery after the last set, but only while there is a
+    // NATS to publish them to (else this loop would spin on them).
+    if (poses_dirty && conn->connected() && refusal.empty()) {
       const auto due = poses_published_at + kPoseEvery, now = Clock::now();
       wait = due > now ? std::chrono::ceil<std::chrono::milliseconds>(due - now)
                        : std::chrono::milliseconds(0);
