@@ -91,6 +91,24 @@ TEST(PoseBoard, CoalescesPerNodeAndEncodesOnceForEverySessionAtTheSameSequence) 
   EXPECT_EQ(decode_poses(*board.frame_since(3, true).frame).poses_size(), 2);
 }
 
+// A gateway's copy of an origin that restarted without some poses: the whole set replaced, and
+// every session's next frame complete (the client puts the missing nodes back).
+TEST(PoseBoard, AReplacedSetIsSentWholeToEveryClient) {
+  PoseBoard board;
+  board.post({{4, at(1.0f)}, {9, at(2.0f)}}, 10);
+  const std::uint64_t seen = board.sequence();
+  EXPECT_EQ(board.replace({{9, at(3.0f)}}, 20), seen + 1);
+  const wire::Poses p = decode_poses(*board.frame_since(seen, false).frame);
+  EXPECT_TRUE(p.complete());
+  ASSERT_EQ(p.poses_size(), 1);
+  EXPECT_EQ(p.poses(0).node(), 9u);
+  EXPECT_FLOAT_EQ(p.poses(0).matrix(12), 3.0f);
+  EXPECT_EQ(board.snapshot().size(), 1u);
+  // After it, deltas again.
+  board.post({{9, at(4.0f)}}, 30);
+  EXPECT_FALSE(decode_poses(*board.frame_since(seen + 1, false).frame).complete());
+}
+
 TEST(PoseBoard, AStreamPastItsRateIsRefusedAndRefillsAtTheRate) {
   PoseBoard board;
   const auto t0 = PoseBoard::Clock::now();

@@ -359,15 +359,16 @@ void NatsGateway::Impl::on_volume_chunk(const std::string& data) {
 void NatsGateway::Impl::try_volume() {
   if (!pending_volume) return;
   const wire::NatsVolume& v = *pending_volume;
-  std::string frame;
   for (std::uint32_t i = 0; i < v.chunks(); ++i) {
     auto it = volume_chunks.find(i);
     if (it == volume_chunks.end() || it->second.hash() != v.hash()) return;  // not yet
-    frame += it->second.data();
-    if (frame.size() > v.bytes()) break;
   }
+  std::string frame;
+  for (std::uint32_t i = 0; i < v.chunks() && frame.size() <= v.bytes(); ++i)
+    frame += volume_chunks[i].data();
   const wire::NatsVolume announced = std::move(*pending_volume);
   pending_volume.reset();
+  volume_chunks.clear();  // used (or refused) whole; the next version brings its own
   if (frame.size() != announced.bytes() || wire::sha256(frame) != announced.hash())
     return bad("the probe volume's chunks do not make the announced frame");
   wire::FrameDecoder decoder(static_cast<std::size_t>(kMaxVolumeBytes));
@@ -402,6 +403,7 @@ void NatsGateway::Impl::on_poses(const std::string& data) {
   if (!m.ParseFromString(data)) return bad("the poses do not parse");
   if (m.poses().poses_size() > wire::kMaxWirePoses) return bad("too many poses");
   const std::map<int, NodePoseState> held = poses.snapshot();
+  std::map<int, NodePoseState> set;  // the origin's whole set: a node not in it is not posed
   std::vector<std::pair<int, NodePoseState>> changed;
   for (const wire::NodePose& p : m.poses().poses()) {
     if (p.matrix_size() != 16 || p.node() >= (1u << 24)) return bad("a pose is out of range");
@@ -417,12 +419,18 @@ void NatsGateway::Impl::on_poses(const std::string& data) {
     auto it = held.find(node);
     if (it == held.end() || it->second.local != s.local || it->second.visible != s.visible)
       changed.emplace_back(node, s);
+    set[node] = s;
   }
   {
     std::lock_guard lock(mutex);
     ++st.poses_received;
   }
-  if (!changed.empty()) poses.post(changed, m.poses().posed_us());
+  bool gone = false;  // a node the origin no longer poses (an origin restarted without them)
+  for (const auto& [node, pose] : held) gone = gone || !set.count(node);
+  if (gone)
+    poses.replace(set, m.poses().posed_us());
+  else if (!changed.empty())
+    poses.post(changed, m.poses().posed_us());
 }
 
 void NatsGateway::Impl::run() {

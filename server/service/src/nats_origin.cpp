@@ -633,6 +633,7 @@ NatsOrigin::NatsOrigin(EngineHost& host, NatsOriginOptions options)
     im.pose_listener = board->add_listener([&im] {
       {
         std::lock_guard lock(im.mutex);
+        if (im.poses_dirty) return;  // the worker knows already
         im.poses_dirty = true;
         im.idle = false;
       }

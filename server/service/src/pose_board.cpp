@@ -39,6 +39,24 @@ std::uint64_t PoseBoard::post(const std::vector<std::pair<int, NodePoseState>>& 
   return sequence;
 }
 
+std::uint64_t PoseBoard::replace(const std::map<int, NodePoseState>& poses,
+                                 std::uint64_t posed_us) {
+  std::vector<std::function<void()>> listeners;
+  std::uint64_t sequence = 0;
+  {
+    std::lock_guard lock(mutex_);
+    sequence = ++sequence_;
+    entries_.clear();
+    for (const auto& [node, pose] : poses) entries_[node] = Entry{pose, sequence};
+    replaced_ = sequence;
+    posed_us_ = posed_us;
+    frames_.clear();
+    for (const auto& [id, l] : listeners_) listeners.push_back(l);
+  }
+  for (const auto& l : listeners) l();
+  return sequence;
+}
+
 void PoseBoard::restore(std::map<int, NodePoseState> poses, std::uint64_t sequence) {
   std::lock_guard lock(mutex_);
   entries_.clear();
@@ -75,6 +93,7 @@ PoseBoard::Frame PoseBoard::frame_since(std::uint64_t since, bool complete) cons
   std::lock_guard lock(mutex_);
   Frame f;
   f.sequence = sequence_;
+  if (since < replaced_) complete = true;  // nodes may have gone: only a complete frame says so
   if (!complete && since >= sequence_) return f;
   const auto key = std::make_pair(complete ? 0 : since, complete);
   if (auto it = frames_.find(key); it != frames_.end()) {

@@ -47,6 +47,10 @@ class PoseBoard {
   // `posed_us` (system clock), then calls the listener (outside the lock).
   std::uint64_t post(const std::vector<std::pair<int, NodePoseState>>& poses,
                      std::uint64_t posed_us);
+  // The whole set of posed nodes becomes `poses` (a gateway's copy of its origin's, which may
+  // have restarted without some): one step of the sequence, and every session's next frame is
+  // complete (a client puts the nodes it no longer lists back where the package places them).
+  std::uint64_t replace(const std::map<int, NodePoseState>& poses, std::uint64_t posed_us);
   // At start (no listener is called): the poses saved before, at their sequence.
   void restore(std::map<int, NodePoseState> poses, std::uint64_t sequence);
   // Called after every post, on the posting thread (the server's fan-out, a NATS origin's
@@ -63,7 +67,8 @@ class PoseBoard {
     std::uint64_t sequence = 0;                // what the client stands at once it has it
   };
   // For a client that stands at `since`: the poses of the nodes moved after it; `complete`: every
-  // posed node (the first frame of a session, sent even when no node is posed).
+  // posed node (the first frame of a session, sent even when no node is posed, and the frame of
+  // a client from before the last replace()).
   Frame frame_since(std::uint64_t since, bool complete) const;
 
  private:
@@ -79,6 +84,7 @@ class PoseBoard {
   std::map<int, Entry> entries_;
   std::map<int, Bucket> buckets_;
   std::uint64_t sequence_ = 0;
+  std::uint64_t replaced_ = 0;  // the sequence of the last replace(): older clients get it whole
   std::uint64_t posed_us_ = 0;
   std::map<int, std::function<void()>> listeners_;
   int next_listener_ = 1;
