@@ -40,12 +40,14 @@ TEST(Image, ReadingAMissingOrBrokenExrNamesTheFile) {
   fs::remove(p);
 }
 
-TEST(Image, CompareComputesRmseAndRelativeMse) {
+TEST(Image, CompareComputesRmseRelativeMseAndMeanRatio) {
   ImageRGB a(2, 1, glm::vec3(1.0f)), b(2, 1, glm::vec3(1.0f));
   b.pixels[1] = glm::vec3(3.0f);
   ImageError e = compare(b, a);
   EXPECT_NEAR(e.rmse, std::sqrt(2.0), 1e-9);  // half the values differ by 2
   EXPECT_NEAR(e.rel_mse, 0.5 * 4.0 / 1.01, 1e-9);
+  EXPECT_NEAR(e.mean_ratio, 2.0, 1e-9);  // (1 + 3) / (1 + 1)
+  EXPECT_EQ(compare(a, ImageRGB(2, 1)).mean_ratio, 0.0);  // a black reference
   EXPECT_THROW(compare(a, ImageRGB(1, 1)), Error);
 }
 

@@ -399,9 +399,13 @@ void compare_with_reference(Bake& b, const ImageRGB& view, const ImageRGB& ref,
   write_png_tonemapped((fs::path(o.out) / "view_vs_reference.png").string(), pair, ref_tm);
   ImageError err = compare(view, ref);
   b.report["error"] = {
-      {"rmse", err.rmse}, {"rel_mse", err.rel_mse}, {"reference_spp", o.reference_spp}};
+      {"rmse", err.rmse},
+      {"rel_mse", err.rel_mse},
+      {"mean_ratio", err.mean_ratio},
+      {"reference_spp", o.reference_spp}};
   log::info("bake", "view vs reference: RMSE " + std::to_string(err.rmse) + ", relative MSE " +
-                        std::to_string(err.rel_mse));
+                        std::to_string(err.rel_mse) + ", mean ratio " +
+                        std::to_string(err.mean_ratio));
 }
 
 // The report's sky: null without one, else its colour or map file and its strength.

@@ -33,10 +33,12 @@ void write_png(const std::string& path, int width, int height,
                const std::vector<std::uint8_t>& rgb8);
 
 // Error of `image` against `reference` (same size), over all pixels and channels:
-// rmse = sqrt(mean((x - r)^2)); relative MSE = mean((x - r)^2 / (r^2 + 0.01)).
+// rmse = sqrt(mean((x - r)^2)); relative MSE = mean((x - r)^2 / (r^2 + 0.01)); mean ratio =
+// mean(x) / mean(r) (0 for a black reference): a bias, where the other two mix bias and noise.
 struct ImageError {
   double rmse = 0.0;
   double rel_mse = 0.0;
+  double mean_ratio = 0.0;
 };
 ImageError compare(const ImageRGB& image, const ImageRGB& reference);
 
