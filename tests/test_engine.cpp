@@ -242,6 +242,7 @@ TEST(Engine, RejectsBadParameters) {
   p.indirect_samples = 0;
   EXPECT_THROW(s.engine(p), Error);
   EXPECT_THROW(parse_tracing_range("far"), Error);
-  EXPECT_TRUE(std::isinf(parse_tracing_range("inf")));
+  EXPECT_TRUE(parse_tracing_range("inf").infinite());
+  EXPECT_EQ(parse_tracing_range("3m"), Length::in_metres(3.0f));
   EXPECT_THROW(parse_dispatch("triangle"), Error);
 }

@@ -18,6 +18,7 @@
 #include "irradcast/common/log.h"
 #include "irradcast/common/progress.h"
 #include "irradcast/engine/engine_params.h"
+#include "irradcast/engine/pass_data.h"
 #include "irradcast/service/engine_host.h"
 #include "params_json.h"
 
@@ -51,6 +52,9 @@ std::string change(const ParamSpec& s, T& v) {
     return "";
   } else if constexpr (std::is_enum_v<T>) {
     v = static_cast<T>((static_cast<std::size_t>(v) + 1) % choice_names(v).size());
+    return param_text(v);
+  } else if constexpr (std::is_same_v<T, Length>) {
+    v = Length::in_metres(s.kind == ParamKind::Distance ? 2.5f : 0.5f);
     return param_text(v);
   } else if constexpr (std::is_same_v<T, float>) {
     v = s.kind == ParamKind::Distance ? std::numeric_limits<float>::infinity() : v * 0.5f;
@@ -151,8 +155,11 @@ TEST(EngineParams, ValidateRefusesEveryParameterOutsideItsRangeByName) {
       EngineParams p;
       std::size_t k = 0;
       for_each_param(p, [&](const ParamSpec&, auto& v) {
-        if constexpr (std::is_arithmetic_v<std::remove_reference_t<decltype(v)>>)
-          if (k == i) v = static_cast<std::remove_reference_t<decltype(v)>>(value);
+        using T = std::remove_reference_t<decltype(v)>;
+        if constexpr (std::is_arithmetic_v<T>)
+          if (k == i) v = static_cast<T>(value);
+        if constexpr (std::is_same_v<T, Length>)
+          if (k == i) v = Length(static_cast<float>(value));
         ++k;
       });
       try {
@@ -194,4 +201,54 @@ TEST(EngineParams, EditParametersChangeTheTileEpoch) {
   EXPECT_NE(epoch([](EngineParams& p) { p.edit_blend = 2.0f; }), defaults);
   EXPECT_NE(epoch([](EngineParams& p) { p.edit_batch = 1.0f; }), defaults);
   EXPECT_NE(epoch([](EngineParams& p) { p.edit_keep = 0; }), defaults);
+}
+
+// Sizes in metres (issue 33): --cell-size and --tracing-range take a fraction of the scene
+// ("0.25"), metres ("2m") or, for the range, inf; the text reads back as the same value; the
+// report and the tile epoch tell a fraction from metres; a grid in metres has cubes of that edge
+// whatever the scene's size, and refuses more than 256 of them along the scene.
+TEST(EngineParams, LengthsTakeMetres) {
+  const EngineParams m = parse({"--cell-size", "2m", "--tracing-range", "2.4m"});
+  EXPECT_EQ(m.cell_size, Length::in_metres(2.0f));
+  EXPECT_EQ(m.tracing_range, Length::in_metres(2.4f));
+  EXPECT_FALSE(m.unbiased());
+  EXPECT_EQ(param_text(m.cell_size), "2m");
+  EXPECT_EQ(parse({"--cell-size", "0.125"}).cell_size, Length(0.125f));
+  EXPECT_TRUE(parse({"--tracing-range", "inf"}).unbiased());
+  EXPECT_EQ(parse({"--tracing-range", "0m"}).tracing_range, Length::in_metres(0.0f));
+  EXPECT_EQ(tools::params_json(m).at("cell_size"), "2m");
+  EXPECT_EQ(tools::params_json(EngineParams{}).at("cell_size"), 0.25f);
+  EngineParams fraction;
+  fraction.cell_size = 2.0f / 8.0f;
+  EngineParams metres;
+  metres.cell_size = Length::in_metres(0.25f);
+  EXPECT_NE(engine_params_key(fraction), engine_params_key(metres));
+  for (const char* bad : {"m", "2mm", "-1m", "0m", "infm", "nanm", "2 m", "2km", "", "inf"}) {
+    SCOPED_TRACE(bad);
+    try {
+      parse({"--cell-size", bad});
+      ADD_FAILURE() << "accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("cell_size"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(parse({"--tracing-range", "-0.5m"}), Error);
+  EXPECT_THROW(parse({"--tracing-range", "far"}), Error);
+
+  // A 40 x 3 x 10 m floor: 2 m cubes, 20 x 2 x 5 of them; as a fraction, 4 cubes of 10 m.
+  const Bounds floor{glm::vec3(0.0f), glm::vec3(40.0f, 3.0f, 10.0f)};
+  const ProbeGrid g = ProbeGrid::cells_of(floor, m);
+  EXPECT_EQ(g.cell, 2.0f);
+  EXPECT_EQ(g.dims, glm::ivec3(20, 2, 5));
+  const ProbeGrid f = ProbeGrid::cells_of(floor, EngineParams{});
+  EXPECT_EQ(f.cell, 10.0f);
+  EXPECT_EQ(f.dims, glm::ivec3(4, 1, 1));
+  EngineParams tiny;
+  tiny.cell_size = Length::in_metres(0.1f);  // 400 cells along 40 m
+  try {
+    ProbeGrid::cells_of(floor, tiny);
+    ADD_FAILURE() << "400 cells accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("at most 256"), std::string::npos) << e.what();
+  }
 }

@@ -17,8 +17,8 @@
 namespace irradcast::tools {
 
 struct EngineOptions {
-  // Numbers and flags are parsed straight into `values`; Choice and Distance parameters are
-  // kept as typed, by name, and parsed by params().
+  // Numbers and flags are parsed straight into `values`; Choice, Distance and Length parameters
+  // are kept as typed, by name, and parsed by params().
   EngineParams values;
   std::map<std::string, std::string> text;
   float texels_per_scene = 256.0f;
@@ -29,7 +29,8 @@ struct EngineOptions {
 
   EngineOptions() {
     for_each_param(values, [&](const ParamSpec& s, const auto& v) {
-      if (s.kind == ParamKind::Choice || s.kind == ParamKind::Distance)
+      if (s.kind == ParamKind::Choice || s.kind == ParamKind::Distance ||
+          std::is_same_v<std::remove_cvref_t<decltype(v)>, Length>)
         text[s.name] = param_text(v);
     });
   }
@@ -49,7 +50,8 @@ struct EngineOptions {
     EngineParams p = values;
     for_each_param(p, [&](const ParamSpec& s, auto& v) {
       if constexpr (std::is_enum_v<std::remove_reference_t<decltype(v)>> ||
-                    std::is_same_v<std::remove_reference_t<decltype(v)>, float>)
+                    std::is_same_v<std::remove_reference_t<decltype(v)>, float> ||
+                    std::is_same_v<std::remove_reference_t<decltype(v)>, Length>)
         if (auto it = text.find(s.name); it != text.end()) parse_param(s, it->second, v);
     });
     p.validate();
@@ -80,6 +82,8 @@ struct EngineOptions {
           s.flags, [&v, on = s.kind == ParamKind::On] { v = on; }, s.help);  // Off / On
     } else if constexpr (std::is_enum_v<T>) {
       app.add_option(s.flags, text[s.name], s.help);  // ParamKind::Choice
+    } else if constexpr (std::is_same_v<T, Length>) {
+      app.add_option(s.flags, text[s.name], s.help);  // a fraction, metres ("2m") or inf
     } else if (s.kind == ParamKind::Distance) {
       app.add_option(s.flags, text[s.name], s.help);
     } else {

@@ -54,11 +54,14 @@ CellsMethod::CellsMethod(const EngineParams& params, const World& world, const R
     : params_(params), world_(&world), rays_(&rays), backend_(&backend) {
   // Seed 001 section 4.3.2 and our rooms test: probes stand in for everything beyond the range,
   // so a range much shorter than a cell makes the probes' parallax dominate the error.
-  if (params_.uses_probes() && params_.tracing_range < 0.4f * params_.cell_size)
-    log::warn("engine", "tracing range " + std::to_string(params_.tracing_range) +
-                            " is short for cells of " + std::to_string(params_.cell_size) +
+  const float extent = world.bounds.max_extent();
+  const float range = params_.tracing_range.resolve(extent),
+              cell = params_.cell_size.resolve(extent);
+  if (params_.uses_probes() && range < 0.4f * cell)
+    log::warn("engine", "tracing range " + param_text(params_.tracing_range) +
+                            " is short for cells of " + param_text(params_.cell_size) +
                             ": expect probe error; use a cell size of at most " +
-                            std::to_string(2.5f * params_.tracing_range));
+                            std::to_string(2.5f * range) + " m");
 }
 
 void CellsMethod::place_probes(const SurfaceTexels& texels, const SceneChange* change,

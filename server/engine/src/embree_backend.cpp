@@ -68,7 +68,7 @@ glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d) {
 float scatter_range(const PassInput& in, std::uint32_t i) {
   const bool probes =
       !in.params.unbiased() && !in.probe_weights.empty() && in.probe_weights[i].count > 0;
-  return probes ? in.params.tracing_range * in.world.bounds.max_extent() : 3.4e38f;
+  return probes ? in.params.tracing_range.resolve(in.world.bounds.max_extent()) : 3.4e38f;
 }
 
 ScatterMiss::ScatterMiss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance)
@@ -76,7 +76,7 @@ ScatterMiss::ScatterMiss(const PassInput& in, const std::vector<glm::vec3>& prob
       radiance_(&probe_radiance),
       lo_(in.world.bounds.lo - exit_pad(in.world.bounds)),
       hi_(in.world.bounds.hi + exit_pad(in.world.bounds)),
-      range_(in.params.tracing_range * in.world.bounds.max_extent()),
+      range_(in.params.tracing_range.resolve(in.world.bounds.max_extent())),
       extent_(in.world.bounds.max_extent()),
       probes_(!in.params.unbiased() && !in.probe_weights.empty()),
       fixed_(in.params.distant_point == DistantPoint::FixedDistance) {}

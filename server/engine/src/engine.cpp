@@ -430,7 +430,7 @@ std::vector<std::uint8_t> Engine::priorities(const SceneChange& change,
   // the rest; within each, texels a viewer's camera sees first.
   const float cell = probes_.grid.cell;
   const float margin = std::max(
-      cell, !params_.uses_probes() ? cell : params_.tracing_range * world_->bounds.max_extent());
+      cell, !params_.uses_probes() ? cell : params_.tracing_range.resolve(world_->bounds.max_extent()));
   const std::size_t n = texels_.size();
   std::vector<std::uint8_t> tier(n, 0);
   tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {

@@ -3,6 +3,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 #include <type_traits>
 
@@ -50,6 +51,24 @@ float parse_distance(const char* what, double lo, const std::string& text) {
   }
 }
 
+Length parse_length(const ParamSpec& s, const std::string& text) {
+  const bool metres = !text.empty() && text.back() == 'm';
+  const std::string number = metres ? text.substr(0, text.size() - 1) : text;
+  try {
+    if (s.kind == ParamKind::Distance && !metres && number == "inf")
+      return Length(std::numeric_limits<float>::infinity());
+    std::size_t used = 0;
+    const float v = std::stof(number, &used);
+    if (number.empty() || used != number.size() || !std::isfinite(v))
+      throw std::invalid_argument(text);
+    return metres ? Length::in_metres(v) : Length(v);
+  } catch (const std::exception&) {
+    throw Error(std::string(s.name) + " '" + text + "' must be a fraction of the scene (" +
+                (s.kind == ParamKind::Distance ? "0.3" : "0.25") + "), metres (2m)" +
+                (s.kind == ParamKind::Distance ? " or inf" : ""));
+  }
+}
+
 bool in_range(const ParamSpec& s, double v) {
   switch (s.kind) {
     case ParamKind::Int:
@@ -82,7 +101,15 @@ std::string range_text(const ParamSpec& s) {
 // Throws unless `v` is within `s`'s range (ParamKind).
 template <class T>
 void check_param(const ParamSpec& s, T v) {
-  if constexpr (std::is_enum_v<T>) {
+  if constexpr (std::is_same_v<T, Length>) {
+    if (!v.metres) return check_param(s, v.value);
+    // Metres: finite and above zero (a Distance may also be zero, or inf written as a fraction).
+    const bool ok = s.kind == ParamKind::Distance ? v.value >= 0.0f && std::isfinite(v.value)
+                                                  : v.value > 0.0f && std::isfinite(v.value);
+    if (!ok)
+      throw Error(std::string(s.name) + " in metres must be " +
+                  (s.kind == ParamKind::Distance ? ">= 0" : "> 0") + " and finite");
+  } else if constexpr (std::is_enum_v<T>) {
     if (static_cast<std::size_t>(v) >= choice_names(v).size())
       throw Error(std::string(s.name) + " has no value " + std::to_string(static_cast<int>(v)));
   } else if constexpr (!std::is_same_v<T, bool>) {
@@ -102,12 +129,16 @@ void EngineParams::validate() const {
         "needs a path)");
   if (!(ic_min_radius <= ic_max_radius))
     throw Error("ic radii must satisfy 0 < ic_min_radius <= ic_max_radius <= 1");
-  if (std::ceil(1.0f / cell_size) > 256.0f)
+  if (!cell_size.metres && std::ceil(1.0f / cell_size.value) > 256.0f)
     throw Error("cell_size is too small (over 256 cells per axis)");
+  // In metres the scene decides: ProbeGrid::cells_of refuses over 256 cells along its extent.
 }
 
 std::string param_text(float v) {
   return v == std::numeric_limits<float>::infinity() ? "inf" : shortest(v);
+}
+std::string param_text(Length v) {
+  return v.metres ? shortest(v.value) + "m" : param_text(v.value);
 }
 std::string param_text(int v) {
   return std::to_string(v);
@@ -150,6 +181,9 @@ void parse_param(const ParamSpec& s, const std::string& text, DistantPoint& v) {
 void parse_param(const ParamSpec& s, const std::string& text, float& v) {
   v = parse_distance(s.name, s.lo, text);
 }
+void parse_param(const ParamSpec& s, const std::string& text, Length& v) {
+  v = parse_length(s, text);
+}
 
 std::string engine_params_key(const EngineParams& p) {
   std::string key;
@@ -180,8 +214,10 @@ std::string method_name(Method m) {
   return i < names.size() ? names[i] : "?";
 }
 
-float parse_tracing_range(const std::string& text) {
-  return parse_distance("tracing range", 0.0, text);
+Length parse_tracing_range(const std::string& text) {
+  for (const ParamSpec& s : kEngineParamSpecs)
+    if (std::strcmp(s.name, "tracing_range") == 0) return parse_length(s, text);
+  throw Error("no tracing_range parameter");
 }
 
 }  // namespace irradcast

@@ -6,6 +6,8 @@
 
 #include "irradcast/engine/pass_data.h"
 
+#include "irradcast/common/error.h"
+
 namespace irradcast {
 
 int ProbeGrid::cell_index(glm::vec3 p) const {
@@ -22,10 +24,18 @@ glm::vec3 ProbeGrid::centre(std::size_t i) const {
 ProbeGrid ProbeGrid::cells_of(const Bounds& b, const EngineParams& params) {
   ProbeGrid g;
   const float extent = std::max(b.max_extent(), 1e-6f);
-  const int per_axis = static_cast<int>(std::ceil(1.0f / params.cell_size));
-  // Cells are cubes of cell_size x extent; axes shorter than the largest get fewer cells
-  // (seed 001 grids the normalised cube; cells outside the bounds would hold nothing).
-  g.cell = extent / static_cast<float>(per_axis);
+  // A fraction: ceil(1 / cell_size) cubes across the largest extent (seed 001 grids the
+  // normalised cube). Metres: cubes of that edge, as many as cover the largest extent.
+  const Length size = params.cell_size;
+  const float across =
+      size.metres ? std::ceil(extent / size.value - 1e-4f) : std::ceil(1.0f / size.value);
+  if (!(across <= 256.0f))
+    throw Error("cell_size " + param_text(size) + " gives " + param_text(across) +
+                " cells along the scene's largest extent of " + param_text(extent) +
+                " m (at most 256)");
+  const int per_axis = std::max(1, static_cast<int>(across));
+  // Axes shorter than the largest get fewer cells (cells outside the bounds would hold nothing).
+  g.cell = size.metres ? size.value : extent / static_cast<float>(per_axis);
   g.origin = b.lo;
   glm::vec3 e = b.extent();
   for (int a = 0; a < 3; ++a)
@@ -50,6 +60,5 @@ float SceneChange::distance(glm::vec3 p) const {
   }
   return nearest;
 }
-
 
 }  // namespace irradcast

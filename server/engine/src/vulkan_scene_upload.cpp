@@ -260,7 +260,7 @@ PushConstants VulkanBackend::Impl::constants(const PassInput& in) const {
   pc.seed_hi = static_cast<std::uint32_t>(in.params.seed >> 32);
   pc.epsilon = rays->epsilon();
   pc.extent = in.world.bounds.max_extent();
-  pc.range = in.params.unbiased() ? 3.4e38f : in.params.tracing_range * pc.extent;
+  pc.range = in.params.unbiased() ? 3.4e38f : in.params.tracing_range.resolve(pc.extent);
   pc.punctual_count = punctual_count;
   pc.emissive_count = emissive_count;
   for (int a = 0; a < 3; ++a) {

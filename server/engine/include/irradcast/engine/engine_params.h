@@ -21,8 +21,9 @@ enum class ParamKind {
   Int,       // int in lo..hi
   IntShown,  // the same, and the command line checks it too, showing the range in --help
   Real,      // float in [lo, hi]
-  Positive,  // float in (lo, hi]
-  Distance,  // float >= lo, or inf; on the command line a number or "inf"
+  Positive,  // float in (lo, hi]; a Length: a fraction in (lo, hi], or metres > 0 ("2m")
+  Distance,  // float >= lo, or inf; on the command line a number or "inf"; a Length: a
+             // fraction >= lo, metres >= 0 ("2m"), or inf
   Choice,    // an enum, on the command line one of choice_names()
   Off,       // a bool, true by default; its command-line flag turns it off
   On,        // a bool, false by default; its command-line flag turns it on
@@ -32,13 +33,32 @@ enum class ParamKind {
 // No upper bound.
 inline constexpr double kNoLimit = std::numeric_limits<double>::infinity();
 
+// A length in the scene: a fraction of its largest extent (seed 001's convention: the scene
+// normalised to its bounding box), or metres (world units), whatever the scene's size. On the
+// command line "0.25" is a fraction and "2m" metres (docs/ENGINE.md, "Sizes in metres").
+struct Length {
+  float value = 0.0f;
+  bool metres = false;
+  constexpr Length() = default;
+  constexpr Length(float fraction) : value(fraction) {}  // NOLINT: a plain number is a fraction
+  static constexpr Length in_metres(float m) {
+    Length l(m);
+    l.metres = true;
+    return l;
+  }
+  // In world units, for a scene whose largest extent is `extent`.
+  float resolve(float extent) const { return metres ? value : value * extent; }
+  bool infinite() const { return !(value < std::numeric_limits<float>::infinity()); }
+  bool operator==(const Length&) const = default;
+};
+
 struct EngineParams {
 #define IRRADCAST_ENGINE_PARAM(kind, type, name, init, lo, hi, flags, help) type name = init;
 #include "irradcast/engine/engine_params.inc"
 #undef IRRADCAST_ENGINE_PARAM
 
   bool unbiased() const {
-    return !(tracing_range < std::numeric_limits<float>::infinity());
+    return tracing_range.infinite();
   }
   // Radiance cells with a finite tracing range: the only configuration that places probes.
   bool uses_probes() const {
@@ -78,6 +98,7 @@ void for_each_param(Params& p, F&& f) {
 // A parameter's value as the command line spells it: numbers in their shortest exact form,
 // inf as "inf", enums by name.
 std::string param_text(float v);
+std::string param_text(Length v);  // "0.25", "2m" or "inf"
 std::string param_text(int v);
 std::string param_text(std::uint64_t v);
 std::string param_text(bool v);
@@ -94,13 +115,14 @@ void parse_param(const ParamSpec& spec, const std::string& text, Method& v);
 void parse_param(const ParamSpec& spec, const std::string& text, Dispatch& v);
 void parse_param(const ParamSpec& spec, const std::string& text, DistantPoint& v);
 void parse_param(const ParamSpec& spec, const std::string& text, float& v);
+void parse_param(const ParamSpec& spec, const std::string& text, Length& v);
 // Every parameter as "name=text|...": what the tile epoch keys on (server/service), so that
 // any change of a parameter gives another epoch.
 std::string engine_params_key(const EngineParams& p);
 
 Dispatch parse_dispatch(const std::string& name);           // "cell" | "object"
 DistantPoint parse_distant_point(const std::string& name);  // "project" | "fixed"
-float parse_tracing_range(const std::string& text);         // a number or "inf"
+Length parse_tracing_range(const std::string& text);        // a fraction, "2m" or "inf"
 Method parse_method(const std::string& name);               // "cells" | "vpl" | "irradiance-cache"
 std::string method_name(Method m);
 

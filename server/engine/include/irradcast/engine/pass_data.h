@@ -56,8 +56,9 @@ struct ProbeGrid {
   int cell_index(glm::vec3 p) const;
   // The centre of cell i (where its probe stands unless it was relocated).
   glm::vec3 centre(std::size_t i) const;
-  // The cells over `bounds` (cubes of params.cell_size x the largest extent), every probe at its
-  // cell's centre and usable.
+  // The cells over `bounds` (cubes of params.cell_size: metres, or that fraction of the largest
+  // extent), every probe at its cell's centre and usable. Throws irradcast::Error for more than
+  // 256 cells along the largest extent.
   static ProbeGrid cells_of(const Bounds& bounds, const EngineParams& params);
 };
 
