@@ -243,6 +243,12 @@ TEST(EngineParams, LengthsTakeMetres) {
   const ProbeGrid f = ProbeGrid::cells_of(floor, EngineParams{});
   EXPECT_EQ(f.cell, 10.0f);
   EXPECT_EQ(f.dims, glm::ivec3(4, 1, 1));
+  EngineParams huge;
+  huge.cell_size = Length::in_metres(1e38f);  // one cell over the floor, its probe inside it
+  const ProbeGrid h = ProbeGrid::cells_of(floor, huge);
+  EXPECT_EQ(h.dims, glm::ivec3(1));
+  EXPECT_EQ(h.cell, 40.0f);
+  EXPECT_EQ(h.position[0], glm::vec3(20.0f));
   EngineParams tiny;
   tiny.cell_size = Length::in_metres(0.1f);  // 400 cells along 40 m
   try {

@@ -35,7 +35,8 @@ ProbeGrid ProbeGrid::cells_of(const Bounds& b, const EngineParams& params) {
                 " m (at most 256)");
   const int per_axis = std::max(1, static_cast<int>(across));
   // Axes shorter than the largest get fewer cells (cells outside the bounds would hold nothing).
-  g.cell = size.metres ? size.value : extent / static_cast<float>(per_axis);
+  // (A cube larger than the scene is one cell over it: its probe stays inside the bounds.)
+  g.cell = size.metres ? std::min(size.value, extent) : extent / static_cast<float>(per_axis);
   g.origin = b.lo;
   glm::vec3 e = b.extent();
   for (int a = 0; a < 3; ++a)
