@@ -28,7 +28,8 @@ layout(std430, binding = 4) readonly buffer Materials { vec4 materials[]; };
 layout(std430, binding = 5) readonly buffer TexHeaders { uvec4 tex_headers[]; };
 layout(std430, binding = 6) readonly buffer TexTexels { uint tex_texels[]; };  // RGBA8
 // 7 vec4 per emissive triangle: (p0, -) (e1, -) (e2, double sided) (normal, area)
-// (cdf, pick pdf, material, -) (emissive uv 0, uv 1) (uv 2, -, -).
+// (cdf, pick pdf, material, -) (emissive uv 0, uv 1) (uv 2, -, -); then, with FLAG_LIGHT_TREE,
+// the light hierarchy's nodes (lights.glsl).
 layout(std430, binding = 7) readonly buffer Emissive { vec4 emissive[]; };
 // 4 vec4 per punctual light: (position, type) (direction, range) (intensity, cos inner)
 // (cos outer, -, -, -). Types: 0 directional, 1 point, 2 spot.
@@ -55,7 +56,7 @@ layout(std430, binding = 17) readonly buffer SkyData { float sky[]; };
 
 const uint FLAG_AREA = 1u, FLAG_UNBIASED = 2u, FLAG_FIXED = 4u, FLAG_PROBES = 8u;
 const uint FLAG_CAMERA = 16u, FLAG_SKY = 32u, FLAG_SKY_MAP = 64u;
-const uint FLAG_PROBE_MEAN = 128u;
+const uint FLAG_PROBE_MEAN = 128u, FLAG_LIGHT_TREE = 256u;
 
 layout(push_constant) uniform Params {
   uint base;     // first item of this dispatch

@@ -80,8 +80,89 @@ vec3 area_sample(vec3 p, vec3 n, vec3 ng, uint k, float pick_pdf, vec2 u, inout 
   return emission_at(k, b) * (cos_x * cos_y * nrm.w / dist2) / pick_pdf;
 }
 
-// LightSampler::area_irradiance: a triangle picked by power, a uniform point on it.
+// ---- the light hierarchy (common/src/light_tree.cpp), with FLAG_LIGHT_TREE: its nodes follow
+// the emissive triangles in emissive[], 4 vec4 each from 7 * emissive_count: (lo, phi)
+// (hi, cos_o) (w, flags: 1 leaf, 2 two-sided) (index, -, -, -); index: the triangle of a leaf,
+// the second child of an inner node (the first follows it).
+
+uint tree_node(uint k) {
+  return 7u * pc.emissive_count + 4u * k;
+}
+
+float cos_sub_clamped(float sin_a, float cos_a, float sin_b, float cos_b) {
+  return cos_a > cos_b ? 1.0 : cos_a * cos_b + sin_a * sin_b;
+}
+float sin_sub_clamped(float sin_a, float cos_a, float sin_b, float cos_b) {
+  return cos_a > cos_b ? 0.0 : sin_a * cos_b - cos_a * sin_b;
+}
+
+// LightTree::importance.
+float tree_importance(uint k, vec3 p, vec3 n) {
+  uint at = tree_node(k);
+  vec4 a = emissive[at], b = emissive[at + 1u], c = emissive[at + 2u];
+  float phi = a.w;
+  if (!(phi > 0.0)) return 0.0;
+  vec3 pc_ = 0.5 * (a.xyz + b.xyz);
+  float radius = 0.5 * length(b.xyz - a.xyz);
+  float dist2 = dot(p - pc_, p - pc_);
+  float d2 = max(dist2, radius);
+  if (!(dist2 > radius * radius)) return phi / max(d2, 1e-12);
+  vec3 wi = (p - pc_) / sqrt(dist2);
+  float sin2_b = radius * radius / dist2;
+  float cos_b = sqrt(max(1.0 - sin2_b, 0.0)), sin_b = sqrt(max(sin2_b, 0.0));
+  float cos_w = dot(c.xyz, wi);
+  if ((floatBitsToUint(c.w) & 2u) != 0u) cos_w = abs(cos_w);
+  float sin_w = sqrt(max(1.0 - cos_w * cos_w, 0.0));
+  float cos_o = b.w, sin_o = sqrt(max(1.0 - cos_o * cos_o, 0.0));
+  float cos_x = cos_sub_clamped(sin_w, cos_w, sin_o, cos_o);
+  float sin_x = sin_sub_clamped(sin_w, cos_w, sin_o, cos_o);
+  float cos_p = cos_sub_clamped(sin_x, cos_x, sin_b, cos_b);
+  if (!(cos_p > 0.0)) return 0.0;
+  float cos_i = -dot(n, wi);
+  float sin_i = sqrt(max(1.0 - cos_i * cos_i, 0.0));
+  float cos_pi = cos_sub_clamped(sin_i, cos_i, sin_b, cos_b);
+  if (!(cos_pi > 0.0)) return 0.0;
+  return phi * cos_p * cos_pi / d2;
+}
+
+// LightTree::sample: false where no light can reach p.
+bool tree_pick(vec3 p, vec3 n, float u, out uint triangle, out float pmf) {
+  uint at = 0u;
+  float prob = 1.0;
+  triangle = 0u;
+  pmf = 0.0;
+  while ((floatBitsToUint(emissive[tree_node(at) + 2u].w) & 1u) == 0u) {
+    uint c0 = at + 1u, c1 = floatBitsToUint(emissive[tree_node(at) + 3u].x);
+    float i0 = tree_importance(c0, p, n), i1 = tree_importance(c1, p, n);
+    float sum = i0 + i1;
+    if (!(sum > 0.0)) return false;
+    float p0 = i0 / sum;
+    if (u < p0) {
+      u = min(u / p0, 0.99999994);
+      prob *= p0;
+      at = c0;
+    } else {
+      u = min((u - p0) / (1.0 - p0), 0.99999994);
+      prob *= 1.0 - p0;
+      at = c1;
+    }
+  }
+  if (at == 0u && !(tree_importance(0u, p, n) > 0.0)) return false;
+  if (!(prob > 0.0)) return false;
+  triangle = floatBitsToUint(emissive[tree_node(at) + 3u].x);
+  pmf = prob;
+  return true;
+}
+
+// LightSampler::area_irradiance: a triangle picked by power (by the light hierarchy with
+// FLAG_LIGHT_TREE: LightSampler::pick), a uniform point on it.
 vec3 area_irradiance(vec3 p, vec3 n, vec3 ng, vec3 u, inout float rays) {
+  if ((pc.flags & FLAG_LIGHT_TREE) != 0u) {
+    uint k;
+    float pmf;
+    if (!tree_pick(p, n, u.x, k, pmf)) return vec3(0.0);
+    return area_sample(p, n, ng, k, pmf, u.yz, rays);
+  }
   uint lo = 0u, hi = pc.emissive_count;
   while (lo < hi) {
     uint mid = (lo + hi) / 2u;

@@ -535,3 +535,49 @@ TEST(Rooms, ShellIsSolidFromOutside) {
   }
   EXPECT_GT(checked, 1000);
 }
+
+// rooms:N:lit lights every room; rooms:N:trim also gives each room 16 emissive triangles of
+// trim along its walls, emitting into the room, off the doorways: a building of many lights
+// (rooms:12:trim: 2,592 emissive triangles at detail 1). Other variants are refused by name.
+TEST(Rooms, EveryRoomLitAndTrimGiveManyLights) {
+  auto count = [](const Scene& s, const std::string& prefix) {
+    int n = 0;
+    for (const Node& node : s.nodes) n += node.name.rfind(prefix, 0) == 0;
+    return n;
+  };
+  const Scene lit = load_scene("rooms:3:lit");
+  EXPECT_EQ(count(lit, "light_"), 9);
+  EXPECT_EQ(count(lit, "trim_"), 0);
+  const Scene trim = load_scene("rooms:3:trim");
+  EXPECT_EQ(count(trim, "light_"), 9);
+  ASSERT_EQ(count(trim, "trim_"), 9);
+  const World w = World::build(trim);
+  int trim_triangles = 0;
+  for (const WorldObject& o : w.objects) {
+    const std::string& name = object_name(w, o.object);
+    if (name.rfind("trim_", 0) != 0) continue;
+    const int parent = trim.nodes[o.node].parent;
+    const glm::vec3 room(trim.world_matrices()[parent][3]);
+    for (std::uint32_t t = 0; t < o.source->triangles.size(); ++t) {
+      ASSERT_TRUE(w.material(o.object, t).is_emissive()) << name;
+      ++trim_triangles;
+      const glm::uvec3 tri = o.source->triangles[t];
+      const glm::vec3 c =
+          (o.positions[tri.x] + o.positions[tri.y] + o.positions[tri.z]) / 3.0f - room;
+      // Inside the room, low on a wall, facing its middle, away from the doorway there.
+      EXPECT_GT(std::min(c.x, c.z), 0.1f) << name;
+      EXPECT_LT(std::max(c.x, c.z), 3.9f) << name;
+      EXPECT_NEAR(c.y, 0.3f, 0.03f) << name;
+      const glm::vec3 ng = o.geometric_normal(t);
+      EXPECT_NEAR(ng.y, 0.0f, 1e-5f);
+      EXPECT_GT(glm::dot(ng, glm::vec3(2.0f, c.y, 2.0f) - c), 1.0f) << name;
+      const float along = std::fabs(ng.x) > 0.5f ? c.z : c.x;
+      EXPECT_GT(std::fabs(along - 2.0f), 0.5f) << name << " in front of a doorway";
+    }
+  }
+  EXPECT_EQ(trim_triangles, 9 * 16);
+  for (const char* bad : {"rooms:3:dark", "rooms:3:", "rooms::lit", "rooms:3:lit:trim"}) {
+    SCOPED_TRACE(bad);
+    EXPECT_THROW(load_scene(bad), Error);
+  }
+}

@@ -164,6 +164,16 @@ Scene small_rooms() {
   return make_rooms(ro);
 }
 
+// rooms:3:trim at low detail: 162 emissive triangles, over LightSampler::kMaxFront, so both
+// backends pick the area lights by the light hierarchy (lights.glsl's tree_pick).
+Scene many_light_rooms() {
+  RoomsOptions ro;
+  ro.n = 3;
+  ro.detail = 0.5f;
+  ro.trim = true;
+  return make_rooms(ro);
+}
+
 struct ParityCase {
   const char* name;
   Scene (*scene)();
@@ -230,6 +240,7 @@ INSTANTIATE_TEST_SUITE_P(
                       ParityCase{"cornell_unbiased", make_cornell_box, 32.0f, INFINITY},
                       ParityCase{"rooms2_biased", small_rooms, 24.0f, 0.3f},
                       ParityCase{"rooms2_unbiased", small_rooms, 24.0f, INFINITY},
+                      ParityCase{"many_lights_unbiased", many_light_rooms, 36.0f, INFINITY},
                       ParityCase{"textured_cornell_biased", textured_cornell, 32.0f, 0.3f},
                       ParityCase{"cornell_biased_staging", make_cornell_box, 32.0f, 0.3f, true}),
     [](const ::testing::TestParamInfo<ParityCase>& info) { return info.param.name; });

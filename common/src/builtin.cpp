@@ -16,6 +16,19 @@ Scene build_or_load(const std::string& spec, float detail, const std::string& sc
   if (spec == "sponza") return make_sponza(scene_root);
   if (spec.rfind("rooms:", 0) == 0) {
     std::string n = spec.substr(6);
+    // rooms:N, rooms:N:lit (every room lit), rooms:N:trim (and emissive trim).
+    RoomsOptions o;
+    if (const std::size_t colon = n.find(':'); colon != std::string::npos) {
+      const std::string variant = n.substr(colon + 1);
+      if (variant == "lit")
+        o.every_room_lit = true;
+      else if (variant == "trim")
+        o.trim = true;
+      else
+        throw Error("scene spec '" + spec + "': after rooms:N comes :lit or :trim, not '" +
+                    variant + "'");
+      n = n.substr(0, colon);
+    }
     int count = 0;
     try {
       std::size_t used = 0;
@@ -28,7 +41,6 @@ Scene build_or_load(const std::string& spec, float detail, const std::string& sc
       throw Error("scene spec '" + spec + "': N must be between 1 and 64");
     if (!(detail > 0.0f) || !std::isfinite(detail) || detail > 1000.0f)
       throw Error("--detail must be a number in (0, 1000]");
-    RoomsOptions o;
     o.n = count;
     o.detail = detail;
     return make_rooms(o);

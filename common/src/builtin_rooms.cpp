@@ -55,6 +55,11 @@ constexpr float kLightHalfSize = 0.6f;
 constexpr float kLightThickness = 0.03f;
 constexpr float kLightGap = 0.01f;  // between the panel and the ceiling
 constexpr float kLightStrength = 10.0f;
+constexpr float kTrimStrength = 4.0f;
+constexpr float kTrimHalfLength = 0.4f;    // emissive trim: strips along the walls, clear of the
+constexpr float kTrimHalfHeight = 0.025f;  // doorways, facing into the room
+constexpr float kTrimY = 0.3f;
+constexpr float kTrimGap = 0.01f;        // off the wall
 constexpr float kWallGap = 0.02f;        // furniture against a wall
 constexpr float kTableWallGap = 0.25f;   // free-standing furniture to the walls
 constexpr float kFurnitureClear = 0.1f;  // between pieces of furniture
@@ -69,6 +74,7 @@ enum MaterialId : std::uint32_t {
   kFabricRedMat,
   kHousingMat,
   kLightMat,
+  kTrimMat,
 };
 
 std::vector<Material> make_materials() {
@@ -90,6 +96,10 @@ std::vector<Material> make_materials() {
   light.emissive = glm::vec3(1.0f);
   light.emissive_strength = kLightStrength;
   mats.push_back(light);
+  Material trim = lambert("trim", {0.80f, 0.80f, 0.80f});
+  trim.emissive = glm::vec3(1.0f, 0.85f, 0.6f);
+  trim.emissive_strength = kTrimStrength;
+  mats.push_back(trim);
   return mats;
 }
 
@@ -416,6 +426,32 @@ Mesh light_panel(float detail) {
   return mesh;
 }
 
+// The emissive trim of a room: on each wall two strips (one quad each, emitting into the room),
+// centred 0.8 m from the corners, clear of the doorway in the wall's middle.
+Mesh trim_strips() {
+  Mesh mesh;
+  const glm::vec3 up(0.0f, 1.0f, 0.0f);
+  auto strip = [&](glm::vec3 c, glm::vec3 n) {
+    const glm::vec3 t = glm::cross(up, n);  // t x up = n: counter-clockwise seen from n
+    const glm::vec3 a = t * kTrimHalfLength, b = up * kTrimHalfHeight;
+    const auto first = static_cast<std::uint32_t>(mesh.positions.size());
+    mesh.positions.insert(mesh.positions.end(), {c - a - b, c + a - b, c + a + b, c - a + b});
+    mesh.normals.insert(mesh.normals.end(), {n, n, n, n});
+    mesh.uv0.insert(mesh.uv0.end(), {{0, 0}, {1, 0}, {1, 1}, {0, 1}});
+    mesh.triangles.push_back({first, first + 1, first + 2});
+    mesh.triangles.push_back({first, first + 2, first + 3});
+    mesh.triangle_material.insert(mesh.triangle_material.end(), {kTrimMat, kTrimMat});
+  };
+  const float lo = kInLo + kTrimGap, hi = kInHi - kTrimGap;
+  for (float along : {kInLo + 0.8f, kInHi - 0.8f}) {
+    strip({lo, kTrimY, along}, {1.0f, 0.0f, 0.0f});
+    strip({hi, kTrimY, along}, {-1.0f, 0.0f, 0.0f});
+    strip({along, kTrimY, lo}, {0.0f, 0.0f, 1.0f});
+    strip({along, kTrimY, hi}, {0.0f, 0.0f, -1.0f});
+  }
+  return mesh;
+}
+
 glm::mat4 translation(glm::vec3 t) {
   return glm::translate(glm::mat4(1.0f), t);
 }
@@ -445,7 +481,8 @@ Scene make_rooms(const RoomsOptions& options) {
   scene.name = "rooms:" + std::to_string(n);
   scene.materials = make_materials();
   auto lit = [&](int i, int j) {
-    return n == 1 || (static_cast<std::uint32_t>(i + j) + options.seed % 2u) % 2u == 0u;
+    return n == 1 || options.every_room_lit || options.trim ||
+           (static_cast<std::uint32_t>(i + j) + options.seed % 2u) % 2u == 0u;
   };
 
   Node building;
@@ -476,6 +513,7 @@ Scene make_rooms(const RoomsOptions& options) {
       if (lit(i, j))
         add_mesh_node(scene, "light_" + id, node,
                       translation({kCentre, kHeight - kLightGap, kCentre}), light_panel(detail));
+      if (options.trim) add_mesh_node(scene, "trim_" + id, node, glm::mat4(1.0f), trim_strips());
     }
   }
 

@@ -153,6 +153,9 @@ LightSampler::LightSampler(const World& world) : world_(&world) {
     pick_pdf_[i] = static_cast<float>(power[i] / total);
   }
   if (!cdf_.empty()) cdf_.back() = 1.0f;
+  // Past the per-texel list's size, lights are picked by where they are (light_tree.h).
+  if (triangles_.size() > static_cast<std::size_t>(kMaxFront))
+    tree_ = LightTree(triangles_, pick_pdf_);
   record_.assign(triangles_.size() * kRecRows * 4, 0.0f);
   for (std::size_t k = 0; k < triangles_.size(); ++k) {
     const EmissiveTriangle& e = triangles_[k];
@@ -261,6 +264,19 @@ glm::vec3 LightSampler::triangle_irradiance(const RayScene& rays, std::size_t in
   return triangle_emitted(s);
 }
 
+bool LightSampler::pick(glm::vec3 p, glm::vec3 n, float u, std::size_t& index, float& pdf) const {
+  if (triangles_.empty()) return false;
+  if (!tree_.empty()) {
+    std::uint32_t i;
+    if (!tree_.sample(p, n, u, i, pdf)) return false;
+    index = i;
+    return true;
+  }
+  index = pick_triangle(u);
+  pdf = pick_pdf_[index];
+  return true;
+}
+
 std::size_t LightSampler::pick_triangle(float u) const {
   return std::min<std::size_t>(upper_index(cdf_.data(), cdf_.size(), u), triangles_.size() - 1);
 }
@@ -302,8 +318,7 @@ inline bool LightSampler::draw_direct(const RayScene& rays, const FrontLights* f
     pdf = pick_pdf_[li] / front->total;
     if (!point_sample(rays, li, p, n, ng, glm::vec2(u.y, u.z), s)) return false;
   } else {
-    li = pick_triangle(u.x);
-    pdf = pick_pdf_[li];
+    if (!pick(p, n, u.x, li, pdf)) return false;
     if (!triangle_sample(rays, li, p, n, ng, glm::vec2(u.y, u.z), s)) return false;
   }
   weight = triangle_emitted(s) / pdf;
@@ -440,9 +455,10 @@ void LightSampler::sample_lanes(const RayScene& rays, glm::vec3 p, glm::vec3 n, 
 
 glm::vec3 LightSampler::area_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n,
                                         glm::vec3 ng, glm::vec3 u) const {
-  if (triangles_.empty()) return glm::vec3(0.0f);
-  std::size_t i = pick_triangle(u.x);
-  return triangle_irradiance(rays, i, p, n, ng, glm::vec2(u.y, u.z)) / pick_pdf_[i];
+  std::size_t i;
+  float pdf;
+  if (!pick(p, n, u.x, i, pdf)) return glm::vec3(0.0f);
+  return triangle_irradiance(rays, i, p, n, ng, glm::vec2(u.y, u.z)) / pdf;
 }
 
 bool LightSampler::punctual_sample(const RayScene& rays, const WorldLight& l, glm::vec3 p,

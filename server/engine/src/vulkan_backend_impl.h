@@ -64,6 +64,7 @@ enum Flags : std::uint32_t {
   kFlagSky = 32,         // the scene has a sky (Sky::enabled)
   kFlagSkyMap = 64,      // ... a map with its sampling tables (SkyDistribution::valid)
   kFlagProbeMean = 128,  // the gather folds its estimates into the running means
+  kFlagLightTree = 256,  // area lights are picked by the light hierarchy (LightSampler::pick)
 };
 
 // shaders/common.glsl's push constant block (std430 offsets).

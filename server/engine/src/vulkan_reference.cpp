@@ -30,6 +30,7 @@ std::vector<glm::dvec3> VulkanBackend::Impl::paths(std::size_t items, int sample
   pc.punctual_count = punctual_count;
   pc.emissive_count = emissive_count;
   if (emissive_count > 0) pc.flags |= kFlagArea;
+  if (!lights->tree().empty()) pc.flags |= kFlagLightTree;
   pc.flags |= sky_flags;
   if (camera) pc.flags |= kFlagCamera;
   const int batch = 16;

@@ -59,6 +59,14 @@ void VulkanBackend::Impl::upload_scene() {
     em.emplace_back(o.uv(set, e.triangle, 0.0f, 0.0f), o.uv(set, e.triangle, 1.0f, 0.0f));
     em.emplace_back(o.uv(set, e.triangle, 0.0f, 1.0f), glm::vec2(0.0f));
   }
+  // The light hierarchy's nodes after the triangles (lights.glsl's tree_node).
+  for (const LightTree::Node& nd : lights->tree().nodes()) {
+    const std::uint32_t flags = (nd.leaf ? 1u : 0u) | (nd.two_sided ? 2u : 0u);
+    em.emplace_back(nd.lo, nd.phi);
+    em.emplace_back(nd.hi, nd.cos_o);
+    em.emplace_back(nd.w, as_float(flags));
+    em.emplace_back(as_float(nd.index), 0.0f, 0.0f, 0.0f);
+  }
   write(kEmissive, em);
   emissive_count = static_cast<std::uint32_t>(tris.size());
 
@@ -269,6 +277,7 @@ PushConstants VulkanBackend::Impl::constants(const PassInput& in) const {
   }
   pc.probe_res = in.probes.resolution;
   if (emissive_count > 0) pc.flags |= kFlagArea;
+  if (!lights->tree().empty()) pc.flags |= kFlagLightTree;
   pc.flags |= sky_flags;
   if (in.params.unbiased()) pc.flags |= kFlagUnbiased;
   if (in.params.distant_point == DistantPoint::FixedDistance) pc.flags |= kFlagFixed;

@@ -1,6 +1,7 @@
 // Built-in scenes and the scene spec parser shared by every tool:
 //   "cornell"            the Cornell box (published measurements, ceiling light, standard camera)
-//   "rooms:N"            a procedural N x N building of rooms (see RoomsOptions)
+//   "rooms:N"            a procedural N x N building of rooms (see RoomsOptions); "rooms:N:lit"
+//                        lights every room, "rooms:N:trim" adds emissive trim (many lights)
 //   "sponza"             the Dabrovic Sponza of the shared sample data, with a sky and a sun
 //   anything else        a glTF 2.0 file (.gltf / .glb)
 #pragma once
@@ -19,10 +20,13 @@ struct RoomsOptions {
   float detail = 1.0f;     // tessellation knob: triangle count grows ~ detail^2 (thousands at 1,
                            // millions at ~30)
   std::uint32_t seed = 1;  // furniture placement and which rooms are lit
+  bool every_room_lit = false;  // every room gets its ceiling panel (scene spec rooms:N:lit)
+  bool trim = false;  // every room lit, and 8 emissive trim strips along its walls (rooms:N:trim)
 };
 // A building of N x N rooms on one floor, joined by doorways, with furniture, and an emissive
-// ceiling panel in some rooms (never all, never none when N > 1). Room (i, j) is named
-// "room_i_j"; lit rooms have a node "light_i_j". Deterministic for given options.
+// ceiling panel in some rooms (never all, never none when N > 1; all with every_room_lit or trim,
+// and trim adds 16 emissive triangles per room: rooms:12:trim has 2,592 emissive triangles). Room
+// (i, j) is named "room_i_j"; lit rooms have a node "light_i_j". Deterministic for given options.
 Scene make_rooms(const RoomsOptions& options);
 
 // The file `relative` (e.g. "dabrovic-sponza/sponza.gltf") in the shared sample data: under

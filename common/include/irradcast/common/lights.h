@@ -8,6 +8,7 @@
 
 #include <glm/glm.hpp>
 
+#include "irradcast/common/light_tree.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/sampling.h"
 #include "irradcast/common/sky.h"
@@ -46,7 +47,7 @@ class LightSampler {
   const std::vector<float>& pick_pdf() const { return pick_pdf_; }
 
   // One-sample estimate of the direct irradiance at p (unit normal n, geometric normal ng for
-  // the ray offset) from the area lights: picks a triangle by power and a uniform point on it
+  // the ray offset) from the area lights: picks a triangle (pick()) and a uniform point on it
   // (u.x picks, (u.y, u.z) place), traces a shadow ray. Unbiased; 0 when there are none.
   glm::vec3 area_irradiance(const RayScene& rays, glm::vec3 p, glm::vec3 n, glm::vec3 ng,
                             glm::vec3 u) const;
@@ -79,6 +80,12 @@ class LightSampler {
   };
   // The area light that u (in [0, 1)) picks by power.
   std::size_t pick_triangle(float u) const;
+  // The area light that u picks for the point p with normal n, and its probability: by power
+  // (pick_triangle), or with more than kMaxFront emissive triangles by the light hierarchy
+  // (light_tree.h: power, distance and orientation at p). false: none can light p.
+  bool pick(glm::vec3 p, glm::vec3 n, float u, std::size_t& index, float& pdf) const;
+  // The light hierarchy (empty with at most kMaxFront emissive triangles).
+  const LightTree& tree() const { return tree_; }
   // triangle_irradiance before its shadow ray; false: no contribution (no ray).
   bool triangle_sample(const RayScene& rays, std::size_t index, glm::vec3 p, glm::vec3 n,
                        glm::vec3 ng, glm::vec2 u, ShadowSample& s) const;
@@ -88,7 +95,8 @@ class LightSampler {
   // behind (which add exactly 0 at every point), each with its pick probability renormalised
   // over them. The same expectation as picking among all, no sample drawn in vain, and lower
   // variance. For scenes with at most kMaxFront emissive triangles (a per-texel list; with more
-  // front_lights returns false and the pass picks among all). shaders/direct.comp mirrors it.
+  // front_lights returns false and the pass picks with pick(), by the light hierarchy).
+  // shaders/direct.comp mirrors the list; with more lights it still picks by power alone.
   static constexpr int kMaxFront = 64;
   struct FrontLights {
     int count = 0;
@@ -137,6 +145,7 @@ class LightSampler {
   float total_power_ = 0.0f;
   const Sky* sky_ = nullptr;  // the world's scene's sky when enabled
   SkyDistribution sky_dist_;
+  LightTree tree_;
 };
 
 }  // namespace irradcast
