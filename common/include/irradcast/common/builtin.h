@@ -25,7 +25,7 @@ struct RoomsOptions {
 };
 // A building of N x N rooms on one floor, joined by doorways, with furniture, and an emissive
 // ceiling panel in some rooms (never all, never none when N > 1; all with every_room_lit or trim,
-// and trim adds 16 emissive triangles per room: rooms:12:trim has 2,592 emissive triangles). Room
+// and trim adds 16 emissive triangles per room: rooms:12:trim has 3,456 emissive triangles). Room
 // (i, j) is named "room_i_j"; lit rooms have a node "light_i_j". Deterministic for given options.
 Scene make_rooms(const RoomsOptions& options);
 
