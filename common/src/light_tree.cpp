@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -96,7 +97,7 @@ float split_cost(const Node& b, glm::vec3 diagonal, int dim) {
 }
 
 constexpr int kBuckets = 12;
-constexpr int kMaxDepth = 60;  // trails are 64 bits; past this depth splits are by count
+constexpr int kTrailBits = 64;
 
 }  // namespace
 
@@ -150,6 +151,7 @@ LightTree::LightTree(const std::vector<EmissiveTriangle>& triangles,
     if (l.phi > 0.0f) lights.push_back(static_cast<std::uint32_t>(i));
   }
   if (lights.empty()) return;
+  max_depth_ = std::max(0, kTrailBits - 1 - static_cast<int>(std::bit_width(lights.size())));
   nodes_.reserve(2 * lights.size());
   build(lights, 0, lights.size(), 0, leaves);
   // Each triangle's trail, from a walk over the finished tree.
@@ -197,7 +199,9 @@ std::uint32_t LightTree::build(std::vector<std::uint32_t>& lights, std::size_t b
     const int b = static_cast<int>(kBuckets * ((c - clo[dim]) / (chi[dim] - clo[dim])));
     return std::clamp(b, 0, kBuckets - 1);
   };
-  if (depth < kMaxDepth)
+  // Trails are 64 bits: past max_depth_ the splits halve by count, which ends every branch
+  // within the bits left.
+  if (depth < max_depth_)
     for (int dim = 0; dim < 3; ++dim) {
       if (!(chi[dim] > clo[dim])) continue;
       std::array<Node, kBuckets> bucket{};

@@ -51,6 +51,7 @@ class LightTree {
   std::uint32_t build(std::vector<std::uint32_t>& lights, std::size_t begin, std::size_t end,
                       int depth, const std::vector<Node>& leaves);
   std::vector<Node> nodes_;
+  int max_depth_ = 0;                 // the deepest level split by cost
   std::vector<std::uint64_t> trail_;  // per triangle: its path from the root (bit d: second
                                       // child at depth d); ~0 for a triangle left out
 };
