@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 #include <nats/nats.h>
 
+#include <unistd.h>
 #include <cstdlib>
 #include <fstream>
 #include <optional>
@@ -41,8 +42,12 @@ std::unique_ptr<test::NatsProcess> secured_nats() {
   return std::make_unique<test::NatsProcess>(IRRADCAST_NATS_CONF);
 }
 
+// The file is the test's own: ctest runs tests side by side, and another test writing a wrong
+// password to a shared name refused this one's origin.
 NatsCredentials user(const std::string& name, const std::string& password) {
-  const fs::path f = fs::path(::testing::TempDir()) / ("nats_password_" + name);
+  const std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+  const fs::path f = fs::path(::testing::TempDir()) /
+                     ("nats_password_" + test + "_" + std::to_string(::getpid()) + "_" + name);
   std::ofstream(f) << password << "\n";
   NatsCredentials c;
   c.user = name;
