@@ -77,9 +77,13 @@ struct Lit {
     volume = std::make_unique<IrradianceVolumeBuilder>(setup.world, setup.rays, setup.atlas, vo);
     for (int r = 0; r < refines; ++r) volume->refine(maps);
   }
-  DynamicView view() const { return {&dynamic, &volume->volume()}; }
-  ImageRGB compose(const CameraPose& cam, int w, int h) const {
-    const DynamicView v = view();
+  // As irradcast-view draws them (tracing the emitters' direct light), or with
+  // `trace_emitters` false as the browser page does (the volume's emitters' part instead).
+  DynamicView view(bool trace_emitters = true) const {
+    return {&dynamic, &volume->volume(), trace_emitters ? &setup.lights : nullptr};
+  }
+  ImageRGB compose(const CameraPose& cam, int w, int h, bool trace_emitters = true) const {
+    const DynamicView v = view(trace_emitters);
     return irradcast::compose(setup.world, setup.rays, setup.atlas, maps, cam, w, h, nullptr, &v);
   }
   EngineParams params;
@@ -96,12 +100,13 @@ struct Against {
   double mean_ratio = 0.0;
   std::size_t pixels = 0;
 };
-Against against_path_tracer(const Lit& lit, const CameraPose& cam, int w, int h, int spp) {
+Against against_path_tracer(const Lit& lit, const CameraPose& cam, int w, int h, int spp,
+                            bool trace_emitters = true) {
   const std::vector<DynamicPixel> px =
       pixels_of(lit.setup.world, lit.setup.rays, lit.view(), cam, w, h);
   std::vector<std::uint8_t> mask(static_cast<std::size_t>(w) * static_cast<std::size_t>(h), 0);
   for (const DynamicPixel& p : px) mask[p.index] = 1;
-  const ImageRGB view = lit.compose(cam, w, h);
+  const ImageRGB view = lit.compose(cam, w, h, trace_emitters);
   PathTracerOptions po{lit.params.indirect_bounces + 1, true, 5};
   po.camera_only = &lit.dynamic;
   const ImageRGB ref = PathTracer(lit.setup.world, lit.setup.rays, lit.setup.lights, po)
@@ -208,16 +213,18 @@ TEST(DynamicView, DrawnInFrontHiddenBehindAndNothingElseChanges) {
 }
 
 // Part 5: the sphere at three places in the Cornell box, and a textured one, against the path
-// tracer over the sphere's pixels: relative MSE <= 0.02 and the mean within 5 %; on the floor
-// against the red wall (1 cm from the floor, 3 mm from the wall) the volume reads 7 % dark
-// (a known bias of the interpolation between two surfaces: docs/DYNAMIC.md), held at 10 %.
+// tracer over the sphere's pixels: relative MSE <= 0.02 and the mean within 5 %, as irradcast-view
+// draws them (the emitters' direct light traced). As the browser page draws them, from the volume
+// alone, the sphere on the floor against the red wall (1 cm from the floor, 3 mm from the wall)
+// reads 7 % dark (the probes see the light and the wall over a wide view: docs/DYNAMIC.md), held
+// at 10 %, the others at 5 %.
 TEST(DynamicView, CornellSphereAgainstThePathTracer) {
   constexpr int kW = 96, kH = 96;
   struct Case {
     glm::vec3 at;
     bool textured;
     const char* what;
-    double mean_bound;
+    double page_bound;
   };
   const Case cases[] = {{{0.20f, 0.30f, 0.15f}, false, "above the short block", 0.05},
                         {{0.47f, 0.09f, 0.15f}, false, "on the floor by the red wall", 0.10},
@@ -227,12 +234,17 @@ TEST(DynamicView, CornellSphereAgainstThePathTracer) {
     const Lit lit(with_ball(make_cornell_box(), c.at, 0.08f, c.textured), 48.0f, 12);
     const CameraPose cam = default_camera(lit.setup.scene, lit.setup.world);
     const Against a = against_path_tracer(lit, cam, kW, kH, 512);
-    std::printf("sphere %s: %zu pixels, relative MSE %.4f, mean ratio %.4f\n", c.what, a.pixels,
-                a.rel_mse, a.mean_ratio);
+    const Against page = against_path_tracer(lit, cam, kW, kH, 512, false);
+    std::printf(
+        "sphere %s: %zu pixels, relative MSE %.4f, mean ratio %.4f (from the volume alone: %.4f, "
+        "%.4f)\n",
+        c.what, a.pixels, a.rel_mse, a.mean_ratio, page.rel_mse, page.mean_ratio);
     RecordProperty(std::string("rel_mse ") + c.what, std::to_string(a.rel_mse));
     EXPECT_GT(a.pixels, 200u) << c.what;
     EXPECT_LE(a.rel_mse, 0.02) << c.what;
-    EXPECT_NEAR(a.mean_ratio, 1.0, c.mean_bound) << c.what;
+    EXPECT_NEAR(a.mean_ratio, 1.0, 0.05) << c.what;
+    EXPECT_LE(page.rel_mse, 0.02) << c.what;
+    EXPECT_NEAR(page.mean_ratio, 1.0, c.page_bound) << c.what;
   }
 }
 

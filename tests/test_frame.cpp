@@ -229,6 +229,7 @@ std::vector<Envelope> all_messages() {
     v->set_spacing(0.5f);
     v->set_layout(std::string(40, '\x11'));
     v->set_sh(std::string(30, '\x22'));
+    v->set_emitted(std::string(30, '\x33'));
     out.push_back(e);
   }
   out.push_back(make_error(UNSUPPORTED_VERSION, "protocol version 9 is not supported"));

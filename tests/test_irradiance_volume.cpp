@@ -253,11 +253,26 @@ TEST(ProbeVolumeMessage, RoundTripAndBadMessages) {
   EXPECT_EQ(got.epoch, 3u);
   EXPECT_EQ(got.version, 8u);
   ASSERT_EQ(got.volume.probe_count(), v.probe_count());
+  // The emitters' part travels apart (the Cornell box's light), and both arrive.
+  EXPECT_FALSE(full.emitted().empty());
   for (const glm::vec3& p : {glm::vec3(0.0f), v.grid.position({1, 2, 3})})
-    for (const glm::vec3& n : kNormals) {
-      const float a = luminance(v.irradiance(p, n)), b = luminance(got.volume.irradiance(p, n));
-      EXPECT_NEAR(b, a, 0.01f * a + 1e-4f);
-    }
+    for (const glm::vec3& n : kNormals)
+      for (const bool with_emitted : {true, false}) {
+        const float a = luminance(v.irradiance(p, n, with_emitted)),
+                    b = luminance(got.volume.irradiance(p, n, with_emitted));
+        EXPECT_NEAR(b, a, 0.01f * a + 1e-4f);
+      }
+  const glm::vec3 below_light = v.grid.position(v.grid.counts / 2);
+  EXPECT_GT(luminance(got.volume.irradiance(below_light, {0, 1, 0})),
+            2.0f * luminance(got.volume.irradiance(below_light, {0, 1, 0}, false)));
+  {  // Without the field (a scene without emitters) the emitters' part is zero.
+    wire::ProbeVolume none = full;
+    none.clear_emitted();
+    wire::ReceivedVolume dark;
+    ASSERT_TRUE(wire::apply_probe_volume(none, dark));
+    EXPECT_EQ(dark.volume.irradiance(below_light, {0, 1, 0}),
+              dark.volume.irradiance(below_light, {0, 1, 0}, false));
+  }
   const wire::ReceivedVolume before = got;
   const auto refused = [&](wire::ProbeVolume m, const char* what) {
     EXPECT_THROW(wire::apply_probe_volume(m, got), Error) << what;
@@ -292,6 +307,12 @@ TEST(ProbeVolumeMessage, RoundTripAndBadMessages) {
   m = full;
   m.set_sh(z);
   refused(m, "NaN coefficients");
+  m = full;
+  m.set_emitted(z);
+  refused(m, "NaN coefficients of the emitters");
+  m = full;
+  m.set_emitted(m.emitted().substr(0, m.emitted().size() / 2));
+  refused(m, "cut SH data of the emitters");
 }
 
 // Distance moments survive binary16 at any scale: a probe grid of 1 km spacing keeps its

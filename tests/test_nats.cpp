@@ -228,6 +228,7 @@ TEST(Nats, GatewaysServeTheProbeVolumeAndThePoses) {
     for (const glm::vec3 n : {glm::vec3(0, 1, 0), glm::vec3(0, -1, 0), glm::vec3(1, 0, 0)}) {
       const glm::vec3 p(x, 0.2f, 0.3f);
       EXPECT_EQ(a.irradiance(p, n), b.irradiance(p, n)) << x;
+      EXPECT_EQ(a.irradiance(p, n, false), b.irradiance(p, n, false)) << x;
       EXPECT_GT(a.irradiance(p, n).x, 0.0f);
     }
   EXPECT_GE(gw.gateway.nats_stats().volumes_received, 1u);

@@ -27,6 +27,7 @@ void ClientScene::build_ray_scenes() {
                                        [](const WorldObject& o) { return o.dynamic; });
   dynamic_rays =
       any_dynamic ? std::make_unique<RayScene>(world, true, RaySceneContent::Dynamic) : nullptr;
+  lights = any_dynamic ? std::make_unique<LightSampler>(world) : nullptr;
 }
 
 ClientSession::ClientSession(ClientSessionOptions options, ClientSceneFactory factory)

@@ -442,7 +442,7 @@ class User : public std::enable_shared_from_this<User> {
   void render_frame() {
     const auto t0 = Clock::now();
     const ClientScene& s = core_.scene();
-    const DynamicView dynamic{s.dynamic_rays.get(), core_.probe_volume().lit()};
+    const DynamicView dynamic{s.dynamic_rays.get(), core_.probe_volume().lit(), s.lights.get()};
     const ImageRGB img = compose(s.world, *s.rays, s.unpacked.atlas, core_.tiles().lightmaps(),
                                  path_.at(run_.elapsed_s()), run_.options.width,
                                  run_.options.height, nullptr, &dynamic);

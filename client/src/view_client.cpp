@@ -348,7 +348,9 @@ void ViewClient::close() {
 }
 
 DynamicView ViewClient::dynamic_view() const {
-  return {core_.scene().dynamic_rays.get(), core_.probe_volume().lit()};
+  const ClientScene& s = core_.scene();
+  return {s.dynamic_rays.get(), core_.probe_volume().lit(),
+          options_.trace_emitters ? s.lights.get() : nullptr};
 }
 
 ImageRGB ViewClient::compose(const CameraPose& camera, int width, int height) const {

@@ -47,6 +47,7 @@ struct Options {
   std::uint64_t max_rate = 0;
   std::string name = "irradcast-view";
   std::string tonemap = "reinhard";
+  std::string dynamic_emitters = "traced";
   std::string exposure = "auto";
   std::string json;
   std::string log_level = "info";
@@ -123,6 +124,7 @@ irradcast::ViewClientOptions client_options(const Options& o) {
   vo.max_bytes_per_s = o.max_rate;
   vo.reconnect = !o.no_reconnect;
   vo.tls = tools::tls_of(o.tls);
+  vo.trace_emitters = o.dynamic_emitters == "traced";
   return vo;
 }
 
@@ -330,6 +332,11 @@ int main(int argc, char** argv) {
   app.add_option("--max-rate", o.max_rate, "byte-rate cap for tiles, bytes/s (0 = none)");
   app.add_option("--name", o.name, "client name in the server's logs");
   app.add_option("--tonemap", o.tonemap, "reinhard | aces | clamp");
+  app.add_option("--dynamic-emitters", o.dynamic_emitters,
+                 "how dynamic objects get the emissive surfaces' direct light: traced (shadow "
+                 "rays, the default) | volume (from the probe volume, as the browser page does; "
+                 "docs/DYNAMIC.md)")
+      ->check(CLI::IsMember({"traced", "volume"}));
   app.add_option("--exposure", o.exposure, "auto (key 0.18) or exposure in stops");
   app.add_option("--json", o.json, "also write a JSON report here");
   app.add_flag("--no-reconnect", o.no_reconnect,

@@ -38,6 +38,7 @@ void IrradianceVolume::reset(const VolumeGrid& g) {
   offsets.assign(n, glm::vec3(0.0f));
   active.assign(n, 1);
   sh.assign(n, ShIrradiance{});
+  emitted.assign(n, ShIrradiance{});
   const float far = g.max_distance();
   depth.assign(n * kDepthTexels, glm::vec2(far, far * far));
 }
@@ -54,7 +55,7 @@ glm::vec2 IrradianceVolume::moments(std::size_t probe, glm::vec3 d) const {
                   glm::mix(at(a.x, b.y), at(b.x, b.y), t.x), t.y);
 }
 
-glm::vec3 IrradianceVolume::irradiance(glm::vec3 p, glm::vec3 n) const {
+glm::vec3 IrradianceVolume::irradiance(glm::vec3 p, glm::vec3 n, bool with_emitted) const {
   if (grid.probe_count() == 0) return glm::vec3(0.0f);
   // A little off the surface, so that the visibility test does not see the surface itself.
   const glm::vec3 q = p + n * (0.05f * grid.spacing);
@@ -96,7 +97,14 @@ glm::vec3 IrradianceVolume::irradiance(glm::vec3 p, glm::vec3 n) const {
     // Weights crushed near zero, so that a wall's far side contributes next to nothing.
     if (w < 0.2f) w *= w * w / (0.2f * 0.2f);
     w = std::max(w, 1e-6f) * trilinear;
-    sum += w * sh_irradiance(sh[i], n);
+    if (with_emitted) {
+      ShIrradiance all = sh[i];
+      for (int k = 0; k < kShCoefficients; ++k)
+        all[static_cast<std::size_t>(k)] += emitted[i][static_cast<std::size_t>(k)];
+      sum += w * sh_irradiance(all, n);
+    } else {
+      sum += w * sh_irradiance(sh[i], n);
+    }
     weights += w;
   }
   return weights > 0.0f ? sum / weights : glm::vec3(0.0f);

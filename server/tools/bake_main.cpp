@@ -321,7 +321,8 @@ json write_lightmaps(Bake& b, const PreparedScene& p, const std::vector<Lightmap
 struct DynamicObjects {
   std::unique_ptr<RayScene> rays;
   std::unique_ptr<IrradianceVolumeBuilder> volume;
-  DynamicView view() const { return {rays.get(), volume ? &volume->volume() : nullptr}; }
+  const LightSampler* lights = nullptr;
+  DynamicView view() const { return {rays.get(), volume ? &volume->volume() : nullptr, lights}; }
 };
 
 DynamicObjects light_dynamic_objects(Bake& b, const PreparedScene& p,
@@ -332,6 +333,7 @@ DynamicObjects light_dynamic_objects(Bake& b, const PreparedScene& p,
                    [](const WorldObject& o) { return o.dynamic; }))
     return d;
   d.rays = std::make_unique<RayScene>(w, true, RaySceneContent::Dynamic);
+  d.lights = &p.lights();
   const IrradianceVolumeOptions vo;
   d.volume = std::make_unique<IrradianceVolumeBuilder>(w, p.rays(), p.atlas(), vo);
   for (int i = 0; i < vo.max_history; ++i) d.volume->refine(maps);
@@ -398,11 +400,10 @@ void compare_with_reference(Bake& b, const ImageRGB& view, const ImageRGB& ref,
     }
   write_png_tonemapped((fs::path(o.out) / "view_vs_reference.png").string(), pair, ref_tm);
   ImageError err = compare(view, ref);
-  b.report["error"] = {
-      {"rmse", err.rmse},
-      {"rel_mse", err.rel_mse},
-      {"mean_ratio", err.mean_ratio},
-      {"reference_spp", o.reference_spp}};
+  b.report["error"] = {{"rmse", err.rmse},
+                       {"rel_mse", err.rel_mse},
+                       {"mean_ratio", err.mean_ratio},
+                       {"reference_spp", o.reference_spp}};
   log::info("bake", "view vs reference: RMSE " + std::to_string(err.rmse) + ", relative MSE " +
                         std::to_string(err.rel_mse) + ", mean ratio " +
                         std::to_string(err.mean_ratio));

@@ -12,7 +12,7 @@ import { createRequire } from 'node:module';
 import { decodeTile, packRgb9e5, unpackRgb9e5, TILE_RGB9E5_ZSTD, TILE_HALF_ZSTD, TILE_RGB9E5_DELTA_ZSTD }
   from '../../web/src/codec.js';
 import { sha256 } from '../../web/src/sha256.js';
-import { applyProbeVolume, halfToFloat } from '../../web/src/volume.js';
+import { applyProbeVolume, floatToHalf, halfToFloat } from '../../web/src/volume.js';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const require = createRequire(path.join(here, '..', '..', 'web', 'package.json'));
@@ -133,6 +133,13 @@ assert.throws(() => page.decode(new Uint8Array([0xff, 0xff, 0xff, 0xff])), /prot
   assert.equal(later.version, 8);
   assert.equal(later.offsets, v.offsets);
   assert.equal(applyProbeVolume({ ...msg, epoch: 4, layout: new Uint8Array(0) }, v), v);
+  // The emitters' part is added to the rest (exact here: sums that binary16 holds).
+  const emitted = new Uint8Array(probes * 27 * 2);
+  for (let i = 0; i < probes * 27; ++i) put(emitted, 2 * i, 0.5);
+  const lit = applyProbeVolume({ ...msg, emitted: zstdRaw(emitted) }, null);
+  assert.equal(halfToFloat(lit.sh[5]), 1.5 + 5 / 64);
+  for (const x of [0, 1, -2.5, 1 / 3, 6e-5, 3e-8, 65504, 1e9])
+    assert.ok(Math.abs(halfToFloat(floatToHalf(x)) - Math.min(x, 65504)) <= Math.abs(x) * 1e-3 + 6e-8, `half of ${x}`);
   const nan = new Uint8Array(sh); nan[1] = 0x7e;
   const refused = [
     [{ ...msg, sh: zstdRaw(nan) }, /not finite/],
@@ -141,6 +148,8 @@ assert.throws(() => page.decode(new Uint8Array([0xff, 0xff, 0xff, 0xff])), /prot
     [{ ...msg, counts: [65536, 2, 1] }, /more than 65536/],
     [{ ...msg, spacing: NaN }, /not finite/],
     [{ ...msg, origin: [0, 0] }, /3 origin/],
+    [{ ...msg, emitted: zstdRaw(nan) }, /emitters' SH data holds a value that is not finite/],
+    [{ ...msg, emitted: zstdRaw(emitted.subarray(0, 10)) }, /holds 10 bytes/],
   ];
   for (const [m, why] of refused) assert.throws(() => applyProbeVolume(m, v), why);
 }

@@ -95,13 +95,14 @@ export function run(exe, args, timeoutMs = 120000) {
 }
 
 // irradcast-view's converged PNG (the engine idle: --converge-at far below any reachable value).
-export async function viewPng(o, server, { width, height, camera, tonemap, exposure }, name) {
+export async function viewPng(o, server, { width, height, camera, tonemap, exposure, extra }, name) {
   const out = path.join(tmp, `${name}.png`);
   const args = ['--connect', `127.0.0.1:${server.port}`, '--width', String(width), '--height', String(height),
     '--until-converged', '--converge-at', '1e-9', '--timeout', '60', '--cache-dir', 'none', '--out', out];
   if (camera) args.push('--camera', camera);
   if (tonemap) args.push('--tonemap', tonemap);
   if (exposure !== undefined) args.push('--exposure', String(exposure));
+  if (extra) args.push(...extra);
   await run(o.view, args);
   return out;
 }

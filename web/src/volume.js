@@ -26,6 +26,19 @@ function halves(bytes, count, what) {
   return out;
 }
 
+// The nearest binary16 of x (rounding half up), clamped to +-65504; NaN gives 0.
+const f32 = new Float32Array(1), u32 = new Uint32Array(f32.buffer);
+export function floatToHalf(x) {
+  f32[0] = Number.isNaN(x) ? 0 : Math.max(-65504, Math.min(65504, x));
+  const u = u32[0], s = (u >>> 16) & 0x8000, e = ((u >>> 23) & 255) - 112, m = u & 0x7fffff;
+  if (e <= 0) {  // a subnormal half, or zero
+    if (e < -10) return s;
+    const full = m | 0x800000, shift = 14 - e;
+    return s | ((full >> shift) + ((full >> (shift - 1)) & 1));
+  }
+  return (s | (e << 10) | (m >> 13)) + ((m >> 12) & 1);
+}
+
 export function halfToFloat(h) {
   const s = h & 0x8000 ? -1 : 1, e = (h >> 10) & 31, m = h & 1023;
   return s * (e === 0 ? m * 2 ** -24 : (1 + m / 1024) * 2 ** (e - 15));
@@ -51,6 +64,12 @@ export function applyProbeVolume(m, held) {
     if (Math.abs(m.origin[a]) + (m.counts[a] + 2) * spacing > 1e18) throw new Error('probe volume: the grid reaches past 1e18 from the origin');
   if (!layout && held.probes !== probes) throw new Error("probe volume: the grid differs from its epoch's layout");
   const sh = halves(inflate(m.sh, probes * SH_HALVES * 2), probes * SH_HALVES, 'the SH data');
+  // The light seen straight from emitters comes apart (irradcast-view traces it itself); the page
+  // cannot trace the static scene, so it adds it to the rest.
+  if (m.emitted && m.emitted.length > 0) {
+    const em = halves(inflate(m.emitted, probes * SH_HALVES * 2), probes * SH_HALVES, "the emitters' SH data");
+    for (let i = 0; i < sh.length; ++i) sh[i] = floatToHalf(halfToFloat(sh[i]) + halfToFloat(em[i]));
+  }
   const next = layout ? {} : { ...held };
   if (layout) {
     const raw = inflate(m.layout, probes * LAYOUT_BYTES);

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include <glm/gtc/packing.hpp>
 
@@ -57,6 +58,28 @@ std::string decompress(const std::string& z, std::size_t expected, const char* w
   return raw;
 }
 
+std::string encode_sh(const std::vector<ShIrradiance>& sh) {
+  std::string raw;
+  raw.reserve(sh.size() * kShBytesPerProbe);
+  for (const ShIrradiance& e : sh)
+    for (const glm::vec3& c : e)
+      for (int a = 0; a < 3; ++a) put_half(raw, c[a]);
+  return compress(raw);
+}
+
+// Empty z: all zero, where `may_be_empty`.
+std::vector<ShIrradiance> decode_sh(const std::string& z, std::size_t probes, const char* what,
+                                    bool may_be_empty) {
+  std::vector<ShIrradiance> out(probes);
+  if (z.empty() && may_be_empty) return out;
+  const std::string raw = decompress(z, probes * kShBytesPerProbe, what);
+  std::size_t at = 0;
+  for (ShIrradiance& e : out)
+    for (glm::vec3& c : e)
+      for (int a = 0; a < 3; ++a) c[a] = get_half(raw, at);
+  return out;
+}
+
 }  // namespace
 
 std::string encode_probe_layout(const IrradianceVolume& v) {
@@ -94,12 +117,11 @@ ProbeVolume probe_volume_to_proto(const IrradianceVolume& v, std::uint64_t epoch
   }
   m.set_spacing(v.grid.spacing);
   m.set_layout(layout);
-  std::string raw;
-  raw.reserve(v.probe_count() * kShBytesPerProbe);
-  for (const ShIrradiance& e : v.sh)
-    for (const glm::vec3& c : e)
-      for (int a = 0; a < 3; ++a) put_half(raw, c[a]);
-  m.set_sh(compress(raw));
+  m.set_sh(encode_sh(v.sh));
+  const bool any_emitted = std::any_of(v.emitted.begin(), v.emitted.end(), [](const auto& e) {
+    return std::any_of(e.begin(), e.end(), [](glm::vec3 c) { return c != glm::vec3(0.0f); });
+  });
+  if (any_emitted) m.set_emitted(encode_sh(v.emitted));
   return m;
 }
 
@@ -132,7 +154,8 @@ bool apply_probe_volume(const ProbeVolume& m, ReceivedVolume& into) {
       throw irradcast::Error("probe volume: the grid reaches past 1e18 from the origin");
   if (!layout && g.probe_count() != into.volume.probe_count())
     throw irradcast::Error("probe volume: the grid differs from its epoch's layout");
-  const std::string sh = decompress(m.sh(), probes * kShBytesPerProbe, "SH data");
+  std::vector<ShIrradiance> coefficients = decode_sh(m.sh(), probes, "SH data", false);
+  std::vector<ShIrradiance> emitted = decode_sh(m.emitted(), probes, "emitters' SH data", true);
   IrradianceVolume next;
   if (layout) {
     const std::string raw = decompress(m.layout(), probes * kLayoutBytesPerProbe, "layout");
@@ -150,13 +173,9 @@ bool apply_probe_volume(const ProbeVolume& m, ReceivedVolume& into) {
       d *= glm::vec2(far, far * far);
     }
   }
-  std::vector<ShIrradiance> coefficients(probes);
-  std::size_t at = 0;
-  for (ShIrradiance& e : coefficients)
-    for (glm::vec3& c : e)
-      for (int a = 0; a < 3; ++a) c[a] = get_half(sh, at);
   if (layout) into.volume = std::move(next);
   into.volume.sh = std::move(coefficients);
+  into.volume.emitted = std::move(emitted);
   into.epoch = m.epoch();
   into.version = m.version();
   into.has_sh = true;

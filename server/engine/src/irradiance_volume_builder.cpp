@@ -1,6 +1,6 @@
 // The irradiance volume's probes: placement (out of geometry, distance moments) and refinement
-// from the lightmaps (SH L2 of the radiance around each probe; the punctual lights' direct light
-// is left to the viewers, who trace it: dynamic_view.h).
+// from the lightmaps (SH L2 of the radiance around each probe, the emitters' apart; the punctual
+// lights' direct light is left to the viewers, who trace it: dynamic_view.h).
 #include "irradcast/engine/irradiance_volume_builder.h"
 
 #include <algorithm>
@@ -189,38 +189,43 @@ void IrradianceVolumeBuilder::refine(const std::vector<Lightmap>& lightmaps) {
     dirs[static_cast<std::size_t>(k)] = glm::normalize(rotation * fibonacci(k, n));
     basis[static_cast<std::size_t>(k)] = sh_basis(dirs[static_cast<std::size_t>(k)]);
   }
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, volume_.probe_count(), 16),
-      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i < r.end(); ++i) {
-          if (!volume_.active[i]) continue;
-          const glm::vec3 p = volume_.probe_position(i);
-          ShIrradiance radiance{};
-          for (int k = 0; k < n; ++k) {
-            Ray ray;
-            ray.origin = p;
-            ray.direction = dirs[static_cast<std::size_t>(k)];
-            const Hit h = rays_.intersect(ray);
-            glm::vec3 l(0.0f);
-            if (h.valid()) {
-              const HitShade s = shader.shade(ray.direction, h);
-              l = s.diffuse + s.emission;
-            } else if (sky) {
-              l = sky->radiance(ray.direction);
-            }
-            const auto& y = basis[static_cast<std::size_t>(k)];
-            for (int c = 0; c < kShCoefficients; ++c)
-              radiance[static_cast<std::size_t>(c)] +=
-                  (weight * y[static_cast<std::size_t>(c)]) * l;
-          }
-          ShIrradiance& e = volume_.sh[i];
-          for (int c = 0; c < kShCoefficients; ++c) {
-            const int band = c == 0 ? 0 : c < 4 ? 1 : 2;
-            const glm::vec3 estimate = kShCosineBand[band] * radiance[static_cast<std::size_t>(c)];
-            e[static_cast<std::size_t>(c)] += blend * (estimate - e[static_cast<std::size_t>(c)]);
-          }
-        }
-      });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, volume_.probe_count(), 16),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                        if (!volume_.active[i]) continue;
+                        const glm::vec3 p = volume_.probe_position(i);
+                        ShIrradiance radiance{}, emission{};
+                        for (int k = 0; k < n; ++k) {
+                          Ray ray;
+                          ray.origin = p;
+                          ray.direction = dirs[static_cast<std::size_t>(k)];
+                          const Hit h = rays_.intersect(ray);
+                          glm::vec3 l(0.0f), e(0.0f);
+                          if (h.valid()) {
+                            const HitShade s = shader.shade(ray.direction, h);
+                            l = s.diffuse;
+                            e = s.emission;
+                          } else if (sky) {
+                            l = sky->radiance(ray.direction);
+                          }
+                          const auto& y = basis[static_cast<std::size_t>(k)];
+                          for (int c = 0; c < kShCoefficients; ++c) {
+                            radiance[static_cast<std::size_t>(c)] +=
+                                (weight * y[static_cast<std::size_t>(c)]) * l;
+                            emission[static_cast<std::size_t>(c)] +=
+                                (weight * y[static_cast<std::size_t>(c)]) * e;
+                          }
+                        }
+                        for (int c = 0; c < kShCoefficients; ++c) {
+                          const int band = c == 0 ? 0 : c < 4 ? 1 : 2;
+                          const auto k = static_cast<std::size_t>(c);
+                          volume_.sh[i][k] +=
+                              blend * (kShCosineBand[band] * radiance[k] - volume_.sh[i][k]);
+                          volume_.emitted[i][k] +=
+                              blend * (kShCosineBand[band] * emission[k] - volume_.emitted[i][k]);
+                        }
+                      }
+                    });
   ++rounds_;
 }
 

@@ -669,7 +669,7 @@ bool EngineHost::refine_probe_volume(const std::vector<Lightmap>& maps) {
     std::vector<float> level(v.probe_count());
     double moved = 0.0, total = 0.0;
     for (std::size_t i = 0; i < level.size(); ++i) {
-      level[i] = luminance(v.sh[i][0]);
+      level[i] = luminance(v.sh[i][0] + v.emitted[i][0]);
       if (i < impl_->volume_published.size())
         moved += std::fabs(level[i] - impl_->volume_published[i]);
       total += std::fabs(level[i]);

@@ -25,6 +25,7 @@
 #include "irradcast.pb.h"
 #include "irradcast/client/tile_cache.h"
 #include "irradcast/common/error.h"
+#include "irradcast/common/lights.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/scene_edit.h"
 #include "irradcast/common/world.h"
@@ -41,8 +42,11 @@ struct ClientScene {
   std::unique_ptr<RayScene> rays;  // null when the client does not compose frames
   // The dynamic objects' own ray scene (dynamic_view.h); null without dynamic objects or rays.
   std::unique_ptr<RayScene> dynamic_rays;
+  // The static scene's emitters, whose direct light the viewer traces onto dynamic objects;
+  // null with `dynamic_rays`.
+  std::unique_ptr<LightSampler> lights;
 
-  // Builds `rays` and, when the world has dynamic objects, `dynamic_rays`.
+  // Builds `rays` and, when the world has dynamic objects, `dynamic_rays` and `lights`.
   void build_ray_scenes();
 };
 

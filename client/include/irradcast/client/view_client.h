@@ -56,6 +56,9 @@ struct ViewClientOptions {
   BackoffPolicy backoff;           // delays between connection attempts
   std::uint64_t backoff_seed = 0;  // jitter; 0 = a random seed per client
   ClientTls tls;                   // plain TCP unless enabled
+  // Dynamic objects get the emitters' direct light traced (shadow rays, dynamic_view.h); false:
+  // from the probe volume, as the browser page does (--dynamic-emitters volume).
+  bool trace_emitters = true;
 };
 
 struct ViewClientCounters {

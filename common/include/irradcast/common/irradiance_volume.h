@@ -60,8 +60,14 @@ struct IrradianceVolume {
   // Per probe (VolumeGrid::index order):
   std::vector<glm::vec3> offsets;    // where it was moved, from its grid position
   std::vector<std::uint8_t> active;  // 0: switched off (inside geometry), never used
-  std::vector<ShIrradiance> sh;      // irradiance coefficients
-  std::vector<glm::vec2> depth;      // kDepthTexels per probe: (mean, mean square) distance
+  // Irradiance coefficients of the light the probe sees reflected by the static surfaces (the
+  // lightmaps' albedo / pi x E) and of the sky; `emitted`, of the light it sees straight from
+  // emissive surfaces. They are kept apart because a viewer that can trace the static scene
+  // draws the emitters' direct light itself, with shadow rays, as it does the punctual lights':
+  // near an area light that light changes faster than any probe grid follows (dynamic_view.h).
+  std::vector<ShIrradiance> sh;
+  std::vector<ShIrradiance> emitted;  // all zero in a scene without emissive surfaces
+  std::vector<glm::vec2> depth;       // kDepthTexels per probe: (mean, mean square) distance
 
   std::size_t probe_count() const { return grid.probe_count(); }
   glm::vec3 probe_position(std::size_t i) const {
@@ -76,7 +82,8 @@ struct IrradianceVolume {
   // by how much each faces the surface, and by DDGI's Chebyshev visibility test on its distance
   // moments (a probe behind a wall from p gets almost no weight); switched-off probes get none.
   // p outside the grid takes the nearest probes. Zero without an active probe around p.
-  glm::vec3 irradiance(glm::vec3 p, glm::vec3 n) const;
+  // With `with_emitted` false, the emitters' direct light is left out (`sh` alone).
+  glm::vec3 irradiance(glm::vec3 p, glm::vec3 n, bool with_emitted = true) const;
 };
 
 }  // namespace irradcast
