@@ -283,7 +283,40 @@ async function dynamic(o) {
   }
 }
 
-const CASES = { image, errors, edits, tabs, dynamic };
+// The sun on a dynamic object: the Cornell box with --sun shining in low from the front right
+// through its open front, the tall block dynamic and the short block (static) casting its shadow
+// onto the tall block's front. The page takes the sun's shadow from a shadow map of the static
+// scene, irradcast-view from shadow rays; the same bounds as `dynamic` (against irradcast-view
+// drawing from the volume, as the page does, plus the sun). A page without the shadow (the map's
+// test always passing) fails them: largest block difference 23.8.
+async function sun(o) {
+  const server = await startServer(o.server, [...SERVER, '--dynamic', 'tall_block', '--sun', '-0.5,-0.35,1,3']);
+  const b = await browser(o);
+  try {
+    const page = await openConverged(b, server.url + query({ width: W, height: H, ui: 0, converge: 0 }), W, H);
+    const shot = path.join(tmpDir, 'page-sun.png');
+    await page.screenshot({ path: shot });
+    const reference = await viewPng(o, server, { width: W, height: H, extra: ['--dynamic-emitters', 'volume'] }, 'view-sun');
+    compare(shot, reference, 'page (sun)');
+    const a = readPng(shot), v = readPng(reference);
+    const region = (img) => {
+      let sum = 0, n = 0;
+      for (let y = Math.floor(0.62 * H); y < Math.floor(0.9 * H); ++y)
+        for (let x = Math.floor(0.52 * W); x < Math.floor(0.72 * W); ++x) {
+          for (let c = 0; c < 3; ++c) sum += img.rgb[3 * (y * img.width + x) + c];
+          n += 3;
+        }
+      return sum / n;
+    };
+    console.log(`page (sun): the short block's region, mean level ${region(a).toFixed(1)} / ${region(v).toFixed(1)}`);
+    assert.ok(region(v) > 80, "page (sun): irradcast-view's short block is not in the sun");
+  } finally {
+    await b.close();
+    await server.stop();
+  }
+}
+
+const CASES = { image, errors, edits, tabs, dynamic, sun };
 const o = options(process.argv);
 try {
   if (!o.cases.length || o.cases.some((c) => !CASES[c])) throw new Error(`cases: ${Object.keys(CASES).join(', ')}`);

@@ -1,7 +1,8 @@
 // Applied SceneEdit broadcasts on the page's scene model (common/src/scene_edit.cpp apply_edit):
-// transforms and visibility of nodes, materials' albedo and emission, the sky. Lights change
-// nothing the page draws (their light reaches it through the lightmaps). An edit that does not
-// resolve throws, and the page loads the scene again.
+// transforms and visibility of nodes, materials' albedo and emission, the sky, lights' colour and
+// intensity (the page draws the directional lights' direct light on dynamic objects; on static
+// surfaces their light comes through the lightmaps). An edit that does not resolve throws, and
+// the page loads the scene again.
 import * as THREE from 'three';
 import { placeNodes, readSky } from './scene.js';
 
@@ -37,9 +38,9 @@ function transformed(local, op) {
   }
 }
 
-// Applies the ops in order; returns what changed: { nodes, materials, sky }.
+// Applies the ops in order; returns what changed: { nodes, materials, sky, lights }.
 export function applyEdit(scene, message) {
-  const changed = { nodes: false, materials: false, sky: false };
+  const changed = { nodes: false, materials: false, sky: false, lights: false };
   for (const op of message.ops || []) {
     const kind = op.kind || 0, target = op.target || '';
     if (kind <= KIND.HIDE) {
@@ -64,7 +65,13 @@ export function applyEdit(scene, message) {
       }
       if (parts & 2) sky.strength = op.value || 0;
       changed.sky = true;
-    } else if (kind !== KIND.LIGHT_COLOR && kind !== KIND.LIGHT_INTENSITY) {
+    } else if (kind === KIND.LIGHT_COLOR || kind === KIND.LIGHT_INTENSITY) {
+      const i = find(scene.lights, target);
+      if (i < 0) throw new Error(`edit: no light '${target}'`);
+      if (kind === KIND.LIGHT_COLOR) scene.lights[i].color = vec(op.vector);
+      else scene.lights[i].intensity = op.value || 0;
+      changed.lights = true;
+    } else {
       throw new Error(`edit: unknown operation ${kind}`);
     }
   }

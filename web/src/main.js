@@ -102,7 +102,7 @@ function handlers(ctx) {
     edit(m) {
       try {
         const c = applyEdit(state.view.scene, m);
-        if (c.nodes) state.view.placeNodes();
+        if (c.nodes || c.lights) state.view.placeNodes();
         if (c.materials) state.view.updateMaterials();
         if (c.sky) state.view.updateSky();
         unconverge(state);
@@ -112,7 +112,7 @@ function handlers(ctx) {
     },
     poses(m) {
       try {
-        if (applyPoses(state.view.scene, m, state.posed)) state.view.placeNodes();
+        if (applyPoses(state.view.scene, m, state.posed)) state.view.placeNodes(false);
         unconverge(state);
       } catch (e) {
         ctx.conn.fail(e.message);

@@ -4,7 +4,9 @@
 // exposure and tone map of irradcast-view (common/src/tonemap.cpp) and the sRGB transfer
 // function. The sky (common/src/sky.cpp) is the background. Dynamic objects (docs/DYNAMIC.md) have
 // no lightmap: their E comes from the probe volume, held in 3-D textures and looked up as
-// IrradianceVolume::irradiance does (common/src/irradiance_volume.cpp).
+// IrradianceVolume::irradiance does (common/src/irradiance_volume.cpp), plus the direct light of
+// the directional lights (a sun), which irradcast-view traces with shadow rays and the page takes
+// from a shadow map of the static scene per light (sunShadows).
 import * as THREE from 'three';
 import { placeNodes } from './scene.js';
 import { DEPTH_SIZE } from './volume.js';
@@ -116,10 +118,51 @@ vec3 volumeIrradiance(vec3 p, vec3 n) {
   return weights > 0.0 ? sum / weights : vec3(0.0);
 }`;
 
+// The directional lights' direct light on a dynamic object, as LightSampler::punctual_sample
+// with its shadow ray: E cos, where the static scene's shadow map (depth from the light, 3 x 3
+// taps) does not hide p. MAX_SUNS lights; the rest are left out (and said so on the console).
+const MAX_SUNS = 2;
+const SUN_MAP = 2048;
+const sunGlsl = `
+uniform int sunCount;
+uniform vec3 sunDir[${MAX_SUNS}];  // the direction the light travels
+uniform vec3 sunE[${MAX_SUNS}];
+uniform mat4 sunMatrix[${MAX_SUNS}];
+uniform float sunTexel[${MAX_SUNS}];  // a shadow map texel's size in world units
+uniform highp sampler2D sunDepth0, sunDepth1;
+float sunDepth(int i, ivec2 t) {
+  return i == 0 ? texelFetch(sunDepth0, t, 0).r : texelFetch(sunDepth1, t, 0).r;
+}
+float sunVisible(int i, vec3 p, vec3 ng) {
+  vec3 wi = -sunDir[i];
+  // Off the surface along its normal by two texels and towards the light by one (shadow acne).
+  vec4 c = sunMatrix[i] * vec4(p + ng * (2.0 * sunTexel[i]) + wi * sunTexel[i], 1.0);
+  vec3 ndc = c.xyz / c.w;
+  if (any(greaterThan(abs(ndc.xy), vec2(1.0)))) return 1.0;  // outside the static scene's bounds
+  float z = 0.5 * ndc.z + 0.5;
+  vec2 f = (0.5 * ndc.xy + 0.5) * float(${SUN_MAP}) - 0.5;
+  ivec2 b = ivec2(floor(f));
+  float seen = 0.0;
+  for (int y = -1; y <= 1; ++y)
+    for (int x = -1; x <= 1; ++x)
+      seen += z <= sunDepth(i, clamp(b + ivec2(x, y), ivec2(0), ivec2(${SUN_MAP} - 1))) ? 1.0 : 0.0;
+  return seen / 9.0;
+}
+vec3 sunIrradiance(vec3 p, vec3 n, vec3 ng) {
+  vec3 e = vec3(0.0);
+  for (int i = 0; i < ${MAX_SUNS}; ++i) {
+    if (i >= sunCount) break;
+    float c = dot(n, -sunDir[i]);
+    if (c > 0.0) e += sunE[i] * c * sunVisible(i, p, ng);
+  }
+  return e;
+}`;
+
 const surfaceFragment = `
 precision highp float;
 ${finishGlsl}
 ${volumeGlsl}
+${sunGlsl}
 uniform int dynamicOn;
 uniform vec3 cameraPosition;
 uniform sampler2D lightmap;
@@ -139,7 +182,7 @@ void main() {
     if (dot(ng, cameraPosition - vWorld) < 0.0) ng = -ng;
     vec3 n = dot(vNormal, vNormal) > 0.0 ? normalize(vNormal) : ng;
     if (dot(n, ng) < 0.0) n = -n;
-    e = volumeIrradiance(vWorld, n);
+    e = volumeIrradiance(vWorld, n) + sunIrradiance(vWorld, n, ng);
   } else {
     e = texture(lightmap, vLuv / vec2(textureSize(lightmap, 0))).rgb;
   }
@@ -248,6 +291,7 @@ export class SceneView {
     });
     this.tileSize = welcome.tile_size;
     this.volumeUniforms = this.emptyVolume();
+    this.sunUniforms = this.emptySuns();
     this.materials = [];  // per scene material, the ShaderMaterials that show it
     this.meshes = scene.objects.map((o, i) => this.buildObject(o, i));
     this.buildSky();
@@ -255,6 +299,77 @@ export class SceneView {
     this.bounds = new THREE.Box3();
     this.meshes.forEach((m) => this.bounds.expandByObject(m));
     if (this.bounds.isEmpty()) this.bounds.set(new THREE.Vector3(-1, -1, -1), new THREE.Vector3(1, 1, 1));
+    this.sunsDirty = true;
+  }
+
+  // The suns' uniforms, shared by every material (no sun until sunShadows runs).
+  emptySuns() {
+    const depth = () => {
+      const t = new THREE.DataTexture(new Float32Array([1]), 1, 1, THREE.RedFormat, THREE.FloatType);
+      t.needsUpdate = true;
+      return t;
+    };
+    return { sunCount: { value: 0 }, sunDir: { value: [...Array(MAX_SUNS)].map(() => new THREE.Vector3(0, -1, 0)) },
+      sunE: { value: [...Array(MAX_SUNS)].map(() => new THREE.Vector3()) },
+      sunMatrix: { value: [...Array(MAX_SUNS)].map(() => new THREE.Matrix4()) },
+      sunTexel: { value: [...Array(MAX_SUNS)].fill(0) }, sunDepth0: { value: depth() }, sunDepth1: { value: depth() } };
+  }
+
+  // The directional lights placed by visible static nodes (world.cpp place_lights), and per light
+  // a depth map of the static scene seen along it (an orthographic view over the static bounds,
+  // dynamic objects left out: they cast no shadow on anything, as in irradcast-view).
+  sunShadows() {
+    this.sunsDirty = false;
+    const { world, visible, dynamic } = placeNodes(this.scene);
+    const suns = [];
+    this.scene.nodes.forEach((node, i) => {
+      if (node.light < 0 || !visible[i] || dynamic[i]) return;
+      const l = this.scene.lights[node.light];
+      if (l.type !== 2) return;
+      const d = new THREE.Vector3(0, 0, -1).transformDirection(world[i]);
+      suns.push({ dir: d, e: l.color.clone().multiplyScalar(l.intensity) });
+    });
+    if (suns.length > MAX_SUNS) console.warn(`irradcast: ${suns.length} directional lights, the page draws ${MAX_SUNS} on dynamic objects`);
+    const u = this.sunUniforms, n = Math.min(suns.length, MAX_SUNS);
+    u.sunCount.value = n;
+    if (n === 0) return;
+    const center = this.bounds.getCenter(new THREE.Vector3()), radius = Math.max(1e-6, this.bounds.getSize(new THREE.Vector3()).length() * 0.5);
+    if (!this.depthOnly) {
+      this.depthOnly = new THREE.RawShaderMaterial({ glslVersion: THREE.GLSL3, side: THREE.DoubleSide, colorWrite: false,
+        vertexShader: 'in vec3 position; uniform mat4 modelMatrix, viewMatrix, projectionMatrix;\n' +
+          'void main() { gl_Position = projectionMatrix * viewMatrix * modelMatrix * vec4(position, 1.0); }',
+        fragmentShader: 'precision highp float; out vec4 c; void main() { c = vec4(1.0); }' });
+    }
+    const hidden = this.meshes.map((m, i) => [m, m.visible, this.scene.objects[i].dynamic]);
+    for (const [m, , dyn] of hidden) if (dyn) m.visible = false;
+    this.sky.visible = false;
+    this.root.overrideMaterial = this.depthOnly;
+    for (let i = 0; i < n; ++i) {
+      const cam = new THREE.OrthographicCamera(-radius, radius, radius, -radius, 0, 4 * radius);
+      const up = Math.abs(suns[i].dir.y) < 0.9 ? new THREE.Vector3(0, 1, 0) : new THREE.Vector3(1, 0, 0);
+      cam.up.copy(up);
+      cam.position.copy(center).addScaledVector(suns[i].dir, -2 * radius);
+      cam.lookAt(center);
+      cam.updateMatrixWorld(true);
+      cam.updateProjectionMatrix();
+      const key = `sunTarget${i}`;
+      if (!this[key]) {
+        this[key] = new THREE.WebGLRenderTarget(SUN_MAP, SUN_MAP, { depthBuffer: true });
+        this[key].depthTexture = new THREE.DepthTexture(SUN_MAP, SUN_MAP, THREE.FloatType);
+      }
+      this.renderer.setRenderTarget(this[key]);
+      this.renderer.clear();
+      this.renderer.render(this.root, cam);
+      u[`sunDepth${i}`].value = this[key].depthTexture;
+      u.sunDir.value[i].copy(suns[i].dir);
+      u.sunE.value[i].copy(suns[i].e);
+      u.sunMatrix.value[i].multiplyMatrices(cam.projectionMatrix, cam.matrixWorldInverse);
+      u.sunTexel.value[i] = 2 * radius / SUN_MAP;
+    }
+    this.renderer.setRenderTarget(null);
+    this.root.overrideMaterial = null;
+    this.sky.visible = true;
+    for (const [m, vis] of hidden) m.visible = vis;
   }
 
   buildObject(obj, index) {
@@ -264,7 +379,7 @@ export class SceneView {
       const mat = new THREE.RawShaderMaterial({
         glslVersion: THREE.GLSL3, vertexShader: surfaceVertex, fragmentShader: surfaceFragment,
         side: THREE.DoubleSide,
-        uniforms: { ...this.finish, ...this.volumeUniforms, lightmap: { value: this.lightmaps[index].texture },
+        uniforms: { ...this.finish, ...this.volumeUniforms, ...this.sunUniforms, lightmap: { value: this.lightmaps[index].texture },
           dynamicOn: { value: obj.dynamic ? 1 : 0 } },
       });
       mat.sceneMaterial = gr.material;
@@ -299,8 +414,10 @@ export class SceneView {
     for (const mesh of this.meshes) for (const mat of mesh.material) this.setMaterial(mat, mat.sceneMaterial);
   }
 
-  // After a transform or visibility edit.
-  placeNodes() {
+  // After a transform or visibility edit (`statics`: of static nodes, which cast the suns'
+  // shadows; a pose moves a dynamic node only).
+  placeNodes(statics = true) {
+    if (statics) this.sunsDirty = true;
     const { world, visible } = placeNodes(this.scene);
     this.scene.objects.forEach((o, i) => {
       this.meshes[i].matrix.copy(world[o.node]);
@@ -426,6 +543,8 @@ export class SceneView {
     }
     for (const t of [...this.textures, ...this.lightmaps.map((l) => l.texture), this.white]) t.dispose();
     for (const k of ['volProbes', 'volSh', 'volDepth']) this.volumeUniforms[k].value.dispose();
+    for (let i = 0; i < MAX_SUNS; ++i) if (this[`sunTarget${i}`]) this[`sunTarget${i}`].dispose();
+    if (this.depthOnly) this.depthOnly.dispose();
     if (this.skyUniforms.skyMap.value !== this.white) this.skyUniforms.skyMap.value.dispose();
     this.sky.geometry.dispose();
     this.sky.material.dispose();
@@ -442,6 +561,7 @@ export class SceneView {
     u.tanHalf.value.set(th * width / height, th);
     u.viewport.value.set(width, height);
     camera.apply(this.bounds, width / height);
+    if (this.sunsDirty) this.sunShadows();
     this.renderer.setRenderTarget(target);
     this.renderer.render(this.root, camera.three);
     this.renderer.setRenderTarget(null);

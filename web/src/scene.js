@@ -116,7 +116,9 @@ export function readScene(d) {
     return { name: nameOf(t.name), width: w, height: h, rgba8: t.rgba8 };
   });
   scene.materials = (d.materials || []).map((m, i) => readMaterial(m, scene.textures.length, i));
-  scene.lights = (d.lights || []).map((l) => ({ name: nameOf(l.name) }));
+  // type: 0 point, 1 spot, 2 directional (LightType).
+  scene.lights = (d.lights || []).map((l) => ({ name: nameOf(l.name), type: int(l.type, 0),
+    color: vec3(l.color), intensity: Number.isFinite(l.intensity) ? l.intensity : 0 }));
   scene.cameras = (d.cameras || []).map((c) => ({ yfov: c.yfov || 0 }));
   const nn = scene.nodes.length;
   scene.nodes.forEach((n, i) => {
