@@ -316,7 +316,73 @@ async function sun(o) {
   }
 }
 
-const CASES = { image, errors, edits, tabs, dynamic, sun };
+// A room lit by a point light and a spot light (KHR_lights_punctual), with a static pillar
+// standing on a dynamic tile: the pillar's shadows from both lights fall across the tile. Written
+// here as glTF (positions in a data URI), the lights and the camera placed by nodes.
+function lampRoomGltf(file) {
+  const tris = [];
+  const quad = (a, b, c, d) => tris.push(a, b, c, a, c, d);
+  const box = ([x0, y0, z0], [x1, y1, z1], inward) => {
+    const p = (x, y, z) => [x ? x1 : x0, y ? y1 : y0, z ? z1 : z0];
+    const faces = [[p(0, 0, 0), p(0, 0, 1), p(0, 1, 1), p(0, 1, 0)], [p(1, 0, 0), p(1, 1, 0), p(1, 1, 1), p(1, 0, 1)],
+      [p(0, 0, 0), p(1, 0, 0), p(1, 0, 1), p(0, 0, 1)], [p(0, 1, 0), p(0, 1, 1), p(1, 1, 1), p(1, 1, 0)],
+      [p(0, 0, 0), p(0, 1, 0), p(1, 1, 0), p(1, 0, 0)], [p(0, 0, 1), p(1, 0, 1), p(1, 1, 1), p(0, 1, 1)]];
+    const start = tris.length;
+    for (const [a, b, c, d] of faces) inward ? quad(a, d, c, b) : quad(a, b, c, d);  // faces: outward
+    return [start, tris.length - start];
+  };
+  const meshes = [box([0, 0, 0], [5, 3, 5], true), box([2.2, 0, 1.7], [2.8, 1.5, 2.3], false),
+    box([0.8, 0, 0.6], [4.2, 0.1, 4.2], false)];
+  const bytes = Buffer.from(new Float32Array(tris.flat()).buffer);
+  const accessors = meshes.map(([start, count]) => {
+    const pts = tris.slice(start, start + count);
+    return { bufferView: 0, byteOffset: start * 12, componentType: 5126, count, type: 'VEC3',
+      min: [0, 1, 2].map((a) => Math.min(...pts.map((q) => q[a]))), max: [0, 1, 2].map((a) => Math.max(...pts.map((q) => q[a]))) };
+  });
+  // The rotation that turns -Z (where lights shine and cameras look) to d.
+  const turn = (d) => {
+    const l = Math.hypot(...d), [x, y, z] = d.map((v) => v / l), q = [y, -x, 0, 1 - z], n = Math.hypot(...q);
+    return q.map((v) => v / n);
+  };
+  const gltf = {
+    asset: { version: '2.0' }, extensionsUsed: ['KHR_lights_punctual'],
+    extensions: { KHR_lights_punctual: { lights: [{ name: 'lamp', type: 'point', color: [1, 0.9, 0.8], intensity: 6 },
+      { name: 'spot', type: 'spot', color: [0.8, 0.9, 1], intensity: 10, spot: { innerConeAngle: 0.35, outerConeAngle: 0.6 } }] } },
+    scene: 0, scenes: [{ nodes: [0, 1, 2, 3, 4, 5] }],
+    nodes: [{ name: 'room', mesh: 0 }, { name: 'pillar', mesh: 1 }, { name: 'tile', mesh: 2, extras: { irradcast: { dynamic: true } } },
+      { name: 'lamp', translation: [2.5, 2.4, 0.9], extensions: { KHR_lights_punctual: { light: 0 } } },
+      { name: 'spot', translation: [1.0, 2.6, 3.6], rotation: turn([0.45, -1, -0.45]), extensions: { KHR_lights_punctual: { light: 1 } } },
+      { name: 'eye', camera: 0, translation: [2.5, 2.8, 4.9], rotation: turn([0, -2.8, -3.4]) }],
+    cameras: [{ type: 'perspective', perspective: { yfov: 0.9, znear: 0.01 } }],
+    materials: [{ pbrMetallicRoughness: { baseColorFactor: [0.6, 0.6, 0.6, 1], metallicFactor: 0 } }],
+    meshes: accessors.map((_, i) => ({ primitives: [{ attributes: { POSITION: i }, material: 0 }] })),
+    accessors, bufferViews: [{ buffer: 0, byteLength: bytes.length }],
+    buffers: [{ byteLength: bytes.length, uri: `data:application/octet-stream;base64,${bytes.toString('base64')}` }],
+  };
+  writeFileSync(file, JSON.stringify(gltf));
+  return file;
+}
+
+// The point and spot lights' direct light on a dynamic object: the page's shadow maps (a cube for
+// the point light, a perspective view for the spot) against irradcast-view's shadow rays, with
+// the bounds of `image` (irradcast-view --dynamic-emitters volume, the page's shading).
+async function lamps(o) {
+  const scene = lampRoomGltf(path.join(tmpDir, 'lamp_room.gltf'));
+  const server = await startServer(o.server, ['--scene', scene, ...SERVER.slice(2)]);
+  const b = await browser(o);
+  try {
+    const page = await openConverged(b, server.url + query({ width: W, height: H, ui: 0, converge: 0 }), W, H);
+    const shot = path.join(tmpDir, 'page-lamps.png');
+    await page.screenshot({ path: shot });
+    const reference = await viewPng(o, server, { width: W, height: H, extra: ['--dynamic-emitters', 'volume'] }, 'view-lamps');
+    compare(shot, reference, 'page (lamps)');
+  } finally {
+    await b.close();
+    await server.stop();
+  }
+}
+
+const CASES = { image, errors, edits, tabs, dynamic, sun, lamps };
 const o = options(process.argv);
 try {
   if (!o.cases.length || o.cases.some((c) => !CASES[c])) throw new Error(`cases: ${Object.keys(CASES).join(', ')}`);

@@ -5,8 +5,8 @@
 // function. The sky (common/src/sky.cpp) is the background. Dynamic objects (docs/DYNAMIC.md) have
 // no lightmap: their E comes from the probe volume, held in 3-D textures and looked up as
 // IrradianceVolume::irradiance does (common/src/irradiance_volume.cpp), plus the direct light of
-// the directional lights (a sun), which irradcast-view traces with shadow rays and the page takes
-// from a shadow map of the static scene per light (sunShadows).
+// the punctual lights, which irradcast-view traces with shadow rays and the page takes from shadow
+// maps of the static scene (shadowMaps).
 import * as THREE from 'three';
 import { placeNodes } from './scene.js';
 import { DEPTH_SIZE } from './volume.js';
@@ -118,42 +118,89 @@ vec3 volumeIrradiance(vec3 p, vec3 n) {
   return weights > 0.0 ? sum / weights : vec3(0.0);
 }`;
 
-// The directional lights' direct light on a dynamic object, as LightSampler::punctual_sample
-// with its shadow ray: E cos, where the static scene's shadow map (depth from the light, 3 x 3
-// taps) does not hide p. MAX_SUNS lights; the rest are left out (and said so on the console).
-const MAX_SUNS = 2;
-const SUN_MAP = 2048;
-const sunGlsl = `
-uniform int sunCount;
-uniform vec3 sunDir[${MAX_SUNS}];  // the direction the light travels
-uniform vec3 sunE[${MAX_SUNS}];
-uniform mat4 sunMatrix[${MAX_SUNS}];
-uniform float sunTexel[${MAX_SUNS}];  // a shadow map texel's size in world units
-uniform highp sampler2D sunDepth0, sunDepth1;
-float sunDepth(int i, ivec2 t) {
-  return i == 0 ? texelFetch(sunDepth0, t, 0).r : texelFetch(sunDepth1, t, 0).r;
+// The punctual lights' direct light on a dynamic object, as LightSampler::punctual_sample with
+// its shadow ray (lights.cpp): intensity x cos x falloff (1 / d^2, the range window, the spot
+// cone), where the static scene's shadow map seen from the light (3 x 3 taps) does not hide p.
+// A directional light has one orthographic view over the static bounds, a spot light one
+// perspective view over its cone, a point light six (a cube). MAX_LIGHTS lights and MAX_VIEWS
+// views; lights past them are left out (and said so on the console).
+const MAX_LIGHTS = 4;
+const MAX_VIEWS = 8;
+const LIGHT_POINT = 0, LIGHT_SPOT = 1, LIGHT_DIRECTIONAL = 2;
+const lightGlsl = `
+uniform int lightCount;
+uniform int lightType[${MAX_LIGHTS}];
+uniform vec3 lightPos[${MAX_LIGHTS}], lightDir[${MAX_LIGHTS}], lightE[${MAX_LIGHTS}];
+uniform float lightRange[${MAX_LIGHTS}], lightCosInner[${MAX_LIGHTS}], lightCosOuter[${MAX_LIGHTS}];
+uniform int lightView[${MAX_LIGHTS}], lightViews[${MAX_LIGHTS}];  // its shadow views: first, count
+uniform mat4 viewMatrix_[${MAX_VIEWS}];
+uniform vec3 viewPos[${MAX_VIEWS}];
+uniform float viewTexel[${MAX_VIEWS}];  // a texel's size: in world units (orthographic) or per unit of distance
+uniform int viewOrtho[${MAX_VIEWS}], viewSize[${MAX_VIEWS}];
+uniform highp sampler2D shadow0, shadow1, shadow2, shadow3, shadow4, shadow5, shadow6, shadow7;
+float shadowDepth(int v, ivec2 t) {
+  switch (v) {
+    case 0: return texelFetch(shadow0, t, 0).r;
+    case 1: return texelFetch(shadow1, t, 0).r;
+    case 2: return texelFetch(shadow2, t, 0).r;
+    case 3: return texelFetch(shadow3, t, 0).r;
+    case 4: return texelFetch(shadow4, t, 0).r;
+    case 5: return texelFetch(shadow5, t, 0).r;
+    case 6: return texelFetch(shadow6, t, 0).r;
+    default: return texelFetch(shadow7, t, 0).r;
+  }
 }
-float sunVisible(int i, vec3 p, vec3 ng) {
-  vec3 wi = -sunDir[i];
+// The share of 3 x 3 taps around p that view v sees; -1 where p is outside the view.
+float shadowSeen(int v, vec3 p, vec3 ng, vec3 wi) {
+  float texel = viewOrtho[v] == 1 ? viewTexel[v] : viewTexel[v] * length(p - viewPos[v]);
   // Off the surface along its normal by two texels and towards the light by one (shadow acne).
-  vec4 c = sunMatrix[i] * vec4(p + ng * (2.0 * sunTexel[i]) + wi * sunTexel[i], 1.0);
+  vec4 c = viewMatrix_[v] * vec4(p + ng * (2.0 * texel) + wi * texel, 1.0);
+  if (c.w <= 0.0) return -1.0;
   vec3 ndc = c.xyz / c.w;
-  if (any(greaterThan(abs(ndc.xy), vec2(1.0)))) return 1.0;  // outside the static scene's bounds
+  if (any(greaterThan(abs(ndc.xy), vec2(1.0))) || ndc.z > 1.0) return -1.0;
   float z = 0.5 * ndc.z + 0.5;
-  vec2 f = (0.5 * ndc.xy + 0.5) * float(${SUN_MAP}) - 0.5;
+  int size = viewSize[v];
+  vec2 f = (0.5 * ndc.xy + 0.5) * float(size) - 0.5;
   ivec2 b = ivec2(floor(f));
   float seen = 0.0;
   for (int y = -1; y <= 1; ++y)
     for (int x = -1; x <= 1; ++x)
-      seen += z <= sunDepth(i, clamp(b + ivec2(x, y), ivec2(0), ivec2(${SUN_MAP} - 1))) ? 1.0 : 0.0;
+      seen += z <= shadowDepth(v, clamp(b + ivec2(x, y), ivec2(0), ivec2(size - 1))) ? 1.0 : 0.0;
   return seen / 9.0;
 }
-vec3 sunIrradiance(vec3 p, vec3 n, vec3 ng) {
+vec3 punctualIrradiance(vec3 p, vec3 n, vec3 ng) {
   vec3 e = vec3(0.0);
-  for (int i = 0; i < ${MAX_SUNS}; ++i) {
-    if (i >= sunCount) break;
-    float c = dot(n, -sunDir[i]);
-    if (c > 0.0) e += sunE[i] * c * sunVisible(i, p, ng);
+  for (int i = 0; i < ${MAX_LIGHTS}; ++i) {
+    if (i >= lightCount) break;
+    vec3 wi;
+    float falloff = 1.0;
+    if (lightType[i] == ${LIGHT_DIRECTIONAL}) {
+      wi = -lightDir[i];
+    } else {
+      vec3 d = lightPos[i] - p;
+      float dist2 = dot(d, d);
+      if (!(dist2 > 0.0)) continue;
+      float dist = sqrt(dist2);
+      wi = d / dist;
+      falloff = 1.0 / dist2;
+      if (lightRange[i] > 0.0) {
+        float r = dist / lightRange[i];
+        falloff *= clamp(1.0 - r * r * r * r, 0.0, 1.0);
+      }
+      if (lightType[i] == ${LIGHT_SPOT}) {
+        float t = clamp((dot(lightDir[i], -wi) - lightCosOuter[i]) / max(1e-4, lightCosInner[i] - lightCosOuter[i]), 0.0, 1.0);
+        falloff *= t * t;
+      }
+    }
+    float c = dot(n, wi);
+    if (c <= 0.0 || falloff <= 0.0) continue;
+    float seen = 1.0;
+    for (int k = 0; k < 6; ++k) {
+      if (k >= lightViews[i]) break;
+      float s = shadowSeen(lightView[i] + k, p, ng, wi);
+      if (s >= 0.0) { seen = s; break; }
+    }
+    e += lightE[i] * (c * falloff * seen);
   }
   return e;
 }`;
@@ -162,7 +209,7 @@ const surfaceFragment = `
 precision highp float;
 ${finishGlsl}
 ${volumeGlsl}
-${sunGlsl}
+${lightGlsl}
 uniform int dynamicOn;
 uniform vec3 cameraPosition;
 uniform sampler2D lightmap;
@@ -182,7 +229,7 @@ void main() {
     if (dot(ng, cameraPosition - vWorld) < 0.0) ng = -ng;
     vec3 n = dot(vNormal, vNormal) > 0.0 ? normalize(vNormal) : ng;
     if (dot(n, ng) < 0.0) n = -n;
-    e = volumeIrradiance(vWorld, n) + sunIrradiance(vWorld, n, ng);
+    e = volumeIrradiance(vWorld, n) + punctualIrradiance(vWorld, n, ng);
   } else {
     e = texture(lightmap, vLuv / vec2(textureSize(lightmap, 0))).rgb;
   }
@@ -291,7 +338,7 @@ export class SceneView {
     });
     this.tileSize = welcome.tile_size;
     this.volumeUniforms = this.emptyVolume();
-    this.sunUniforms = this.emptySuns();
+    this.lightUniforms = this.emptyLights();
     this.materials = [];  // per scene material, the ShaderMaterials that show it
     this.meshes = scene.objects.map((o, i) => this.buildObject(o, i));
     this.buildSky();
@@ -299,77 +346,116 @@ export class SceneView {
     this.bounds = new THREE.Box3();
     this.meshes.forEach((m) => this.bounds.expandByObject(m));
     if (this.bounds.isEmpty()) this.bounds.set(new THREE.Vector3(-1, -1, -1), new THREE.Vector3(1, 1, 1));
-    this.sunsDirty = true;
+    this.shadowsDirty = true;
   }
 
-  // The suns' uniforms, shared by every material (no sun until sunShadows runs).
-  emptySuns() {
+  // The punctual lights' uniforms, shared by every material (no light until shadowMaps runs).
+  emptyLights() {
     const depth = () => {
       const t = new THREE.DataTexture(new Float32Array([1]), 1, 1, THREE.RedFormat, THREE.FloatType);
       t.needsUpdate = true;
       return t;
     };
-    return { sunCount: { value: 0 }, sunDir: { value: [...Array(MAX_SUNS)].map(() => new THREE.Vector3(0, -1, 0)) },
-      sunE: { value: [...Array(MAX_SUNS)].map(() => new THREE.Vector3()) },
-      sunMatrix: { value: [...Array(MAX_SUNS)].map(() => new THREE.Matrix4()) },
-      sunTexel: { value: [...Array(MAX_SUNS)].fill(0) }, sunDepth0: { value: depth() }, sunDepth1: { value: depth() } };
+    const vecs = (n) => [...Array(n)].map(() => new THREE.Vector3());
+    const u = { lightCount: { value: 0 }, lightType: { value: Array(MAX_LIGHTS).fill(0) },
+      lightPos: { value: vecs(MAX_LIGHTS) }, lightDir: { value: vecs(MAX_LIGHTS) }, lightE: { value: vecs(MAX_LIGHTS) },
+      lightRange: { value: Array(MAX_LIGHTS).fill(0) }, lightCosInner: { value: Array(MAX_LIGHTS).fill(1) },
+      lightCosOuter: { value: Array(MAX_LIGHTS).fill(0) }, lightView: { value: Array(MAX_LIGHTS).fill(0) },
+      lightViews: { value: Array(MAX_LIGHTS).fill(0) },
+      viewMatrix_: { value: [...Array(MAX_VIEWS)].map(() => new THREE.Matrix4()) }, viewPos: { value: vecs(MAX_VIEWS) },
+      viewTexel: { value: Array(MAX_VIEWS).fill(0) }, viewOrtho: { value: Array(MAX_VIEWS).fill(0) },
+      viewSize: { value: Array(MAX_VIEWS).fill(1) } };
+    this.emptyDepth = depth();
+    for (let v = 0; v < MAX_VIEWS; ++v) u[`shadow${v}`] = { value: this.emptyDepth };
+    return u;
   }
 
-  // The directional lights placed by visible static nodes (world.cpp place_lights), and per light
-  // a depth map of the static scene seen along it (an orthographic view over the static bounds,
-  // dynamic objects left out: they cast no shadow on anything, as in irradcast-view).
-  sunShadows() {
-    this.sunsDirty = false;
+  // The punctual lights placed by visible static nodes (world.cpp place_lights), and their shadow
+  // views: depth maps of the static scene seen from each light (dynamic objects left out: they
+  // cast no shadow on anything, as in irradcast-view).
+  shadowMaps() {
+    this.shadowsDirty = false;
     const { world, visible, dynamic } = placeNodes(this.scene);
-    const suns = [];
+    const u = this.lightUniforms, center = this.bounds.getCenter(new THREE.Vector3());
+    const radius = Math.max(1e-6, this.bounds.getSize(new THREE.Vector3()).length() * 0.5);
+    const views = [];  // { camera, size, ortho, texel }
+    let count = 0, left = 0;
     this.scene.nodes.forEach((node, i) => {
       if (node.light < 0 || !visible[i] || dynamic[i]) return;
       const l = this.scene.lights[node.light];
-      if (l.type !== 2) return;
-      const d = new THREE.Vector3(0, 0, -1).transformDirection(world[i]);
-      suns.push({ dir: d, e: l.color.clone().multiplyScalar(l.intensity) });
+      const pos = new THREE.Vector3().setFromMatrixPosition(world[i]);
+      const dir = new THREE.Vector3(0, 0, -1).transformDirection(world[i]);
+      const need = l.type === LIGHT_POINT ? 6 : 1;
+      if (count >= MAX_LIGHTS || views.length + need > MAX_VIEWS) { ++left; return; }
+      u.lightType.value[count] = l.type;
+      u.lightPos.value[count].copy(pos);
+      u.lightDir.value[count].copy(dir);
+      u.lightE.value[count].copy(l.color).multiplyScalar(l.intensity);
+      u.lightRange.value[count] = l.range > 0 ? l.range : 0;
+      u.lightCosInner.value[count] = Math.cos(l.innerCone);
+      u.lightCosOuter.value[count] = Math.cos(l.outerCone);
+      u.lightView.value[count] = views.length;
+      u.lightViews.value[count] = need;
+      const far = 2 * radius + pos.distanceTo(center);
+      const look = (d, fov) => {
+        const cam = new THREE.PerspectiveCamera(fov, 1, Math.max(1e-4 * radius, 1e-6), far);
+        cam.up.copy(Math.abs(d.y) < 0.9 ? new THREE.Vector3(0, 1, 0) : new THREE.Vector3(1, 0, 0));
+        cam.position.copy(pos);
+        cam.lookAt(pos.clone().add(d));
+        views.push({ camera: cam, size: 1024, ortho: false, texel: 2 * Math.tan(0.5 * fov * Math.PI / 180) / 1024 });
+      };
+      if (l.type === LIGHT_DIRECTIONAL) {
+        const cam = new THREE.OrthographicCamera(-radius, radius, radius, -radius, 0, 4 * radius);
+        cam.up.copy(Math.abs(dir.y) < 0.9 ? new THREE.Vector3(0, 1, 0) : new THREE.Vector3(1, 0, 0));
+        cam.position.copy(center).addScaledVector(dir, -2 * radius);
+        cam.lookAt(center);
+        views.push({ camera: cam, size: 2048, ortho: true, texel: 2 * radius / 2048 });
+      } else if (l.type === LIGHT_SPOT) {
+        look(dir, Math.min(2 * l.outerCone * 180 / Math.PI + 2, 170));
+      } else {  // a cube, its faces a little wider than 90 degrees so that they overlap
+        for (const d of [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])
+          look(new THREE.Vector3(...d), 92);
+      }
+      ++count;
     });
-    if (suns.length > MAX_SUNS) console.warn(`irradcast: ${suns.length} directional lights, the page draws ${MAX_SUNS} on dynamic objects`);
-    const u = this.sunUniforms, n = Math.min(suns.length, MAX_SUNS);
-    u.sunCount.value = n;
-    if (n === 0) return;
-    const center = this.bounds.getCenter(new THREE.Vector3()), radius = Math.max(1e-6, this.bounds.getSize(new THREE.Vector3()).length() * 0.5);
+    if (left) console.warn(`irradcast: ${left} punctual lights left out of the dynamic objects' shading (at most ${MAX_LIGHTS} lights, ${MAX_VIEWS} shadow views)`);
+    u.lightCount.value = count;
+    if (!views.length) return;
     if (!this.depthOnly) {
       this.depthOnly = new THREE.RawShaderMaterial({ glslVersion: THREE.GLSL3, side: THREE.DoubleSide, colorWrite: false,
         vertexShader: 'in vec3 position; uniform mat4 modelMatrix, viewMatrix, projectionMatrix;\n' +
           'void main() { gl_Position = projectionMatrix * viewMatrix * modelMatrix * vec4(position, 1.0); }',
         fragmentShader: 'precision highp float; out vec4 c; void main() { c = vec4(1.0); }' });
     }
-    const hidden = this.meshes.map((m, i) => [m, m.visible, this.scene.objects[i].dynamic]);
-    for (const [m, , dyn] of hidden) if (dyn) m.visible = false;
+    const shown = this.meshes.map((m) => m.visible);
+    this.meshes.forEach((m, i) => { if (this.scene.objects[i].dynamic) m.visible = false; });
     this.sky.visible = false;
     this.root.overrideMaterial = this.depthOnly;
-    for (let i = 0; i < n; ++i) {
-      const cam = new THREE.OrthographicCamera(-radius, radius, radius, -radius, 0, 4 * radius);
-      const up = Math.abs(suns[i].dir.y) < 0.9 ? new THREE.Vector3(0, 1, 0) : new THREE.Vector3(1, 0, 0);
-      cam.up.copy(up);
-      cam.position.copy(center).addScaledVector(suns[i].dir, -2 * radius);
-      cam.lookAt(center);
-      cam.updateMatrixWorld(true);
-      cam.updateProjectionMatrix();
-      const key = `sunTarget${i}`;
-      if (!this[key]) {
-        this[key] = new THREE.WebGLRenderTarget(SUN_MAP, SUN_MAP, { depthBuffer: true });
-        this[key].depthTexture = new THREE.DepthTexture(SUN_MAP, SUN_MAP, THREE.FloatType);
+    this.shadowTargets = this.shadowTargets || [];
+    views.forEach((v, k) => {
+      v.camera.updateMatrixWorld(true);
+      v.camera.updateProjectionMatrix();
+      let t = this.shadowTargets[k];
+      if (!t || t.width !== v.size) {
+        if (t) t.dispose();
+        t = new THREE.WebGLRenderTarget(v.size, v.size, { depthBuffer: true });
+        t.depthTexture = new THREE.DepthTexture(v.size, v.size, THREE.FloatType);
+        this.shadowTargets[k] = t;
       }
-      this.renderer.setRenderTarget(this[key]);
+      this.renderer.setRenderTarget(t);
       this.renderer.clear();
-      this.renderer.render(this.root, cam);
-      u[`sunDepth${i}`].value = this[key].depthTexture;
-      u.sunDir.value[i].copy(suns[i].dir);
-      u.sunE.value[i].copy(suns[i].e);
-      u.sunMatrix.value[i].multiplyMatrices(cam.projectionMatrix, cam.matrixWorldInverse);
-      u.sunTexel.value[i] = 2 * radius / SUN_MAP;
-    }
+      this.renderer.render(this.root, v.camera);
+      u[`shadow${k}`].value = t.depthTexture;
+      u.viewMatrix_.value[k].multiplyMatrices(v.camera.projectionMatrix, v.camera.matrixWorldInverse);
+      u.viewPos.value[k].copy(v.camera.position);
+      u.viewTexel.value[k] = v.texel;
+      u.viewOrtho.value[k] = v.ortho ? 1 : 0;
+      u.viewSize.value[k] = v.size;
+    });
     this.renderer.setRenderTarget(null);
     this.root.overrideMaterial = null;
     this.sky.visible = true;
-    for (const [m, vis] of hidden) m.visible = vis;
+    this.meshes.forEach((m, i) => { m.visible = shown[i]; });
   }
 
   buildObject(obj, index) {
@@ -379,7 +465,7 @@ export class SceneView {
       const mat = new THREE.RawShaderMaterial({
         glslVersion: THREE.GLSL3, vertexShader: surfaceVertex, fragmentShader: surfaceFragment,
         side: THREE.DoubleSide,
-        uniforms: { ...this.finish, ...this.volumeUniforms, ...this.sunUniforms, lightmap: { value: this.lightmaps[index].texture },
+        uniforms: { ...this.finish, ...this.volumeUniforms, ...this.lightUniforms, lightmap: { value: this.lightmaps[index].texture },
           dynamicOn: { value: obj.dynamic ? 1 : 0 } },
       });
       mat.sceneMaterial = gr.material;
@@ -414,10 +500,10 @@ export class SceneView {
     for (const mesh of this.meshes) for (const mat of mesh.material) this.setMaterial(mat, mat.sceneMaterial);
   }
 
-  // After a transform or visibility edit (`statics`: of static nodes, which cast the suns'
-  // shadows; a pose moves a dynamic node only).
+  // After a transform or visibility edit (`statics`: of static nodes or lights, which the shadow
+  // maps follow; a pose moves a dynamic node only).
   placeNodes(statics = true) {
-    if (statics) this.sunsDirty = true;
+    if (statics) this.shadowsDirty = true;
     const { world, visible } = placeNodes(this.scene);
     this.scene.objects.forEach((o, i) => {
       this.meshes[i].matrix.copy(world[o.node]);
@@ -543,8 +629,9 @@ export class SceneView {
     }
     for (const t of [...this.textures, ...this.lightmaps.map((l) => l.texture), this.white]) t.dispose();
     for (const k of ['volProbes', 'volSh', 'volDepth']) this.volumeUniforms[k].value.dispose();
-    for (let i = 0; i < MAX_SUNS; ++i) if (this[`sunTarget${i}`]) this[`sunTarget${i}`].dispose();
+    for (const t of this.shadowTargets || []) if (t) t.dispose();
     if (this.depthOnly) this.depthOnly.dispose();
+    this.emptyDepth.dispose();
     if (this.skyUniforms.skyMap.value !== this.white) this.skyUniforms.skyMap.value.dispose();
     this.sky.geometry.dispose();
     this.sky.material.dispose();
@@ -561,7 +648,7 @@ export class SceneView {
     u.tanHalf.value.set(th * width / height, th);
     u.viewport.value.set(width, height);
     camera.apply(this.bounds, width / height);
-    if (this.sunsDirty) this.sunShadows();
+    if (this.shadowsDirty) this.shadowMaps();
     this.renderer.setRenderTarget(target);
     this.renderer.render(this.root, camera.three);
     this.renderer.setRenderTarget(null);

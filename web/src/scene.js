@@ -117,8 +117,10 @@ export function readScene(d) {
   });
   scene.materials = (d.materials || []).map((m, i) => readMaterial(m, scene.textures.length, i));
   // type: 0 point, 1 spot, 2 directional (LightType).
+  const finite = (x) => (Number.isFinite(x) ? x : 0);
   scene.lights = (d.lights || []).map((l) => ({ name: nameOf(l.name), type: int(l.type, 0),
-    color: vec3(l.color), intensity: Number.isFinite(l.intensity) ? l.intensity : 0 }));
+    color: vec3(l.color), intensity: finite(l.intensity), range: finite(l.range),
+    innerCone: finite(l.inner_cone_angle), outerCone: finite(l.outer_cone_angle) }));
   scene.cameras = (d.cameras || []).map((c) => ({ yfov: c.yfov || 0 }));
   const nn = scene.nodes.length;
   scene.nodes.forEach((n, i) => {
