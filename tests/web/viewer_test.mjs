@@ -223,6 +223,17 @@ async function tabs(o) {
   }
 }
 
+// The mean level of the Cornell box's short block in the default view (its lower right).
+function region(img) {
+  let sum = 0, n = 0;
+  for (let y = Math.floor(0.62 * H); y < Math.floor(0.9 * H); ++y)
+    for (let x = Math.floor(0.52 * W); x < Math.floor(0.72 * W); ++x) {
+      for (let c = 0; c < 3; ++c) sum += img.rgb[3 * (y * img.width + x) + c];
+      n += 3;
+    }
+  return sum / n;
+}
+
 // A dynamic object (docs/DYNAMIC.md): the Cornell box's short block made dynamic is drawn by the
 // page from the probe volume in 3-D textures, as irradcast-view draws it with --dynamic-emitters
 // volume (the page cannot trace the emitters' direct light); the same bounds as `image`, and the
@@ -247,15 +258,6 @@ async function dynamic(o) {
     // The block: the lower right of the default view. Its mean level must agree too, and it must
     // not be black (unlit).
     const a = readPng(shot), v = readPng(reference);
-    const region = (img) => {
-      let sum = 0, n = 0;
-      for (let y = Math.floor(0.62 * H); y < Math.floor(0.9 * H); ++y)
-        for (let x = Math.floor(0.52 * W); x < Math.floor(0.72 * W); ++x) {
-          for (let c = 0; c < 3; ++c) sum += img.rgb[3 * (y * img.width + x) + c];
-          n += 3;
-        }
-      return sum / n;
-    };
     console.log(`page (dynamic): the block's region, mean level ${region(a).toFixed(1)} / ${region(v).toFixed(1)}`);
     assert.ok(region(v) > 20, "page (dynamic): irradcast-view's block is black");
     assert.ok(Math.abs(region(a) - region(v)) <= 2, "page (dynamic): the block differs from irradcast-view's");
@@ -299,15 +301,6 @@ async function sun(o) {
     const reference = await viewPng(o, server, { width: W, height: H, extra: ['--dynamic-emitters', 'volume'] }, 'view-sun');
     compare(shot, reference, 'page (sun)');
     const a = readPng(shot), v = readPng(reference);
-    const region = (img) => {
-      let sum = 0, n = 0;
-      for (let y = Math.floor(0.62 * H); y < Math.floor(0.9 * H); ++y)
-        for (let x = Math.floor(0.52 * W); x < Math.floor(0.72 * W); ++x) {
-          for (let c = 0; c < 3; ++c) sum += img.rgb[3 * (y * img.width + x) + c];
-          n += 3;
-        }
-      return sum / n;
-    };
     console.log(`page (sun): the short block's region, mean level ${region(a).toFixed(1)} / ${region(v).toFixed(1)}`);
     assert.ok(region(v) > 80, "page (sun): irradcast-view's short block is not in the sun");
   } finally {
