@@ -260,6 +260,45 @@ TEST(Nats, GatewaysServeTheProbeVolumeAndThePoses) {
   }));
 }
 
+// An origin that comes back on the same stream with a scene without dynamic nodes clears what the
+// last one left there: its poses (which name nodes this scene does not pose: a gateway serving
+// them would have every viewer refuse them as a protocol error and drop) and its probe volume.
+TEST(Nats, AnOriginWithoutDynamicNodesClearsTheLastOnesPosesAndVolume) {
+  IRRADCAST_NEED_NATS();
+  test::NatsProcess nats;
+  {
+    test::NatsOriginNode first(nats.url(), 2, kToken, {}, test::cornell_with_prop());
+    ASSERT_TRUE(first.settle());
+    test::RawConnection editor(first.server.port());
+    ASSERT_TRUE(editor.join("editor"));
+    wire::Envelope e;
+    wire::to_proto(parse_edit_json(R"({"op": "move", "node": "prop", "by": [0.1, 0, 0]})"),
+                   e.mutable_scene_edit());
+    e.mutable_scene_edit()->set_token(kToken);
+    e.mutable_scene_edit()->set_request_id(1);
+    e.mutable_scene_edit()->set_stream(true);
+    editor.send(e);
+    ASSERT_TRUE(test::eventually([&] {
+      return first.origin.nats_stats().poses_published >= 1 &&
+             first.origin.nats_stats().volumes_published >= 1;
+    }));
+    ASSERT_TRUE(first.origin.flush(std::chrono::seconds(10)));
+  }
+  test::NatsOriginNode second(nats.url(), 1, kToken);
+  ASSERT_TRUE(second.settle());
+  test::NatsGatewayNode gw(nats.url(), kToken);
+  ViewClient via(viewer_of(*gw.server, "via"));
+  via.connect();
+  EXPECT_TRUE(test::converge(via, second.host.tiles()));
+  std::this_thread::sleep_for(500ms);
+  for (int i = 0; i < 10; ++i) via.poll(20ms);
+  EXPECT_EQ(via.counters().connections_lost, 0u) << "the viewer was sent poses it refused";
+  EXPECT_EQ(via.counters().connections, 1u);
+  EXPECT_FALSE(via.probe_volume().lit()) << "the gateway served the last origin's volume";
+  EXPECT_EQ(gw.gateway.nats_stats().bad_messages, 0u);
+  via.close();
+}
+
 // The control token never crosses NATS: a gateway's session checks it and forwards the edit
 // without it (a listener on req.edit sees no token); the origin applies edits from NATS only when
 // it takes edits at all, and refuses one that carries a token.

@@ -336,6 +336,13 @@ void NatsGateway::Impl::on_stats(const std::string& data) {
 void NatsGateway::Impl::on_volume(const std::string& data) {
   wire::NatsVolume v;
   if (!v.ParseFromString(data)) return bad("the probe volume's announcement does not parse");
+  if (v.hash().empty() && v.chunks() == 0 && v.bytes() == 0) {  // the origin has none
+    pending_volume.reset();
+    volume_chunks.clear();
+    std::lock_guard lock(mutex);
+    volume = nullptr;
+    return;
+  }
   if (v.hash().size() != 32 || v.chunks() == 0 || v.chunks() > kMaxVolumeChunks || v.bytes() == 0 ||
       v.bytes() > kMaxVolumeBytes)
     return bad("the probe volume's announcement is out of range");

@@ -431,9 +431,19 @@ bool NatsOrigin::Impl::publish_edit(const AppliedEdit& a, bool names_package) {
 
 // The probe volume's newest version when it is not published yet (or after a reconnection): its
 // frame with the layout in chunks, then the announcement (a gateway has the chunks when it comes).
+// Without a volume (none yet, or a scene without dynamic nodes), a whole publish announces that
+// there is none, so that a gateway does not serve one an earlier origin left in the stream.
 bool NatsOrigin::Impl::publish_volume(bool full) {
   const std::shared_ptr<const ProbeVolumeFrames> v = host.probe_volume();
-  if (!v || (!full && v == published_volume)) return true;
+  if (!v) {
+    if (!full) return true;
+    wire::NatsVolume none;
+    none.set_origin(origin);
+    if (!publish(subjects.volume, none)) return false;
+    published_volume = nullptr;
+    return true;
+  }
+  if (!full && v == published_volume) return true;
   const std::string& frame = *v->with_layout;
   const std::string hash = wire::sha256(frame);
   const std::int64_t max_payload = natsConnection_GetMaxPayload(conn->nc());
@@ -460,12 +470,15 @@ bool NatsOrigin::Impl::publish_volume(bool full) {
   return true;
 }
 
-// Every posed node's newest pose, when the sequence moved (or after a reconnection).
+// Every posed node's newest pose, when the sequence moved (or after a reconnection). A scene
+// without dynamic nodes publishes an empty set on a whole publish: poses an earlier origin left
+// in the stream would name nodes this scene does not pose, which its viewers refuse.
 bool NatsOrigin::Impl::publish_poses(bool full) {
   PoseBoard* board = host.poses();
-  if (!board) return true;
+  if (!board && !full) return true;
   std::uint64_t sequence = 0;
-  const std::map<int, NodePoseState> poses = board->snapshot(&sequence);
+  const std::map<int, NodePoseState> poses =
+      board ? board->snapshot(&sequence) : std::map<int, NodePoseState>{};
   if (!full && sequence == published_poses) return true;
   wire::NatsPoses m;
   m.set_origin(origin);
