@@ -137,7 +137,7 @@ void expect_near(glm::vec3 a, glm::vec3 b, float eps, const std::string& what) {
   EXPECT_NEAR(a.z, b.z, eps) << what;
 }
 
-bool has_warning(const LoadReport& r, const std::string& fragment) {
+bool has_warning(const GltfLoadReport& r, const std::string& fragment) {
   for (const std::string& w : r.warnings)
     if (w.find(fragment) != std::string::npos) return true;
   return false;
@@ -351,7 +351,7 @@ TEST_F(GltfTest, GltfUnsupportedPrimitivesSkippedWithWarning) {
   m.gltf["meshes"].push_back({{"primitives", {{{"attributes", {{"POSITION", 0}}}, {"mode", 3}}}}});
   m.gltf["nodes"].push_back({{"mesh", 1}});
   m.gltf["scenes"][0]["nodes"] = {0, 1};
-  LoadReport report;
+  GltfLoadReport report;
   Scene s = load_gltf(write_model(dir_, "lines", m), &report);
   EXPECT_TRUE(has_warning(report, "LINES")) << ::testing::PrintToString(report.warnings);
   EXPECT_TRUE(has_warning(report, "POINTS"));
@@ -690,7 +690,7 @@ TEST(GltfSamples, GltfBoxTexturedHasItsTexture) {
 
 TEST(GltfSamples, GltfCamerasSkipsOrthographicWithWarning) {
   IRRADCAST_NEED_TESTDATA();
-  LoadReport report;
+  GltfLoadReport report;
   Scene s = load_gltf(kSamples + "/Cameras/Cameras.gltf", &report);
   ASSERT_EQ(s.cameras.size(), 1u);
   EXPECT_FLOAT_EQ(s.cameras[0].yfov, 0.7f);
@@ -981,7 +981,7 @@ TEST_F(GltfTest, GltfRoundTripGltfAndGlb) {
     SCOPED_TRACE(name);
     std::string p = path(name);
     save_gltf(original, p);
-    LoadReport report;
+    GltfLoadReport report;
     Scene loaded = load_gltf(p, &report);
     EXPECT_TRUE(report.warnings.empty()) << ::testing::PrintToString(report.warnings);
     expect_same_scene(original, loaded);
@@ -1100,7 +1100,7 @@ TEST_F(GltfTest, AlphaModeMaskLoadsCutoffAndBaseAlpha) {
         {"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.6, 0.7, 0.4}}}}},
        {{"name", "wall"}, {"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 0.3}}}}},
        {{"name", "default-cutoff"}, {"alphaMode", "MASK"}}});
-  LoadReport report;
+  GltfLoadReport report;
   Scene s = load_gltf(p, &report);
   EXPECT_TRUE(report.warnings.empty()) << ::testing::PrintToString(report.warnings);
   ASSERT_GE(s.materials.size(), 3u);
@@ -1124,7 +1124,7 @@ TEST_F(GltfTest, AlphaModeBlendLoadsAsMaskAtOneHalfWithOneWarning) {
                            {{{"name", "glass"}, {"alphaMode", "BLEND"}, {"alphaCutoff", 0.1}},
                             {{"name", "curtain"}, {"alphaMode", "BLEND"}},
                             {{"name", "opaque"}}});
-  LoadReport report;
+  GltfLoadReport report;
   Scene s = load_gltf(p, &report);
   ASSERT_EQ(report.warnings.size(), 1u) << ::testing::PrintToString(report.warnings);
   EXPECT_TRUE(has_warning(report, "BLEND"));
@@ -1173,7 +1173,7 @@ TEST_F(GltfTest, MaskMaterialsRoundTrip) {
   for (const char* name : {"mask.gltf", "mask.glb"}) {
     SCOPED_TRACE(name);
     save_gltf(original, path(name));
-    LoadReport report;
+    GltfLoadReport report;
     Scene loaded = load_gltf(path(name), &report);
     EXPECT_TRUE(report.warnings.empty()) << ::testing::PrintToString(report.warnings);
     expect_same_scene(original, loaded);

@@ -76,7 +76,7 @@ struct MeshBlocks;  // gltf_meshes.cpp
 
 class Loader {
  public:
-  Loader(std::string path, const tinygltf::Model& model, LoadReport* report)
+  Loader(std::string path, const tinygltf::Model& model, GltfLoadReport* report)
       : path_(std::move(path)), m_(model), report_(report) {}
 
   Scene run();
@@ -141,7 +141,7 @@ class Loader {
 
   std::string path_;
   const tinygltf::Model& m_;
-  LoadReport* report_;
+  GltfLoadReport* report_;
   int default_material_ = -1;
   std::map<int, int> image_to_texture_;  // glTF image -> Scene::textures index (-1 = unusable)
   std::vector<int> camera_map_;          // glTF camera -> Scene::cameras index (-1 = skipped)

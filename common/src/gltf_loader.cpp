@@ -211,7 +211,7 @@ std::string parse_model(const std::string& path, const std::vector<unsigned char
 }  // namespace
 }  // namespace gltf_import
 
-Scene load_gltf(const std::string& path, LoadReport* report, const std::string& root) {
+Scene load_gltf(const std::string& path, GltfLoadReport* report, const std::string& root) {
   using namespace gltf_import;
   std::vector<unsigned char> bytes = read_whole_file(path);
   const bool binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;

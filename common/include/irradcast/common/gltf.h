@@ -8,7 +8,9 @@
 
 namespace irradcast {
 
-struct LoadReport {
+// What load_gltf noticed but did not refuse (named apart from the load generator's LoadReport:
+// two types of one name in one namespace share their implicit functions' symbols).
+struct GltfLoadReport {
   std::vector<std::string> warnings;  // e.g. skipped line / point primitives
 };
 
@@ -33,7 +35,7 @@ struct LoadReport {
 // naming the materials, and the base colour factor's alpha is kept (clamped to [0, 1]).
 // Scene::textures holds each used glTF image once, as RGBA8. Lights and cameras keep glTF order
 // minus the skipped ones.
-Scene load_gltf(const std::string& path, LoadReport* report = nullptr,
+Scene load_gltf(const std::string& path, GltfLoadReport* report = nullptr,
                 const std::string& root = "");
 
 // Writes the scene as valid glTF 2.0: .glb (binary) or .gltf (JSON with the buffer embedded as a
