@@ -13,9 +13,14 @@
 
 namespace irradcast {
 
-std::shared_ptr<ClientScene> make_client_scene(const std::string& bytes, const std::string& hash) {
+std::shared_ptr<ClientScene> make_client_scene(const std::string& bytes, const std::string& hash,
+                                               int avatar_nodes) {
   auto s = std::make_shared<ClientScene>();
   s->unpacked = wire::open_scene_package(bytes, hash);
+  if (avatar_nodes > 0) {
+    s->avatar_first = add_avatar_nodes(s->unpacked, avatar_nodes);
+    s->avatar_count = avatar_nodes;
+  }
   s->world = World::build(s->unpacked.scene);
   s->build_ray_scenes();
   return s;
@@ -32,7 +37,11 @@ void ClientScene::build_ray_scenes() {
 
 ClientSession::ClientSession(ClientSessionOptions options, ClientSceneFactory factory)
     : options_(std::move(options)),
-      factory_(factory ? std::move(factory) : ClientSceneFactory(make_client_scene)),
+      factory_(factory ? std::move(factory)
+                       : ClientSceneFactory([n = options_.follow_edits ? options_.avatar_nodes : 0](
+                                                const std::string& bytes, const std::string& hash) {
+                           return make_client_scene(bytes, hash, n);
+                         })),
       ping_interval_(options_.ping_interval) {
   tiles_.share_decodes(options_.shared_decodes, options_.shared_texels);
 }
@@ -85,6 +94,9 @@ ClientStep ClientSession::on_frame(const wire::Envelope& e) {
       break;
     case wire::Envelope::kPoses:
       on_poses(e.poses());
+      break;
+    case wire::Envelope::kAvatars:
+      on_avatars(e.avatars());
       break;
     case wire::Envelope::kProbeVolume:
       try {
@@ -180,7 +192,8 @@ ClientStep ClientSession::on_chunk(const wire::SceneChunk& c) {
 
 ClientStep ClientSession::install(std::shared_ptr<ClientScene> scene, bool from_cache) {
   try {
-    tiles_.configure(welcome_, scene->unpacked.atlas);
+    tiles_.configure(welcome_, scene->unpacked.atlas,
+                     static_cast<std::size_t>(scene->avatar_count));
   } catch (const Error& e) {
     throw ClientSessionFailure("bad scene", e.what());
   }
@@ -194,6 +207,7 @@ ClientStep ClientSession::install(std::shared_ptr<ClientScene> scene, bool from_
   package_poses_.clear();            // the new scene's nodes stand as its package places them
   posable_.clear();
   pose_sequence_ = 0;
+  avatars_ = AvatarNodes(scene_->avatar_first, scene_->avatar_count);
   phase_ = Phase::Streaming;
   // Edits that arrived during the download, in order (those the package has are skipped).
   std::vector<wire::SceneEdit> pending;
@@ -211,6 +225,7 @@ wire::Envelope ClientSession::subscribe() {
   s.mutable_subscribe()->set_all(true);
   s.mutable_subscribe()->set_encoding(options_.encoding);
   s.mutable_subscribe()->set_max_bytes_per_s(options_.max_bytes_per_s);
+  s.mutable_subscribe()->set_presence(options_.presence);
   return s;
 }
 
@@ -323,6 +338,25 @@ void ClientSession::on_poses(const wire::Poses& m) {
   package_poses_.merge(before);
   pose_sequence_ = m.sequence();
   ++counters_.poses_applied;
+}
+
+void ClientSession::on_avatars(const wire::Avatars& m) {
+  if (phase_ != Phase::Streaming || !scene_) return;
+  ++counters_.avatar_messages;
+  counters_.avatars_listed += static_cast<std::uint64_t>(m.avatars_size());
+  if (avatars_.count() == 0) return;
+  ClientScene& s = *scene_;
+  SceneEdit edit;
+  try {
+    edit = avatars_.place(m, s.world.bounds);
+    if (edit.ops.empty()) return;
+    apply_edit(s.unpacked.scene, edit);
+  } catch (const Error& ex) {
+    throw ClientSessionFailure("protocol", ex.what());
+  }
+  const std::vector<int> changed = s.world.update(s.unpacked.scene);
+  if (s.rays) s.rays->update(changed);
+  if (s.dynamic_rays) s.dynamic_rays->update(changed);
 }
 
 bool ClientSession::take_reload() {

@@ -169,6 +169,7 @@ class User : public std::enable_shared_from_this<User> {
     s.min_ping_interval = std::chrono::milliseconds(100);
     s.follow_edits = false;
     s.log_tag = "load";
+    s.presence = o.presence;
     return s;
   }
 
@@ -305,6 +306,11 @@ class User : public std::enable_shared_from_this<User> {
   void handle(const wire::Envelope& env) {
     using Event = ClientStep::Event;
     if (finishing_ && env.msg_case() != wire::Envelope::kError) return;  // Bye is on its way
+    if (env.has_avatars()) {
+      ++result_.avatar_messages;
+      result_.avatars_listed += static_cast<std::uint64_t>(env.avatars().avatars_size());
+      result_.avatar_bytes += env.ByteSizeLong() + wire::kFrameHeaderBytes;
+    }
     try {
       const ClientStep step = core_.on_frame(env);
       switch (step.event) {

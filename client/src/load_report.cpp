@@ -82,7 +82,8 @@ LoadReport LoadReport::of(const LoadOptions& options, double elapsed,
   r.options = options;
   r.elapsed_s = elapsed;
   r.users = options.users;
-  std::vector<double> scene, full, rate, steady, to_full, fps, frame_ms;
+  std::vector<double> scene, full, rate, steady, to_full, fps, frame_ms, avatar_rate, avatar_bytes;
+  std::uint64_t avatars_listed = 0;
   for (LoadUserResult& res : users) {
     r.connected += res.connected;
     r.failed += !res.failure.empty();
@@ -106,6 +107,12 @@ LoadReport LoadReport::of(const LoadOptions& options, double elapsed,
     r.bytes_received += res.bytes_received;
     r.frames += res.frames;
     r.camera_updates += res.camera_updates;
+    if (options.presence && res.connected) {
+      avatar_rate.push_back(static_cast<double>(res.avatar_messages) / elapsed);
+      avatar_bytes.push_back(static_cast<double>(res.avatar_bytes) / elapsed);
+    }
+    r.avatar_messages += res.avatar_messages;
+    avatars_listed += res.avatars_listed;
     r.connections_lost += res.connections_lost;
     r.reconnects += res.reconnects;
     r.per_user.push_back(std::move(res));
@@ -119,6 +126,11 @@ LoadReport LoadReport::of(const LoadOptions& options, double elapsed,
   r.bytes_to_full_image = Percentiles::of(std::move(to_full));
   r.frames_per_s = Percentiles::of(std::move(fps));
   r.frame_ms = Percentiles::of(std::move(frame_ms));
+  r.avatar_messages_per_s = Percentiles::of(std::move(avatar_rate));
+  r.avatar_bytes_per_s = Percentiles::of(std::move(avatar_bytes));
+  r.avatars_per_message = r.avatar_messages > 0 ? static_cast<double>(avatars_listed) /
+                                                      static_cast<double>(r.avatar_messages)
+                                                : 0.0;
   r.errors = std::move(errors);
   return r;
 }
@@ -147,6 +159,11 @@ std::string LoadReport::text() const {
   if (options.render) {
     s << "  frames/s per user " << dist(frames_per_s, "", 2) << "\n";
     s << "  compose per frame " << dist(frame_ms, " ms") << "\n";
+  }
+  if (options.presence) {
+    s << "  avatars/s per user " << dist(avatar_messages_per_s, "", 2) << "  ("
+      << fixed(avatars_per_message) << " avatars per message)\n";
+    s << "  avatar bytes/s    " << byte_dist(avatar_bytes_per_s, "/s") << "\n";
   }
   s << "  errors            ";
   if (errors.empty()) s << "none";
@@ -203,6 +220,11 @@ std::string LoadReport::json(bool per_user_details) const {
                  {"bytes_received", bytes_received},
                  {"frames", frames},
                  {"camera_updates", camera_updates}};
+  if (options.presence)
+    j["avatars"] = {{"messages", avatar_messages},
+                    {"per_message", avatars_per_message},
+                    {"messages_per_s", to_json(avatar_messages_per_s)},
+                    {"bytes_per_s", to_json(avatar_bytes_per_s)}};
   j["errors"] = nlohmann::json::object();
   for (const auto& [kind, n] : errors) j["errors"][kind] = n;
   if (per_user_details) {

@@ -8,10 +8,15 @@
 
 namespace irradcast {
 
-void TileCache::configure(const wire::Welcome& w, const Atlas& atlas) {
-  if (static_cast<std::size_t>(w.lightmaps_size()) != atlas.objects.size())
+void TileCache::configure(const wire::Welcome& w, const Atlas& atlas, std::size_t added) {
+  if (added > atlas.objects.size() ||
+      static_cast<std::size_t>(w.lightmaps_size()) != atlas.objects.size() - added)
     throw Error("the server announces " + std::to_string(w.lightmaps_size()) +
-                " lightmaps, the scene package has " + std::to_string(atlas.objects.size()));
+                " lightmaps, the scene package has " +
+                std::to_string(atlas.objects.size() - std::min(added, atlas.objects.size())));
+  for (std::size_t m = atlas.objects.size() - added; m < atlas.objects.size(); ++m)
+    if (atlas.objects[m].width != 0 || atlas.objects[m].height != 0)
+      throw Error("an object the client added has a lightmap layout");
   if (w.tile_size() == 0) throw Error("the server announces a tile size of 0");
   const int ts = static_cast<int>(w.tile_size());
   std::vector<wire::LightmapInfo> infos(w.lightmaps().begin(), w.lightmaps().end());
@@ -31,6 +36,7 @@ void TileCache::configure(const wire::Welcome& w, const Atlas& atlas) {
     if (shared_texels_ == SharedTexels::Copy) maps.emplace_back(o.width, o.height);
   }
   first.push_back(total);
+  if (shared_texels_ == SharedTexels::Copy) maps.resize(atlas.objects.size());  // added: empty
   tile_size_ = w.tile_size();
   infos_ = std::move(infos);
   first_tile_ = std::move(first);

@@ -36,6 +36,18 @@ struct ConnectionLost : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+ClientSessionOptions session_options(const ViewClientOptions& o) {
+  ClientSessionOptions so;
+  so.name = o.name;
+  so.encoding = o.encoding;
+  so.max_bytes_per_s = o.max_bytes_per_s;
+  so.ping_interval = o.ping_interval;
+  so.log_tag = "view";
+  so.presence = o.presence;
+  so.avatar_nodes = o.presence ? o.avatars : 0;
+  return so;
+}
+
 }  // namespace
 
 struct ViewClient::Net {
@@ -52,9 +64,7 @@ ViewClient::ViewClient(ViewClientOptions options)
       tls_(make_tls_context(options_.tls)),
       backoff_(options_.backoff,
                options_.backoff_seed != 0 ? options_.backoff_seed : std::random_device{}()),
-      core_(ClientSessionOptions{options_.name, options_.encoding, options_.max_bytes_per_s,
-                                 options_.ping_interval, std::chrono::milliseconds(0),
-                                 /*follow_edits=*/true, "view", nullptr}) {}
+      core_(session_options(options_)) {}
 
 ViewClient::~ViewClient() {
   try {
@@ -392,6 +402,8 @@ ViewClientCounters ViewClient::counters() const {
   c.scene_from_cache = p.scene_from_cache;
   c.errors_received = p.errors_received;
   c.edits_applied = p.edits_applied;
+  c.avatar_messages = p.avatar_messages;
+  c.avatars_shown = static_cast<std::uint32_t>(core_.avatars_shown());
   return c;
 }
 

@@ -26,6 +26,7 @@ struct Options {
   double duration = 10.0;
   std::string mode = "thin";
   bool decode_per_user = false;
+  bool presence = false;
   int width = 320, height = 240;
   double fps = 30.0;
   double camera_hz = 10.0;
@@ -64,6 +65,7 @@ int run(const Options& o) {
     throw Error("--mode must be thin or render, not '" + o.mode + "'");
   lo.render = o.mode == "render";
   lo.decode_per_user = o.decode_per_user;
+  lo.presence = o.presence;
   lo.width = o.width;
   lo.height = o.height;
   lo.fps = o.fps;
@@ -127,6 +129,9 @@ int main(int argc, char** argv) {
                "every user decodes every tile into its own lightmaps (default: the users share "
                "the decode of byte-identical tiles, as N clients' decodes run on N machines, not "
                "on this one; thin users keep a reference to it, render users copy it)");
+  app.add_flag("--presence", o.presence,
+               "every user shows itself as an avatar at its camera and receives the nearest "
+               "others' (irradcast-server --presence; the report adds their rate and bytes)");
   app.add_option("--width", o.width, "frame width (render mode)")->check(CLI::Range(1, 8192));
   app.add_option("--height", o.height, "frame height (render mode)")->check(CLI::Range(1, 8192));
   app.add_option("--fps", o.fps, "render mode: frames per second per user at most (0 = no cap)")

@@ -34,6 +34,8 @@ struct Options {
   std::string connect;
   irradcast::ClientTls tls;
   std::string camera;
+  bool presence = false;
+  int avatars = 32;
   int width = 512;
   int height = 512;
   std::string out;
@@ -125,6 +127,8 @@ irradcast::ViewClientOptions client_options(const Options& o) {
   vo.reconnect = !o.no_reconnect;
   vo.tls = tools::tls_of(o.tls);
   vo.trace_emitters = o.dynamic_emitters == "traced";
+  vo.presence = o.presence;
+  vo.avatars = o.avatars;
   return vo;
 }
 
@@ -256,7 +260,9 @@ void report(const Options& o, const irradcast::ViewClientCounters& c, const Fram
                       {"compose_ms_per_frame", f.compose_s * per_frame},
                       {"ssao_ms_per_frame", f.ssao_s * per_frame},
                       {"reproject_ms_per_frame", f.reproject_s * per_frame},
-                      {"ssao_reused_fraction", f.count > 0 ? f.reused / f.count : 0.0}};
+                      {"ssao_reused_fraction", f.count > 0 ? f.reused / f.count : 0.0},
+                      {"avatar_messages", c.avatar_messages},
+                      {"avatars_shown", c.avatars_shown}};
   std::ofstream out(o.json);
   out << j.dump(2) << "\n";
   if (!out) throw irradcast::Error(o.json + ": cannot write");
@@ -337,6 +343,11 @@ int main(int argc, char** argv) {
                  "rays, the default) | volume (from the probe volume, as the browser page does; "
                  "docs/DYNAMIC.md)")
       ->check(CLI::IsMember({"traced", "volume"}));
+  app.add_flag("--presence", o.presence,
+               "show this viewer to the others as an avatar at its camera and draw theirs "
+               "(irradcast-server --presence; docs/DYNAMIC.md#presence)");
+  app.add_option("--avatars", o.avatars, "with --presence: draw at most this many, the nearest")
+      ->check(CLI::Range(1, 256));
   app.add_option("--exposure", o.exposure, "auto (key 0.18) or exposure in stops");
   app.add_option("--json", o.json, "also write a JSON report here");
   app.add_flag("--no-reconnect", o.no_reconnect,

@@ -5,6 +5,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <fstream>
@@ -43,6 +44,10 @@ struct NetworkOptions {
   std::string proxy_protocol = "none";
   std::uint32_t max_clients = ServerOptions().max_clients;
   std::uint32_t max_clients_per_peer = ServerOptions().max_clients_per_peer;
+  bool presence = false;
+  std::uint32_t presence_nearest = ServerOptions().presence_nearest;
+  double presence_hz = ServerOptions().presence_hz;
+  float presence_height = 0.0f;  // 0: the program's default (presence_default_height)
 
   void add_to(CLI::App& app) {
     app.add_option("--bind", bind, "address to listen on");
@@ -119,6 +124,25 @@ struct NetworkOptions {
         ->default_str("none");
     app.add_option("--tls-key", tls_key, "the PEM private key of --tls-cert")->default_str("none");
     app.add_option("--log-level", log_level, "debug | info | warn | error | off");
+    app.add_flag("--presence", presence,
+                 "show each viewer that asks (irradcast-view --presence) to the others as an "
+                 "avatar at its camera, lit like the dynamic objects (docs/DYNAMIC.md#presence)");
+    app.add_option("--presence-nearest", presence_nearest,
+                   "the most avatars a viewer is sent: those nearest its camera")
+        ->check(CLI::Range(1u, 256u));
+    app.add_option("--presence-hz", presence_hz, "the most avatar updates a viewer gets a second")
+        ->check(CLI::Range(0.1, 60.0));
+    app.add_option("--presence-height", presence_height,
+                   "metres from an avatar's foot to its eye (default: 1.7, or a quarter of the "
+                   "scene's largest extent when that is less)")
+        ->check(CLI::Range(0.001f, 100.0f));
+  }
+
+  // The avatars' height: --presence-height, else 1.7 m, or a quarter of `scene_extent` (metres;
+  // 0: unknown) when that is less (a person in the Cornell box would not fit).
+  float presence_default_height(float scene_extent) const {
+    if (presence_height > 0.0f) return presence_height;
+    return scene_extent > 0.0f ? std::min(1.7f, 0.25f * scene_extent) : 1.7f;
   }
 
   // The control token for scene edits (docs/EDITS.md) and where it came from, for the log (the
@@ -181,6 +205,10 @@ struct NetworkOptions {
     so.tls_key = tls_key;
     so.max_clients = max_clients;
     so.max_clients_per_peer = max_clients_per_peer;
+    so.presence = presence;
+    so.presence_nearest = presence_nearest;
+    so.presence_hz = presence_hz;
+    so.presence_height = presence_default_height(0.0f);
     const std::uint64_t files = raise_open_file_limit();
     if (files < so.max_clients + 64u)
       log::warn(tag, "this process may open " + std::to_string(files) +

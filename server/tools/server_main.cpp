@@ -82,9 +82,15 @@ int run(const Options& o, const sigset_t& signals) {
   ho.sky_dir = o.sky_dir;
   ho.state_dir = o.state_dir;
   ho.journal_compact_after = o.journal_compact_after;
+  ho.avatars = o.net.presence;
   EngineHost host(load_lit_scene(o), o.scene, ho);
 
-  const ServerOptions so = o.net.server_options(token, "server");
+  ServerOptions so = o.net.server_options(token, "server");
+  so.presence_height = o.net.presence_default_height(host.world().bounds.max_extent());
+  if (so.presence)
+    log::info("server", "presence: avatars " + std::to_string(so.presence_height) +
+                            " m tall, the nearest " + std::to_string(so.presence_nearest) +
+                            " to each viewer");
   // With --nats the server serves the NatsOrigin, which publishes what the host makes.
   std::unique_ptr<NatsOrigin> origin;
   if (!o.nats.url.empty()) {

@@ -129,6 +129,8 @@ const char* message_name(const Envelope& e) {
       return "error";
     case Envelope::kPoses:
       return "poses";
+    case Envelope::kAvatars:
+      return "avatars";
     case Envelope::kBye:
       return "bye";
     case Envelope::kSceneEdit:

@@ -14,6 +14,7 @@
 #include "irradcast/wire/frame.h"
 #include "irradcast/wire/pose_message.h"
 #include "irradcast/wire/probe_volume_message.h"
+#include "session_messages.h"
 
 namespace irradcast {
 
@@ -80,11 +81,6 @@ SceneEdit read_sky_files(SceneEdit edit, const std::string& sky_dir) {
   return edit;
 }
 
-std::uint64_t now_us() {
-  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
-                                        std::chrono::system_clock::now().time_since_epoch())
-                                        .count());
-}
 }  // namespace
 
 EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions options)
@@ -133,7 +129,7 @@ EngineHost::EngineHost(Scene scene, std::string scene_id, EngineHostOptions opti
     // Replayed edits: the tiles are not those of a host that applied them while it ran.
     if (replayed > 0) tile_epoch_ = digest64(std::to_string(tile_epoch_) + "|journal");
   }
-  if (has_dynamic_) {
+  if (has_dynamic_ || options_.avatars) {
     impl_->volume = std::make_unique<IrradianceVolumeBuilder>(
         prepared_.world(), prepared_.rays(), prepared_.atlas(), options_.probe_volume);
     impl_->volume_placed = true;
@@ -364,7 +360,7 @@ std::uint64_t EngineHost::post_poses(const SceneEdit& poses, bool stream) {
       throw;
     }
   }
-  const std::uint64_t posted = poses_.post(after, now_us());
+  const std::uint64_t posted = poses_.post(after, wall_clock_us());
   if (pose_file_ && stream) {
     std::lock_guard lock(saver_mutex_);
     poses_dirty_ = true;
@@ -503,7 +499,7 @@ void EngineHost::publish_edits(QueuedEdits& queued, const EditReport& report, La
                 ") in " + std::to_string(static_cast<int>(ms)) + " ms; " +
                 std::to_string(impl_->engine->stale_texels()) + " texels to refresh");
   log::info("engine", "edit " + std::to_string(revision) + " took: " + lap.text());
-  const std::uint64_t at = now_us();
+  const std::uint64_t at = wall_clock_us();
   for (AppliedEdit& a : applied) {
     a.package = package;
     a.tile_epoch = epoch;
@@ -614,7 +610,7 @@ void EngineHost::do_update() {
   const TileStore::Noise noise{impl_->engine->min_samples(),
                                standard_error.empty() ? nullptr : &standard_error};
   std::vector<std::uint32_t> changed =
-      tiles_->publish(maps, now_us(), noise_aware ? &noise : nullptr);
+      tiles_->publish(maps, wall_clock_us(), noise_aware ? &noise : nullptr);
   const bool volume_changed = refine_probe_volume(maps);
   const double bytes_per_texel = tiles_->bytes_per_texel();
   const auto ended = std::chrono::steady_clock::now();

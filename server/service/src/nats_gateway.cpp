@@ -40,12 +40,6 @@ constexpr auto kCameraKeepalive = std::chrono::seconds(2);
 constexpr std::uint32_t kMaxVolumeChunks = 1u << 9;   // 256 MiB at 512 KiB
 constexpr std::uint64_t kMaxVolumeBytes = 96u << 20;  // 2^16 probes' layout and SH, with room
 
-std::uint64_t now_us() {
-  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
-                                        std::chrono::system_clock::now().time_since_epoch())
-                                        .count());
-}
-
 // A state message's problem, or "" when it can be used.
 std::string check_state(const wire::NatsSceneState& s) {
   if (s.scene_hash().size() != 32) return "the scene hash is not 32 bytes";
@@ -274,7 +268,8 @@ void NatsGateway::Impl::on_tile(wire::NatsTile t) {
                  std::to_string(t.version()) + ", beyond what the origin's " +
                  std::to_string(seen) + " updates can have made");
     }
-    st.lag_seconds = static_cast<double>(now_us() - std::min(now_us(), t.time_us())) * 1e-6;
+    st.lag_seconds =
+        static_cast<double>(wall_clock_us() - std::min(wall_clock_us(), t.time_us())) * 1e-6;
     if (!store) {
       // Kept until the layout is known, bounded in count and bytes (the rest come again with the
       // next catch-up or version).

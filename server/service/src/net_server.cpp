@@ -52,7 +52,7 @@ struct Server::Impl {
             SessionContext{host, options, counters, peers, [this] { return stats(); },
                            std::min(options.max_frame,
                                     options.max_hello_frame + 32 * host.tiles().tile_count()),
-                           &tile_frames},
+                           &tile_frames, options.presence ? &presence : nullptr},
             nullptr, &proxies, [this](const std::shared_ptr<Session>& s) { remove(s); }} {}
 
   TileSource& host;
@@ -72,7 +72,9 @@ struct Server::Impl {
   std::optional<asio::executor_work_guard<asio::io_context::executor_type>> work;
   std::atomic<bool> stopping{false};
   std::atomic<std::uint64_t> next_session{1};
-  TileFrames tile_frames;        // the tile frames the sessions share
+  TileFrames tile_frames;  // the tile frames the sessions share
+  PresenceBoard presence;  // ServerOptions::presence
+  asio::steady_timer presence_timer{io};
   SessionServer session_server;  // what the sessions use of the server
 
   mutable std::mutex sessions_mutex;
@@ -104,6 +106,7 @@ struct Server::Impl {
   void on_edit(const AppliedEdit& applied);
   void on_poses();
   void fan_out_poses();
+  void presence_tick();
   void remove(const std::shared_ptr<Session>& s) {
     std::lock_guard lock(sessions_mutex);
     sessions.erase(s);
@@ -305,6 +308,21 @@ void Server::Impl::fan_out_poses() {
   for (const auto& s : sessions) s->poses_changed();
 }
 
+// Every 1 / presence_hz seconds: when any avatar moved, every session gets the new set (each
+// sends its client the nearest others'; presence_board.h).
+void Server::Impl::presence_tick() {
+  if (stopping) return;
+  if (auto avatars = presence.take_changed()) {
+    std::lock_guard lock(sessions_mutex);
+    for (const auto& s : sessions) s->presence_changed(avatars);
+  }
+  presence_timer.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(1.0 / options.presence_hz)));
+  presence_timer.async_wait([this](std::error_code ec) {
+    if (!ec) presence_tick();
+  });
+}
+
 Server::Server(TileSource& host, ServerOptions options)
     : impl_(std::make_shared<Impl>(host, std::move(options))) {
   Impl& im = *impl_;
@@ -318,6 +336,12 @@ Server::Server(TileSource& host, ServerOptions options)
     throw Error("TLS needs both --tls-cert and --tls-key");
   if (!o.tls_cert.empty())
     im.tls = std::make_unique<wire::ServerTls>(o.tls_cert, o.tls_key, "server");
+  if (o.presence &&
+      (!(o.presence_hz > 0.0 && o.presence_hz <= 60.0) || o.presence_nearest < 1 ||
+       o.presence_nearest > 256 || !(o.presence_height > 0.0f && o.presence_height <= 100.0f)))
+    throw Error(
+        "presence needs 0 < --presence-hz <= 60, 1 <= --presence-nearest <= 256 and "
+        "0 < --presence-height <= 100 (metres)");
   im.session_server.tls = im.tls.get();
 }
 
@@ -365,6 +389,7 @@ void Server::start() {
   im.work.emplace(asio::make_work_guard(im.io));
   im.accept(false);
   if (im.options.http_port) im.accept(true);
+  if (im.options.presence) asio::post(im.io, [&im] { im.presence_tick(); });
   for (int i = 0; i < im.options.io_threads; ++i)
     im.threads.emplace_back([&im] {
       set_thread_name("irradcast-io");
@@ -390,6 +415,7 @@ void Server::stop() {
     im.http_acceptor.close(ec);
     im.accept_timer.cancel();
     im.http_accept_timer.cancel();
+    im.presence_timer.cancel();
   });
   {
     std::lock_guard lock(im.sessions_mutex);

@@ -250,6 +250,14 @@ void Session::poses_changed() {
   });
 }
 
+void Session::presence_changed(std::shared_ptr<const AvatarSnapshot> avatars) {
+  asio::post(strand_, [self = shared_from_this(), avatars = std::move(avatars)]() mutable {
+    if (self->protocol_.closed()) return;
+    self->protocol_.presence_changed(std::move(avatars));
+    self->pump();
+  });
+}
+
 void Session::shutdown() {
   asio::post(strand_, [self = shared_from_this()] {
     self->protocol_.shutdown();

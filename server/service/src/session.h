@@ -59,6 +59,8 @@ class Session : public std::enable_shared_from_this<Session> {
   // go first).
   void edit_applied(std::shared_ptr<const std::string> frame);
   void poses_changed();
+  // The presence tick: the avatars now (SessionProtocol::presence_changed).
+  void presence_changed(std::shared_ptr<const AvatarSnapshot> avatars);
   // Server shutdown: an Error SERVER_SHUTDOWN, then close.
   void shutdown();
   std::size_t queue_depth() const { return protocol_.queue_depth(); }

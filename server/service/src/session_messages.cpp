@@ -1,12 +1,19 @@
 // The messages a session builds from the server's state, and the control token's comparison.
 #include "session_messages.h"
 
+#include <chrono>
 #include <cmath>
 #include <utility>
 
 #include <glm/geometric.hpp>
 
 namespace irradcast {
+
+std::uint64_t wall_clock_us() {
+  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
+                                        std::chrono::system_clock::now().time_since_epoch())
+                                        .count());
+}
 
 bool same_secret(const std::string& given, const std::string& secret) {
   unsigned char diff = given.size() == secret.size() ? 0 : 1;

@@ -17,6 +17,8 @@
 
 namespace irradcast {
 
+// The wall clock in microseconds since the Unix epoch (the *_us fields of messages).
+std::uint64_t wall_clock_us();
 // Compares a client's token with the server's in time independent of where they differ.
 bool same_secret(const std::string& given, const std::string& secret);
 // The reason a session ends after sending an Error frame with this code.

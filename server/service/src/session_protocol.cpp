@@ -226,10 +226,45 @@ void SessionProtocol::on_subscribe(const wire::Subscribe& s) {
   queue_changed();
   offer_probe_volume();
   poses_due_ = ctx_.host.poses() != nullptr;  // the first Poses: complete
+  if (s.presence() && !ctx_.presence) {
+    error(wire::BAD_REQUEST, "this server shows no avatars (start it with --presence)");
+  } else if (s.presence() && !presence_) {
+    presence_ = true;
+    if (camera_) ctx_.presence->place(id_, *camera_);
+    avatars_ = ctx_.presence->snapshot();  // the first Avatars: those here now
+  }
 }
 
 void SessionProtocol::poses_changed() {
   if (streaming_ && !closed_) poses_due_ = true;
+}
+
+void SessionProtocol::presence_changed(std::shared_ptr<const AvatarSnapshot> avatars) {
+  if (presence_ && !closed_) avatars_ = std::move(avatars);
+}
+
+// The nearest others' avatars from the newest snapshot; null when they are those sent last.
+std::shared_ptr<const std::string> SessionProtocol::next_avatars() {
+  const std::shared_ptr<const AvatarSnapshot> all = std::exchange(avatars_, nullptr);
+  std::vector<AvatarState> near = nearest_avatars(
+      *all, id_, camera_ ? camera_->eye : glm::vec3(0.0f), ctx_.options.presence_nearest);
+  if (avatars_written_ && near == avatars_sent_) return nullptr;
+  avatars_written_ = true;
+  avatars_sent_ = std::move(near);
+  wire::Envelope e;
+  wire::Avatars* m = e.mutable_avatars();
+  m->set_height(ctx_.options.presence_height);
+  m->set_time_us(wall_clock_us());
+  for (const AvatarState& a : avatars_sent_) {
+    wire::Avatar* w = m->add_avatars();
+    w->set_id(a.id);
+    w->mutable_eye()->set_x(a.eye.x);
+    w->mutable_eye()->set_y(a.eye.y);
+    w->mutable_eye()->set_z(a.eye.z);
+    w->set_heading(a.heading);
+  }
+  ++ctx_.counters.avatar_frames_sent;
+  return std::make_shared<const std::string>(wire::encode_frame(e));
 }
 
 void SessionProtocol::offer_probe_volume() {
@@ -252,6 +287,8 @@ void SessionProtocol::on_camera(const wire::CameraUpdate& c) {
     return;
   }
   ctx_.host.set_camera(id_, pose);
+  camera_ = pose;
+  if (presence_) ctx_.presence->place(id_, *pose);
 }
 
 // A scene edit: needs the control token; validated by the host (the scene does not change on a
@@ -469,6 +506,8 @@ SessionWrite SessionProtocol::next_write(Clock::time_point now) {
       if (f.frame) return {Kind::Edit, f.frame};
     }
   }
+  if (avatars_)
+    if (auto frame = next_avatars()) return {Kind::Edit, std::move(frame)};
   if (volume_frame_) {
     volume_frame_has_layout_ = false;
     return {Kind::Control, std::exchange(volume_frame_, nullptr)};
@@ -553,6 +592,7 @@ void SessionProtocol::close(CloseReason reason) {
   partial_counted_ = 0;
   ctx_.peers.release(peer_key_);
   ctx_.host.set_camera(id_, std::nullopt);
+  if (presence_) ctx_.presence->remove(id_);
   queue_changed();
   ++ctx_.counters.sessions_closed[static_cast<std::size_t>(*close_reason_)];
   queue_depth_ = 0;

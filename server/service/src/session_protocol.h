@@ -26,6 +26,7 @@
 #include "irradcast/service/tile_source.h"
 #include "irradcast/wire/frame.h"
 #include "peer_table.h"
+#include "presence_board.h"
 #include "session_messages.h"
 
 namespace irradcast {
@@ -37,7 +38,7 @@ struct ServerCounters {
       frames_received{0}, tiles_sent{0}, tile_bytes_sent{0}, tiles_coalesced{0},
       scene_bytes_sent{0}, errors_sent{0}, peer_refused{0}, banned_refused{0}, accept_errors{0},
       token_failures{0}, edits_dropped{0}, log_lines_suppressed{0}, websocket_sessions{0},
-      http_requests{0}, poses_streamed{0}, poses_refused{0};
+      http_requests{0}, poses_streamed{0}, poses_refused{0}, avatar_frames_sent{0};
   std::atomic<std::int64_t> partial_bytes{0};  // incomplete frames in every session's decoder
   std::array<std::atomic<std::uint64_t>, kCloseReasons> sessions_closed{};
 };
@@ -51,6 +52,7 @@ struct SessionContext {
   std::function<ServerStats()> server_stats;  // for a StatsRequest
   std::size_t hello_frame_cap = 0;            // the decoder's cap before Hello
   TileFrames* frames = nullptr;               // shared tile frames (null: each session builds)
+  PresenceBoard* presence = nullptr;          // ServerOptions::presence (null: off)
 };
 
 // What the connection must do after a call into the protocol (SessionProtocol::take_events()).
@@ -105,6 +107,9 @@ class SessionProtocol {
   // The host's poses changed (docs/DYNAMIC.md#poses): after Subscribe, the next write sends the
   // newest pose of every node moved since the last Poses this client got.
   void poses_changed();
+  // The avatars moved (presence_board.h): with Subscribe.presence, the next write sends the
+  // nearest others' when they differ from those sent last.
+  void presence_changed(std::shared_ptr<const AvatarSnapshot> avatars);
 
   // The connection's timers and state.
   void penalty_ended() { penalty_ = false; }
@@ -171,6 +176,7 @@ class SessionProtocol {
   void send(const wire::Envelope& e) { send_frame(wire::encode_frame(e)); }
   void send_frame(std::string frame);
   std::string next_scene_chunk();
+  std::shared_ptr<const std::string> next_avatars();
   SessionWrite next_tile(Clock::time_point now);
 
   SessionContext& ctx_;
@@ -191,9 +197,14 @@ class SessionProtocol {
   std::deque<std::string> control_;
   std::deque<std::shared_ptr<const std::string>> edits_;  // broadcasts not yet written
   std::shared_ptr<const std::string> volume_frame_;       // the probe volume, not yet written
-  bool poses_due_ = false;       // a Poses frame may be owed (poses_changed)
-  bool poses_complete_ = false;  // the first, complete Poses was written
-  std::uint64_t poses_seen_ = 0;  // the pose sequence the client stands at
+  bool poses_due_ = false;                         // a Poses frame may be owed (poses_changed)
+  bool poses_complete_ = false;                    // the first, complete Poses was written
+  std::uint64_t poses_seen_ = 0;                   // the pose sequence the client stands at
+  bool presence_ = false;                          // Subscribe.presence on a --presence server
+  std::optional<CameraPose> camera_;               // the last CameraUpdate
+  std::shared_ptr<const AvatarSnapshot> avatars_;  // newer than those sent, not yet written
+  std::vector<AvatarState> avatars_sent_;
+  bool avatars_written_ = false;  // an Avatars frame was written (the first goes out if empty)
   bool volume_frame_has_layout_ = false;
   std::uint64_t volume_layout_epoch_ = 0, volume_version_ = 0;  // queued or written
   std::shared_ptr<const wire::ScenePackage> package_;           // set by Hello

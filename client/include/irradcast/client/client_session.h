@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "irradcast.pb.h"
+#include "irradcast/client/avatars.h"
 #include "irradcast/client/tile_cache.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/lights.h"
@@ -45,6 +46,9 @@ struct ClientScene {
   // The static scene's emitters, whose direct light the viewer traces onto dynamic objects;
   // null with `dynamic_rays`.
   std::unique_ptr<LightSampler> lights;
+  // The other viewers' avatars (avatars.h): nodes [avatar_first, avatar_first + avatar_count)
+  // the client added after the package's.
+  int avatar_first = -1, avatar_count = 0;
 
   // Builds `rays` and, when the world has dynamic objects, `dynamic_rays` and `lights`.
   void build_ray_scenes();
@@ -53,8 +57,10 @@ struct ClientScene {
 // Makes the scene of a package (checking it against `hash`); throws irradcast::Error.
 using ClientSceneFactory =
     std::function<std::shared_ptr<ClientScene>(const std::string& bytes, const std::string& hash)>;
-// The default: unpacks the package (hash checked), builds the world and its RayScene.
-std::shared_ptr<ClientScene> make_client_scene(const std::string& bytes, const std::string& hash);
+// The default: unpacks the package (hash checked), adds `avatar_nodes` avatar nodes (0: none;
+// add_avatar_nodes), builds the world and its RayScene.
+std::shared_ptr<ClientScene> make_client_scene(const std::string& bytes, const std::string& hash,
+                                               int avatar_nodes = 0);
 
 // Input the protocol does not allow: kind() is "protocol" (a message out of order or of another
 // protocol version), "bad scene" (a chunk or package that does not fit the Welcome) or "bad tile".
@@ -84,6 +90,11 @@ struct ClientSessionOptions {
   std::shared_ptr<TileDecodeCache> shared_decodes;
   // How the tiles found there are held (Reference: no lightmaps, for users that never compose).
   SharedTexels shared_texels = SharedTexels::Copy;
+  // Presence (docs/DYNAMIC.md#presence): subscribe with Subscribe.presence (this viewer is shown
+  // to the others at its camera, and gets the nearest others' Avatars).
+  bool presence = false;
+  // The avatars the default scene factory makes room for (0: none are drawn; with follow_edits).
+  int avatar_nodes = 0;
 };
 
 struct ClientSessionCounters {
@@ -91,9 +102,11 @@ struct ClientSessionCounters {
   std::uint64_t tiles_applied = 0;
   std::uint64_t scene_bytes_downloaded = 0;
   std::uint64_t errors_received = 0;
-  std::uint64_t edits_applied = 0;  // scene edits applied to the client's copy of the scene
-  std::uint64_t poses_applied = 0;  // Poses messages applied (docs/DYNAMIC.md#poses)
-  bool scene_from_cache = false;    // the last scene loaded came from use_cached_package
+  std::uint64_t edits_applied = 0;    // scene edits applied to the client's copy of the scene
+  std::uint64_t poses_applied = 0;    // Poses messages applied (docs/DYNAMIC.md#poses)
+  std::uint64_t avatar_messages = 0;  // Avatars messages received (docs/DYNAMIC.md#presence)
+  std::uint64_t avatars_listed = 0;   // avatars in them, summed
+  bool scene_from_cache = false;      // the last scene loaded came from use_cached_package
 };
 
 // What a frame (or a step the driver asked for) did.
@@ -156,6 +169,8 @@ class ClientSession {
   std::uint64_t revision() const { return revision_; }
   // The server's pose sequence of the last Poses applied (docs/DYNAMIC.md#poses).
   std::uint64_t pose_sequence() const { return pose_sequence_; }
+  // The other viewers' avatars shown now (presence; avatars.h).
+  int avatars_shown() const { return avatars_.shown(); }
   // Counts the changes to the static scene: a scene installed, or an applied edit that moved,
   // hid or changed static content (edit_changes_static_scene). Edits that only move dynamic
   // objects leave it (a viewer's history stays valid; client_passes.h).
@@ -176,6 +191,7 @@ class ClientSession {
   void on_scene_edit(const wire::SceneEdit& m);
   void apply_scene_edit(const wire::SceneEdit& m);
   void on_poses(const wire::Poses& m);
+  void on_avatars(const wire::Avatars& m);
 
   ClientSessionOptions options_;
   ClientSceneFactory factory_;
@@ -196,6 +212,7 @@ class ClientSession {
   std::map<int, NodePoseState> package_poses_;
   std::vector<bool> posable_;  // pose_nodes() of the scene, computed at the first Poses
   std::uint64_t pose_sequence_ = 0;
+  AvatarNodes avatars_;  // of scene_
   bool reload_ = false;
   std::chrono::milliseconds ping_interval_;
   std::optional<wire::Stats> last_stats_;

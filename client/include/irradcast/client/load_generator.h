@@ -3,13 +3,14 @@
 // and checks the scene package, subscribes to every tile, sends CameraUpdates along its camera
 // path, and parses, checks and applies every TileUpdate (thin users share the decode of
 // byte-identical tiles and keep a reference to it; with decode_per_user each decodes into its
-// own lightmaps); in render mode it also composes frames of its view into its own lightmaps. A user whose connection drops (reset, EOF, a server Error SERVER_SHUTDOWN,
-// a timed-out handshake or download) reconnects with the viewer's back-off policy (backoff.h)
-// until the end of the run and resumes as the viewer does (Hello with its scene hash and tile
-// versions); with several servers (--connect A,B,...) the users spread their first connection
-// over them and each retry goes to the next. The report has the numbers a service owner asks about:
-// who connected, how long the scene and the first full image took, tile latency (from the version's
-// time stamp on the server to the user's apply), bandwidth, frame rate and errors by kind.
+// own lightmaps); in render mode it also composes frames of its view into its own lightmaps. A user
+// whose connection drops (reset, EOF, a server Error SERVER_SHUTDOWN, a timed-out handshake or
+// download) reconnects with the viewer's back-off policy (backoff.h) until the end of the run and
+// resumes as the viewer does (Hello with its scene hash and tile versions); with several servers
+// (--connect A,B,...) the users spread their first connection over them and each retry goes to the
+// next. The report has the numbers a service owner asks about: who connected, how long the scene
+// and the first full image took, tile latency (from the version's time stamp on the server to the
+// user's apply), bandwidth, frame rate and errors by kind.
 //
 // Tile latency compares the server's clock (TileUpdate.server_time_us) with this machine's, so
 // it is exact on one machine and needs synchronised clocks (NTP) across machines. Only versions
@@ -63,6 +64,9 @@ struct LoadOptions {
   std::chrono::milliseconds reply_timeout{10000};  // for Welcome and each scene chunk
   std::uint64_t seed = 1;                          // random-walk paths and back-off jitter
   ClientTls tls;                                   // plain TCP unless enabled
+  // Presence (irradcast-server --presence): every user is shown as an avatar at its camera,
+  // moving along its camera path, and receives the nearest others' Avatars.
+  bool presence = false;
 };
 
 // Distribution of a quantity over users or events.
@@ -86,6 +90,7 @@ struct LoadUserResult {
   std::uint64_t frames = 0;
   double frame_ms_mean = 0.0;
   std::uint64_t camera_updates = 0;
+  std::uint64_t avatar_messages = 0, avatars_listed = 0, avatar_bytes = 0;  // presence
   std::uint64_t connections_lost = 0;  // connections that dropped before the end of the run
   std::uint64_t reconnects = 0;        // sessions set up again after a lost connection
   // The tile versions held at the end: how many tiles, and an FNV-1a digest of the version
@@ -118,6 +123,10 @@ struct LoadReport {
   Percentiles frame_ms;      // render mode: compose time per frame, per user mean
   std::uint64_t tiles_applied = 0, tiles_live = 0, bytes_received = 0, frames = 0;
   std::uint64_t camera_updates = 0;
+  // Presence: Avatars messages and their bytes per user per second, avatars per message.
+  Percentiles avatar_messages_per_s, avatar_bytes_per_s;
+  std::uint64_t avatar_messages = 0;
+  double avatars_per_message = 0.0;
   std::uint64_t connections_lost = 0, reconnects = 0;  // summed over the users
   std::map<std::string, std::uint64_t> errors;         // by kind
   std::vector<LoadUserResult> per_user;

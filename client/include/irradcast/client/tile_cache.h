@@ -71,7 +71,9 @@ class TileCache {
 
   // Takes the layout of `welcome`; throws irradcast::Error when it does not match the atlas.
   // Versions start at 0 (nothing held) and the lightmaps black.
-  void configure(const wire::Welcome& welcome, const Atlas& atlas);
+  // `added`: objects the client added to the scene after the package's (avatars, avatars.h), at
+  // the end of the atlas with empty layouts; their lightmaps stay empty.
+  void configure(const wire::Welcome& welcome, const Atlas& atlas, std::size_t added = 0);
   bool configured() const { return !first_tile_.empty(); }
 
   // Decodes the tile into its lightmap. Returns false for a version older than the one held

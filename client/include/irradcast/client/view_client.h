@@ -59,6 +59,10 @@ struct ViewClientOptions {
   // Dynamic objects get the emitters' direct light traced (shadow rays, dynamic_view.h); false:
   // from the probe volume, as the browser page does (--dynamic-emitters volume).
   bool trace_emitters = true;
+  // Presence (irradcast-server --presence; docs/DYNAMIC.md#presence): shown to the other viewers
+  // as an avatar at this camera, and drawing theirs (at most `avatars`, the nearest).
+  bool presence = false;
+  int avatars = 32;
 };
 
 struct ViewClientCounters {
@@ -72,7 +76,9 @@ struct ViewClientCounters {
   std::uint32_t failovers = 0;         // moves to the next address of the list after a failure
   bool scene_from_cache = false;
   std::uint64_t errors_received = 0;
-  std::uint64_t edits_applied = 0;  // scene edits applied to the viewer's copy of the scene
+  std::uint64_t edits_applied = 0;    // scene edits applied to the viewer's copy of the scene
+  std::uint64_t avatar_messages = 0;  // Avatars received (presence)
+  std::uint32_t avatars_shown = 0;    // the other viewers' avatars drawn now
 };
 
 class ViewClient {

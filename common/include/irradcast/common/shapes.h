@@ -1,6 +1,6 @@
 // Built-in meshes for things that are not in a scene file: a sphere for tests and the dynamic
-// objects of the built-in scenes (docs/DYNAMIC.md). Centred on the origin of their node, with
-// smooth normals and TEXCOORD_0, every triangle of one material.
+// objects of the built-in scenes (docs/DYNAMIC.md), a capsule for viewers' avatars. Centred on the
+// origin of their node, with smooth normals and TEXCOORD_0, every triangle of one material.
 #pragma once
 
 #include <cstdint>
@@ -16,5 +16,12 @@ namespace irradcast {
 // a radius that is not finite and positive.
 Mesh uv_sphere(const std::string& name, float radius, int rings, int segments,
                std::uint32_t material);
+
+// A capsule along +Y: a cylinder of `length` between two hemispheres of `radius` (height
+// length + 2 radius), `rings` bands from pole to pole (even, >= 2) and `segments` around, UVs as
+// uv_sphere's with v running along the profile. Throws irradcast::Error as uv_sphere does, and on
+// a length that is not finite and >= 0.
+Mesh capsule(const std::string& name, float radius, float length, int rings, int segments,
+             std::uint32_t material);
 
 }  // namespace irradcast

@@ -58,8 +58,11 @@ struct EngineHostOptions {
   // The journal is rewritten as one snapshot once it holds this many edits (0: never).
   std::uint32_t journal_compact_after = 1000;
   // The irradiance volume that lights dynamic objects (computed when the scene has dynamic
-  // nodes; docs/DYNAMIC.md).
+  // nodes, or with `avatars`; docs/DYNAMIC.md).
   IrradianceVolumeOptions probe_volume;
+  // The volume is computed for viewers' avatars (irradcast-server --presence) even without
+  // dynamic nodes.
+  bool avatars = false;
 };
 
 class EngineHost final : public TileSource {

@@ -86,6 +86,15 @@ struct ServerOptions {
   // Log lines one session may cause: a burst, then so many per second (the rest are counted).
   double session_log_burst = 20.0;
   double session_log_per_s = 1.0;
+
+  // Presence (--presence, docs/DYNAMIC.md#presence): a viewer that subscribes with
+  // Subscribe.presence is shown to the others as an avatar at its camera, and is sent the
+  // presence_nearest avatars nearest its camera, at most presence_hz times a second. Off: such a
+  // Subscribe gets Error{BAD_REQUEST} (the rest of it stands).
+  bool presence = false;
+  std::uint32_t presence_nearest = 32;
+  double presence_hz = 10.0;
+  float presence_height = 1.7f;  // metres from an avatar's foot to its eye (Avatars.height)
 };
 
 inline constexpr std::size_t kMinTokenLength = 16;
