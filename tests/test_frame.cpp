@@ -79,6 +79,7 @@ std::vector<Envelope> all_messages() {
     m->add_lightmaps(7);
     m->set_max_bytes_per_s(1 << 20);
     m->set_encoding(TILE_HALF_ZSTD);
+    m->set_presence(true);
     out.push_back(e);
   }
   {
@@ -201,6 +202,19 @@ std::vector<Envelope> all_messages() {
     p->set_hidden(true);
     m->set_complete(true);
     m->set_posed_us(1700000000000002ULL);
+    out.push_back(e);
+  }
+  {
+    Envelope e;
+    Avatars* m = e.mutable_avatars();
+    Avatar* a = m->add_avatars();
+    a->set_id(5);
+    a->mutable_eye()->set_x(1.5f);
+    a->mutable_eye()->set_y(1.6f);
+    a->mutable_eye()->set_z(-2.0f);
+    a->set_heading(0.25f);
+    m->set_height(1.7f);
+    m->set_time_us(1700000000000003ULL);
     out.push_back(e);
   }
   {

@@ -5,7 +5,10 @@
 // --stream moving 0, 1, 16 and 64 of the spheres (--moving) at 60 poses a second each for
 // --window-s seconds. Per row: the poses the server took per second, its network threads' CPU
 // (cores) and the bytes each viewer received per second, measured in the window; the first row
-// (nothing moving) is the baseline the others are read against, side by side in one run.
+// (nothing moving) is the baseline the others are read against, side by side in one run. Then
+// presence (docs/DYNAMIC.md#presence; the server runs with --presence): every user's camera
+// walking at 10 updates a second, first without avatars ("cameras"), then with each user shown
+// as one and sent the nearest 32 others' ("avatars").
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -38,6 +41,14 @@ struct Options {
   int users = 256;
   double window_s = 4.0;
   std::string out = "out/bench-poses";
+  bool presence_rows = true;
+};
+
+struct Row {
+  std::string label;
+  int moving = 0;         // spheres streaming poses
+  bool presence = false;  // users shown as avatars, sent the others'
+  double camera_hz = 1.0;
 };
 
 const char* kToken = "bench-poses-token-0123456789";
@@ -54,15 +65,19 @@ std::string pose_lines(int moving, double seconds) {
 }
 
 int run(const Options& o) {
-  std::vector<int> rows;
+  std::vector<Row> rows;
   {
     std::stringstream ss(o.moving);
     std::string part;
-    while (std::getline(ss, part, ',')) rows.push_back(std::stoi(part));
+    while (std::getline(ss, part, ',')) rows.push_back({part, std::stoi(part), false, 1.0});
   }
-  for (int m : rows)
-    if (m < 0 || m > o.nodes)
-      throw Error("--moving: " + std::to_string(m) + " is not in 0.." + std::to_string(o.nodes));
+  for (const Row& row : rows)
+    if (row.moving < 0 || row.moving > o.nodes)
+      throw Error("--moving: " + row.label + " is not in 0.." + std::to_string(o.nodes));
+  if (o.presence_rows) {
+    rows.push_back({"cameras", 0, false, 10.0});
+    rows.push_back({"avatars", 0, true, 10.0});
+  }
   fs::create_directories(o.out);
   const fs::path gltf = fs::path(o.out) / "balls.glb";
   write_balls_gltf(o.nodes, gltf.string());
@@ -70,8 +85,8 @@ int run(const Options& o) {
   fanout::Options fo;
   fo.scene = gltf.string();
   fo.out = o.out;
-  fo.server_args = {"--control-token", kToken, "--texels-per-scene", "32",  "--max-updates", "4",
-                    "--io-threads",    "2",    "--log-level",        "warn"};
+  fo.server_args = {"--control-token", kToken, "--texels-per-scene", "32",   "--max-updates", "4",
+                    "--io-threads",    "2",    "--log-level",        "warn", "--presence"};
   const std::uint16_t port = fanout::free_port();
   fanout::Child server(fanout::server_command(fo, port), fs::path(o.out) / "server.log");
   fanout::wait_listening(port, 120.0, "irradcast-server");
@@ -86,11 +101,11 @@ int run(const Options& o) {
       "%d thin users of one irradcast-server, %d dynamic spheres; each row streams "
       "poses of `moving` spheres at 60/s for %.1f s\n",
       o.users, o.nodes, o.window_s);
-  std::printf("%-7s %12s %14s %18s %14s\n", "moving", "poses/s in", "server cores",
+  std::printf("%-8s %12s %14s %18s %14s\n", "moving", "poses/s in", "server cores",
               "bytes/viewer/s", "edit refused");
   double base_cores = 0.0, base_bytes = 0.0;
   for (std::size_t r = 0; r < rows.size(); ++r) {
-    const int moving = rows[r];
+    const int moving = rows[r].moving;
     const fs::path lines = fs::path(o.out) / ("poses_" + std::to_string(moving) + ".jsonl");
     std::ofstream(lines) << pose_lines(moving, o.window_s);
     LoadOptions lo;
@@ -99,7 +114,9 @@ int run(const Options& o) {
     lo.ramp_s = 1.0;
     const double start_s = 4.0;  // every user has its full image by then (a tiny scene)
     lo.duration_s = start_s + o.window_s + 2.0;
-    lo.camera_hz = 1.0;
+    lo.camera_hz = rows[r].camera_hz;
+    lo.camera_path = rows[r].camera_hz > 1.0 ? "random-walk" : "orbit";
+    lo.presence = rows[r].presence;
     lo.name = "bench-poses";
     std::mutex mutex;
     std::vector<std::pair<double, std::uint64_t>> received;  // (elapsed s, bytes), each second
@@ -156,10 +173,15 @@ int run(const Options& o) {
       base_cores = cores;
       base_bytes = bytes_per_viewer;
     }
-    std::printf("%-7d %12.0f %14.3f %18.0f %14llu\n", moving, poses_per_s, cores, bytes_per_viewer,
-                refused);
+    std::printf("%-8s %12.0f %14.3f %18.0f %14llu\n", rows[r].label.c_str(), poses_per_s, cores,
+                bytes_per_viewer, refused);
     std::fflush(stdout);
-    j["rows"].push_back({{"moving", moving},
+    j["rows"].push_back({{"row", rows[r].label},
+                         {"moving", moving},
+                         {"presence", rows[r].presence},
+                         {"camera_hz", rows[r].camera_hz},
+                         {"avatar_messages", report.avatar_messages},
+                         {"avatars_per_message", report.avatars_per_message},
                          {"poses_per_s", poses_per_s},
                          {"server_network_cores", cores},
                          {"server_network_cores_over_baseline", cores - base_cores},
@@ -186,6 +208,9 @@ int main(int argc, char** argv) {
   app.add_option("--users", o.users, "thin viewers");
   app.add_option("--window-s", o.window_s, "seconds of streaming per row");
   app.add_option("--out", o.out, "output directory");
+  app.add_option("--presence-rows", o.presence_rows,
+                 "add the rows 'cameras' (every user's camera walking at 10 Hz) and 'avatars' "
+                 "(the same, each user shown as an avatar and sent the nearest others')");
   CLI11_PARSE(app, argc, argv);
   return run_guarded("irradcast-bench-poses: ", [&] { return run(o); });
 }
