@@ -22,6 +22,7 @@
 #include "irradcast/wire/frame.h"
 #include "irradcast/wire/pose_message.h"
 #include "service_fixture.h"
+#include "session_driver.h"
 #include "session_protocol.h"
 
 using namespace irradcast;
@@ -164,25 +165,10 @@ class PoseSessionTest : public ::testing::Test {
     return s;
   }
 
-  static void feed(SessionProtocol& s, const wire::Envelope& e) {
-    const std::string bytes = wire::encode_frame(e);
-    s.receive(bytes.data(), bytes.size());
-    wire::Envelope env;
-    while (s.next_frame(env)) s.handle(env);
-  }
-
+  static void feed(SessionProtocol& s, const wire::Envelope& e) { test::feed(s, e); }
   // Everything the session writes now, tiles left out.
   static std::vector<wire::Envelope> written(SessionProtocol& s) {
-    std::vector<wire::Envelope> out;
-    for (;;) {
-      const SessionWrite w = s.next_write(std::chrono::steady_clock::now());
-      if (!w.frame) return out;
-      wire::FrameDecoder d;
-      d.feed(w.frame->data(), w.frame->size());
-      wire::Envelope e;
-      EXPECT_EQ(d.next(e), wire::DecodeStatus::Frame);
-      if (!e.has_tile_update()) out.push_back(e);
-    }
+    return test::frames_written(s, [](const wire::Envelope& e) { return !e.has_tile_update(); });
   }
 
   static wire::Envelope pose(const std::string& json, std::uint64_t id, bool stream = true,

@@ -20,6 +20,7 @@
 #include "irradcast/common/shapes.h"
 #include "presence_board.h"
 #include "service_fixture.h"
+#include "session_driver.h"
 #include "session_protocol.h"
 
 using namespace irradcast;
@@ -111,24 +112,12 @@ class PresenceSessionTest : public ::testing::Test {
     if (auto avatars = board.take_changed())
       for (const auto& s : sessions) s->presence_changed(avatars);
   }
-  static void feed(SessionProtocol& s, const wire::Envelope& e) {
-    const std::string bytes = wire::encode_frame(e);
-    s.receive(bytes.data(), bytes.size());
-    wire::Envelope env;
-    while (s.next_frame(env)) s.handle(env);
-  }
-  // What the session writes now, tiles and the Welcome left out.
+  static void feed(SessionProtocol& s, const wire::Envelope& e) { test::feed(s, e); }
+  // What the session writes now, tiles, the Welcome and the volume left out.
   static std::vector<wire::Envelope> written(SessionProtocol& s) {
-    std::vector<wire::Envelope> out;
-    for (;;) {
-      const SessionWrite w = s.next_write(std::chrono::steady_clock::now());
-      if (!w.frame) return out;
-      wire::FrameDecoder d;
-      d.feed(w.frame->data(), w.frame->size());
-      wire::Envelope e;
-      EXPECT_EQ(d.next(e), wire::DecodeStatus::Frame);
-      if (!e.has_tile_update() && !e.has_welcome() && !e.has_probe_volume()) out.push_back(e);
-    }
+    return test::frames_written(s, [](const wire::Envelope& e) {
+      return !e.has_tile_update() && !e.has_welcome() && !e.has_probe_volume();
+    });
   }
   static std::vector<std::uint64_t> ids(const wire::Envelope& e) {
     std::vector<std::uint64_t> out;
@@ -194,13 +183,8 @@ TEST_F(PresenceSessionTest, AServerWithoutPresenceSaysSoAndSubscribesTheRest) {
   make_context(false);
   SessionProtocol& s = session(true);
   bool error = false, tiles = false;
-  for (;;) {
-    const SessionWrite w = s.next_write(std::chrono::steady_clock::now());
-    if (!w.frame) break;
-    wire::FrameDecoder dec;
-    dec.feed(w.frame->data(), w.frame->size());
-    wire::Envelope e;
-    ASSERT_EQ(dec.next(e), wire::DecodeStatus::Frame);
+  for (const wire::Envelope& e :
+       test::frames_written(s, [](const wire::Envelope&) { return true; })) {
     if (e.has_error()) {
       error = true;
       EXPECT_EQ(e.error().code(), wire::BAD_REQUEST);

@@ -1,0 +1,40 @@
+// A SessionProtocol driven without sockets, as a client would: frames fed in, and the frames it
+// writes now read back (the unit tests of poses and presence).
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <string>
+#include <vector>
+
+#include "irradcast/wire/frame.h"
+#include "session_protocol.h"
+
+namespace irradcast::test {
+
+// Feeds one frame and handles what it decodes to.
+inline void feed(SessionProtocol& s, const wire::Envelope& e) {
+  const std::string bytes = wire::encode_frame(e);
+  s.receive(bytes.data(), bytes.size());
+  wire::Envelope env;
+  while (s.next_frame(env)) s.handle(env);
+}
+
+// The frames the session writes now, in order, until it has none; those `keep` refuses are
+// left out.
+template <class Keep>
+std::vector<wire::Envelope> frames_written(SessionProtocol& s, Keep keep) {
+  std::vector<wire::Envelope> out;
+  for (;;) {
+    const SessionWrite w = s.next_write(std::chrono::steady_clock::now());
+    if (!w.frame) return out;
+    wire::FrameDecoder d;
+    d.feed(w.frame->data(), w.frame->size());
+    wire::Envelope e;
+    EXPECT_EQ(d.next(e), wire::DecodeStatus::Frame);
+    if (keep(e)) out.push_back(e);
+  }
+}
+
+}  // namespace irradcast::test
