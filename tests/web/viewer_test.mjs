@@ -14,6 +14,7 @@
 import assert from 'node:assert/strict';
 import net from 'node:net';
 import { writeFileSync } from 'node:fs';
+import { spawn } from 'node:child_process';
 import { readPng, blockDifference, meanLevel } from './png.mjs';
 import { options, startServer, viewPng, browser, openConverged, query, run, Envelope, ErrorCode, tmpDir, path,
   chromiumArgs } from './harness.mjs';
@@ -375,7 +376,42 @@ async function lamps(o) {
   }
 }
 
-const CASES = { image, errors, edits, tabs, dynamic, sun, lamps };
+// Presence (docs/DYNAMIC.md#presence): an irradcast-view --presence standing in the Cornell box
+// (the left front, looking in) is drawn by the page with presence=1 as irradcast-view --presence
+// draws it (the same bounds as `image`; the volume's light, as `dynamic`), and it changes the
+// image where it stands.
+async function presence(o) {
+  const server = await startServer(o.server, [...SERVER, '--presence']);
+  const other = spawn(o.view, ['--connect', `127.0.0.1:${server.port}`, '--presence', '--camera',
+    'eye=0.42,0.15,0.12:target=0.2,0.15,0.3', '--frames', '600', '--frame-ms', '100', '--width', '16', '--height', '16',
+    '--cache-dir', 'none', '--log-level', 'warn', '--out', path.join(tmpDir, 'other.png')], { stdio: 'ignore' });
+  const b = await browser(o);
+  try {
+    const page = await openConverged(b, server.url + query({ width: W, height: H, ui: 0, converge: 0, presence: 1 }), W, H);
+    await page.waitForFunction(() => window.irradcast.state.avatars.shown() === 1, { timeout: 20000, polling: 100 });
+    await page.waitForFunction(() => document.title === 'irradcast: converged', { timeout: 20000, polling: 100 });
+    const shot = path.join(tmpDir, 'page-presence.png');
+    await page.screenshot({ path: shot });
+    const avatars = await page.evaluate(() => window.irradcast.conn.counters.avatars);
+    console.log(`page (presence): ${avatars} Avatars messages received`);
+    await page.close();  // its avatar stands at the camera irradcast-view uses next
+    const reference = await viewPng(o, server, { width: W, height: H, extra: ['--presence', '--dynamic-emitters', 'volume'] },
+      'view-presence');
+    compare(shot, reference, 'page (presence)');
+    const without = await viewPng(o, server, { width: W, height: H, extra: ['--dynamic-emitters', 'volume'] }, 'view-no-presence');
+    const d = blockDifference(readPng(reference), readPng(without));
+    console.log(`page (presence): irradcast-view with and without the avatar, largest block difference ${d.max.toFixed(1)}`);
+    // The avatar is about 5 pixels wide: a 16 x 16 block holding it moves by several levels, the
+    // rest of the two images (the same tiles) by rounding.
+    assert.ok(d.max > 3, 'page (presence): the avatar does not show in irradcast-view');
+  } finally {
+    other.kill('SIGTERM');
+    await b.close();
+    await server.stop();
+  }
+}
+
+const CASES = { image, errors, edits, tabs, dynamic, sun, lamps, presence };
 const o = options(process.argv);
 try {
   if (!o.cases.length || o.cases.some((c) => !CASES[c])) throw new Error(`cases: ${Object.keys(CASES).join(', ')}`);

@@ -15,7 +15,8 @@ const equalBytes = (a, b) => a && b && a.length === b.length && a.every((x, i) =
 
 export class Connection {
   // handlers: sceneReady(model, welcome), subscribed(), tile(lightmap, x0, y0, w, h, words),
-  // tileBase(lightmap, x0, y0, w, h), edit(message), stats(stats), status(text), error(text)
+  // tileBase(lightmap, x0, y0, w, h), edit(message), poses(message), avatars(message) (with
+  // options.presence), volume(v), stats(stats), status(text), error(text)
   constructor(url, options, handlers) {
     this.url = url;
     this.options = options;
@@ -24,7 +25,7 @@ export class Connection {
     this.volume = null;        // the probe volume held (volume.js)
     this.versions = null;      // per lightmap, per tile: version held (0 = none)
     this.epoch = 0;
-    this.counters = { bytes: 0, tiles: 0, frames: 0, edits: 0, volumes: 0, poses: 0, connections: 0, byEncoding: [0, 0, 0] };
+    this.counters = { bytes: 0, tiles: 0, frames: 0, edits: 0, volumes: 0, poses: 0, avatars: 0, connections: 0, byEncoding: [0, 0, 0] };
     this.backoff = 250;
     this.connect();
   }
@@ -93,6 +94,10 @@ export class Connection {
       case 'scene_edit': return this.onEdit(env.scene_edit);
       case 'probe_volume': return this.onVolume(env.probe_volume);
       case 'poses': return this.onPoses(env.poses);
+      case 'avatars':
+        if (this.phase !== 'streaming') throw new Error('Avatars before the subscription');
+        ++this.counters.avatars;
+        return this.h.avatars(env.avatars);
       case 'stats': return this.h.stats(env.stats);
       case 'error': {
         const name = ERROR_NAMES[env.error.code] || env.error.code;
@@ -158,7 +163,7 @@ export class Connection {
   }
 
   subscribe() {
-    this.send({ subscribe: { all: true, encoding: this.options.encoding } });
+    this.send({ subscribe: { all: true, encoding: this.options.encoding, presence: !!this.options.presence } });
     this.h.subscribed();
     this.h.status('streaming');
   }

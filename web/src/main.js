@@ -2,7 +2,8 @@
 // the scene, streams the lightmaps into textures and draws the view with irradcast's shading.
 // URL parameters: camera=eye=x,y,z:target=x,y,z:fov=deg (the tools' --camera), width, height,
 // exposure (auto, the default, or stops), tonemap (reinhard|aces|clamp), encoding (rgb9e5|half|delta), converge (the
-// server's convergence target, as irradcast-view --converge-at), ui=0 (no overlay). When every
+// server's convergence target, as irradcast-view --converge-at), ui=0 (no overlay), presence=1 (show
+// this viewer to the others as an avatar and draw theirs, as irradcast-view --presence). When every
 // tile the server holds is applied and drawn, document.title becomes "irradcast: converged".
 import * as THREE from 'three';
 import { Connection } from './connection.js';
@@ -10,6 +11,7 @@ import { SceneView, TONE_OPS } from './render.js';
 import { ViewCamera, attachControls, parseCamera, formatCamera } from './camera.js';
 import { defaultCamera } from './scene.js';
 import { applyEdit, applyPoses, KIND } from './edits.js';
+import { addAvatarNodes, AvatarNodes } from './avatars.js';
 import { Overlay } from './overlay.js';
 import { num } from './proto.js';
 
@@ -26,7 +28,8 @@ function readParams() {
   };
   const p = { camera: q.get('camera'), width: size('width'), height: size('height'),
     exposure: q.get('exposure') || 'auto', tonemap: q.get('tonemap') || 'reinhard',
-    encoding: q.get('encoding') || 'rgb9e5', converge: Number(q.get('converge') ?? 0.02), ui: q.get('ui') !== '0' };
+    encoding: q.get('encoding') || 'rgb9e5', converge: Number(q.get('converge') ?? 0.02), ui: q.get('ui') !== '0',
+    presence: q.get('presence') === '1' };
   if (p.exposure !== 'auto' && !(p.exposure.trim() !== '' && Number.isFinite(Number(p.exposure))))
     throw new Error(`exposure=${p.exposure}: auto or a number of stops`);
   if (!(p.tonemap in TONE_OPS)) throw new Error(`tonemap=${p.tonemap}: reinhard, aces or clamp`);
@@ -76,6 +79,7 @@ function handlers(ctx) {
   return {
     sceneReady(model, welcome) {
       if (state.view) state.view.dispose();
+      state.avatars = params.presence ? new AvatarNodes(addAvatarNodes(model, 32), 32) : null;
       state.view = new SceneView(ctx.renderer, model, welcome, ctx.finish);
       state.posed = new Map();  // nodes posed so far, with their package pose
       if (ctx.conn.volume) state.view.setVolume(ctx.conn.volume);
@@ -113,6 +117,15 @@ function handlers(ctx) {
     poses(m) {
       try {
         if (applyPoses(state.view.scene, m, state.posed)) state.view.placeNodes(false);
+        unconverge(state);
+      } catch (e) {
+        ctx.conn.fail(e.message);
+      }
+    },
+    avatars(m) {
+      if (!state.avatars || !state.view) return;
+      try {
+        if (state.avatars.place(state.view.scene, m, state.view.bounds)) state.view.placeNodes(false);
         unconverge(state);
       } catch (e) {
         ctx.conn.fail(e.message);
@@ -218,7 +231,8 @@ function main() {
   const wsUrl = new URL('ws', window.location.href);
   wsUrl.protocol = wsUrl.protocol === 'https:' ? 'wss:' : 'ws:';
   wsUrl.search = '';
-  const conn = ctx.conn = new Connection(wsUrl.href, { encoding: ENCODINGS[params.encoding] }, handlers(ctx));
+  const conn = ctx.conn = new Connection(wsUrl.href, { encoding: ENCODINGS[params.encoding], presence: params.presence },
+    handlers(ctx));
   window.irradcast = { conn, state, formatCamera: () => state.camera && formatCamera(state.camera.pose, state.camera.distance) };
   holdVirtualTime(state);
   // Stats twice a second, for the overlay and convergence.

@@ -344,7 +344,7 @@ export class SceneView {
     this.buildSky();
     this.placeNodes();
     this.bounds = new THREE.Box3();
-    this.meshes.forEach((m) => this.bounds.expandByObject(m));
+    this.meshes.forEach((m, i) => { if (!scene.objects[i].avatar) this.bounds.expandByObject(m); });
     if (this.bounds.isEmpty()) this.bounds.set(new THREE.Vector3(-1, -1, -1), new THREE.Vector3(1, 1, 1));
     this.shadowsDirty = true;
   }
