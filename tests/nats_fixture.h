@@ -151,8 +151,11 @@ class NatsProcess {
 
 // irradcast-server --nats in the process: cornell, small, final after `updates` updates.
 struct NatsOriginNode {
+  // presence: --presence, avatar sets every 50 ms; a gateway's avatars (and cameras) are kept a
+  // minute after its last request (they go sooner only when it says goodbye).
   NatsOriginNode(const std::string& url, std::uint32_t updates, const std::string& token = "",
-                 const NatsCredentials& credentials = {}, Scene scene = make_cornell_box())
+                 const NatsCredentials& credentials = {}, Scene scene = make_cornell_box(),
+                 bool presence = false)
       : host(std::move(scene), "cornell", small_host(updates)),
         origin(host,
                [&] {
@@ -160,12 +163,19 @@ struct NatsOriginNode {
                  o.url = url;
                  o.credentials = credentials;
                  o.accept_edits = !token.empty();
+                 o.presence = presence;
+                 o.presence_every = std::chrono::milliseconds(50);
+                 o.presence_expiry = std::chrono::minutes(1);
+                 if (presence) o.camera_expiry = std::chrono::minutes(1);
                  return o;
                }()),
         server(origin, [&] {
           ServerOptions o = loopback();
           o.control_token = token;
           o.io_threads = 1;
+          o.presence = presence;
+          o.presence_hz = 20.0;
+          o.presence_height = 0.14f;
           return o;
         }()) {
     server.start();
@@ -187,13 +197,22 @@ struct NatsOriginNode {
 
 // irradcast-gateway in the process.
 struct NatsGatewayNode {
+  // presence: --presence, its avatars sent at most every 50 ms.
   explicit NatsGatewayNode(const std::string& url, const std::string& token = "",
-                           const NatsCredentials& credentials = {})
-      : gateway(NatsGatewayOptions{url, "cornell", credentials}) {
+                           const NatsCredentials& credentials = {}, bool presence = false)
+      : gateway([&] {
+          NatsGatewayOptions o{url, "cornell", credentials};
+          o.presence = presence;
+          o.presence_every = std::chrono::milliseconds(50);
+          return o;
+        }()) {
     EXPECT_TRUE(gateway.wait_ready(std::chrono::seconds(10))) << "no scene from NATS";
     ServerOptions o = loopback();
     o.control_token = token;
     o.io_threads = 1;
+    o.presence = presence;
+    o.presence_hz = 20.0;
+    o.presence_height = 1.7f;  // the origin's (0.14) replaces it
     server = std::make_unique<Server>(gateway, o);
     server->start();
   }

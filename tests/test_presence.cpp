@@ -8,12 +8,14 @@
 
 #include <cmath>
 #include <limits>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "irradcast/client/avatars.h"
+#include "irradcast/client/camera_message.h"
 #include "irradcast/client/load_generator.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
@@ -36,15 +38,7 @@ CameraPose camera_at(glm::vec3 eye, glm::vec3 forward = {0.0f, 0.0f, 1.0f}) {
 }
 
 wire::Envelope camera_update(glm::vec3 eye) {
-  wire::Envelope e;
-  wire::CameraUpdate* c = e.mutable_camera_update();
-  c->mutable_eye()->set_x(eye.x);
-  c->mutable_eye()->set_y(eye.y);
-  c->mutable_eye()->set_z(eye.z);
-  c->mutable_forward()->set_x(1.0f);
-  c->mutable_up()->set_y(1.0f);
-  c->set_yfov(0.7f);
-  return e;
+  return irradcast::camera_update(camera_at(eye, {1.0f, 0.0f, 0.0f}));
 }
 
 }  // namespace
@@ -79,6 +73,75 @@ TEST(PresenceBoard, ChangesAreTakenOnceAndTheNearestComeFirstWithoutSelf) {
   EXPECT_EQ(after->size(), 2u);
 }
 
+// Other servers' avatars (NATS): each (source, id) gets an id of the board's own, kept while it
+// stays listed; what is no place is left out; the local avatars and their version stay apart.
+TEST(PresenceBoard, OtherServersAvatarsGetIdsOfTheirOwnAndBadOnesAreLeftOut) {
+  PresenceBoard b;
+  b.set_height(1.7f);
+  b.place(1, camera_at({0, 0, 0}));
+  std::uint64_t local_version = 0;
+  ASSERT_EQ(b.local(&local_version).size(), 1u);
+  b.take_changed();
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  b.set_group(77, {{1, {1, 0, 0}, 0.0f},  // the same id as session 1: another source's
+                   {2, {2, 0, 0}, 0.0f},
+                   {3, {nan, 0, 0}, 0.0f},   // not finite
+                   {4, {3e7f, 0, 0}, 0.0f},  // beyond kMaxCoordinate
+                   {0, {1, 1, 1}, 0.0f},     // no id
+                   {2, {9, 9, 9}, 0.0f},     // repeated
+                   {5, {1, 1, 1}, nan}});    // heading not finite
+  auto all = b.take_changed();
+  ASSERT_NE(all, nullptr);
+  ASSERT_EQ(all->size(), 3u) << "session 1 and the group's two valid avatars";
+  std::map<std::uint64_t, glm::vec3> at;
+  for (const AvatarState& a : *all) at[a.id] = a.eye;
+  ASSERT_EQ(at.size(), 3u) << "every id distinct";
+  EXPECT_EQ(at.at(1), glm::vec3(0, 0, 0)) << "the session keeps its id";
+  std::uint64_t id_of_2 = 0;
+  for (const auto& [id, eye] : at)
+    if (eye == glm::vec3(2, 0, 0)) id_of_2 = id;
+  EXPECT_GE(id_of_2, PresenceBoard::kFirstGroupId);
+  // The source's avatar 2 moves: it keeps the id; the groups come back with the source's ids.
+  b.set_group(77, {{2, {2.5f, 0, 0}, 0.0f}, {1, {1, 0, 0}, 0.0f}});
+  all = b.take_changed();
+  ASSERT_NE(all, nullptr);
+  int moved = 0;
+  for (const AvatarState& a : *all) {
+    if (a.eye != glm::vec3(2.5f, 0, 0)) continue;
+    ++moved;
+    EXPECT_EQ(a.id, id_of_2);
+  }
+  EXPECT_EQ(moved, 1);
+  const PresenceBoard::Groups groups = b.groups();
+  ASSERT_EQ(groups.size(), 1u);
+  ASSERT_EQ(groups.at(77).size(), 2u);
+  EXPECT_EQ(groups.at(77)[0].id, 1u);
+  EXPECT_EQ(groups.at(77)[1].id, 2u);
+  std::uint64_t v = 0;
+  b.local(&v);
+  EXPECT_EQ(v, local_version) << "other servers' avatars are no local change";
+  // Replacing all groups drops those not named; an unchanged set is no change.
+  b.set_group(78, {{1, {4, 0, 0}, 0.0f}});
+  b.replace_groups({{78, {{1, {4, 0, 0}, 0.0f}}}});
+  EXPECT_EQ(b.size(), 2u);
+  b.take_changed();
+  b.replace_groups({{78, {{1, {4, 0, 0}, 0.0f}}}});
+  EXPECT_EQ(b.take_changed(), nullptr);
+  // The height another server decides wins while it is set.
+  EXPECT_FLOAT_EQ(b.height(), 1.7f);
+  b.set_shared_height(0.14f);
+  EXPECT_FLOAT_EQ(b.height(), 0.14f);
+  EXPECT_NE(b.take_changed(), nullptr) << "a new height is a change";
+  b.set_shared_height(0.0f);
+  EXPECT_FLOAT_EQ(b.height(), 1.7f);
+  // At most kMaxGroupAvatars of one source.
+  std::vector<AvatarState> many;
+  for (std::uint64_t i = 1; i <= PresenceBoard::kMaxGroupAvatars + 10; ++i)
+    many.push_back({i, {0, 0, 0}, 0.0f});
+  b.set_group(79, many);
+  EXPECT_EQ(b.groups().at(79).size(), PresenceBoard::kMaxGroupAvatars);
+}
+
 // A session over a real engine host with the server's board, as the server ticks it.
 class PresenceSessionTest : public ::testing::Test {
  protected:
@@ -91,6 +154,7 @@ class PresenceSessionTest : public ::testing::Test {
     make_context(true);
   }
   void make_context(bool presence) {
+    board.set_height(options.presence_height);  // as the Server does
     context.emplace(SessionContext{*host, options, counters, peers, [] { return ServerStats{}; },
                                    options.max_hello_frame, nullptr, presence ? &board : nullptr});
   }

@@ -17,10 +17,12 @@
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/progress.h"
+#include "irradcast/common/world.h"
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/metrics_text.h"
 #include "irradcast/service/nats_gateway.h"
 #include "irradcast/service/net_server.h"
+#include "irradcast/wire/scene_package.h"
 #include "nats_options.h"
 #include "network_options.h"
 
@@ -61,11 +63,13 @@ int run(const Options& o, const sigset_t& signals) {
   log::set_level(log::parse_level(o.net.log_level));
   Progress::set_enabled(false);
   const auto token = o.net.token();
-  const ServerOptions so = o.net.server_options(token, "gateway");
+  ServerOptions so = o.net.server_options(token, "gateway");
   NatsGatewayOptions go;
   go.url = o.nats.url;
   go.credentials = o.nats.credentials;
   go.scene_id = o.scene;
+  go.presence = o.net.presence;
+  go.presence_every = o.net.presence_every();
   NatsGateway gateway(go);
   // The tile layout and scene package come from the origin: wait for them.
   for (int waited = 0; !gateway.wait_ready(std::chrono::milliseconds(0)); waited += 200) {
@@ -75,6 +79,13 @@ int run(const Options& o, const sigset_t& signals) {
       log::info("gateway", "waiting for scene '" + o.scene + "' from the origin (NATS " +
                                (gateway.nats_stats().connected ? "connected" : "not connected") +
                                ")");
+  }
+  if (so.presence) {
+    // The avatars are the origin's height when it shows them too (NatsPresence.height); else
+    // this gateway's, from the scene as irradcast-server's.
+    const wire::UnpackedScene scene = wire::open_scene_package(gateway.package()->bytes, "");
+    so.presence_height =
+        o.net.presence_default_height(World::build(scene.scene).bounds.max_extent());
   }
   Server server(gateway, so);
   server.start();

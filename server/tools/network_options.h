@@ -6,6 +6,8 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <fstream>
@@ -140,6 +142,11 @@ struct NetworkOptions {
 
   // The avatars' height: --presence-height, else 1.7 m, or a quarter of `scene_extent` (metres;
   // 0: unknown) when that is less (a person in the Cornell box would not fit).
+  // The time between two avatar sets at --presence-hz (what NATS carries between servers).
+  std::chrono::milliseconds presence_every() const {
+    return std::chrono::milliseconds(
+        std::max<long long>(1, std::llround(1000.0 / std::max(presence_hz, 1e-3))));
+  }
   float presence_default_height(float scene_extent) const {
     if (presence_height > 0.0f) return presence_height;
     return scene_extent > 0.0f ? std::min(1.7f, 0.25f * scene_extent) : 1.7f;

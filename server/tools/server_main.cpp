@@ -99,6 +99,8 @@ int run(const Options& o, const sigset_t& signals) {
     no.credentials = o.nats.credentials;
     no.accept_edits = !token.first.empty();
     no.replace_newer = o.nats_replace_newer;
+    no.presence = o.net.presence;
+    no.presence_every = o.net.presence_every();
     origin = std::make_unique<NatsOrigin>(host, no);
     // Never roll the gateways back: a stream with a newer revision from another origin (one
     // that ran without this --state-dir) stops this one here, when NATS answers in time.

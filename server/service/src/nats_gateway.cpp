@@ -21,6 +21,7 @@
 #include "irradcast/wire/scene_package.h"
 #include "irradcast_nats.pb.h"
 #include "nats_link.h"
+#include "presence_board.h"
 #include "session_messages.h"
 
 namespace irradcast {
@@ -36,6 +37,9 @@ constexpr std::size_t kMaxEarlyBytes = 256u << 20;  // their payloads
 constexpr std::uint64_t kMaxVersionLead = 1000;
 constexpr std::uint32_t kMaxLightmaps = 1u << 20;
 constexpr std::size_t kMaxCameras = 4096;
+// A NatsPresence with more groups or avatars than an origin publishes is refused whole.
+constexpr int kMaxPresenceGroups = 4096;
+constexpr std::size_t kMaxPresenceAvatars = 16384;
 constexpr auto kCameraKeepalive = std::chrono::seconds(2);
 constexpr std::uint32_t kMaxVolumeChunks = 1u << 9;   // 256 MiB at 512 KiB
 constexpr std::uint64_t kMaxVolumeBytes = 96u << 20;  // 2^16 probes' layout and SH, with room
@@ -106,6 +110,9 @@ struct NatsGateway::Impl {
   std::map<std::uint32_t, wire::NatsVolumeChunk> volume_chunks;
   std::shared_ptr<const ProbeVolumeFrames> volume;  // the newest checked version (mutex)
   PoseBoard poses;                                  // the origin's poses, as they come
+  PresenceBoard presence;  // with options.presence: this gateway's avatars and the origin's set
+  std::uint64_t avatars_sent = 0;      // the board's local version sent to the origin (mutex)
+  Clock::time_point presence_heard{};  // the origin's newest s.presence (mutex)
 
   std::unique_ptr<nats_link::Connection> conn;
   nats_link::Subscription sub;  // the stream's; worker thread
@@ -128,6 +135,8 @@ struct NatsGateway::Impl {
   void on_volume_chunk(const std::string& data);
   void try_volume();
   void on_poses(const std::string& data);
+  void on_presence(const std::string& data);
+  void expire_presence(Clock::time_point now);
   void bad(const std::string& what) {
     {
       std::lock_guard lock(mutex);
@@ -162,6 +171,7 @@ void NatsGateway::Impl::handle(const std::string& kind, const std::string& data)
   if (kind == "stats") return on_stats(data);
   if (kind == "volume") return on_volume(data);
   if (kind == "poses") return on_poses(data);
+  if (kind == "presence") return on_presence(data);
   if (kind.rfind("volchunk.", 0) == 0) return on_volume_chunk(data);
   if (kind.rfind("package.", 0) == 0) return on_chunk(data);
   if (kind.rfind("tile.", 0) == 0) {
@@ -435,6 +445,45 @@ void NatsGateway::Impl::on_poses(const std::string& data) {
     poses.post(changed, m.poses().posed_us());
 }
 
+// The origin's avatars (docs/DYNAMIC.md#presence): every group but this gateway's own replaces
+// what the board held of the others. Refused whole when it is larger than an origin publishes or
+// its height is no height; avatars that are no place are left out (avatars_refused).
+void NatsGateway::Impl::on_presence(const std::string& data) {
+  if (!options.presence) return;  // this gateway shows no avatars
+  wire::NatsPresence m;
+  if (!m.ParseFromString(data)) return bad("the avatars do not parse");
+  if (!(m.height() >= 0.0f && m.height() <= 100.0f)) return bad("the avatars' height is no height");
+  if (m.groups_size() > kMaxPresenceGroups) return bad("too many avatar groups");
+  std::size_t total = 0, refused = 0;
+  PresenceBoard::Groups groups;
+  for (const wire::NatsAvatarGroup& g : m.groups()) {
+    total += static_cast<std::size_t>(g.avatars_size());
+    if (total > kMaxPresenceAvatars) return bad("too many avatars");
+    if (groups.contains(g.source())) return bad("an avatar group is repeated");
+    std::size_t r = 0;
+    std::vector<AvatarState> avatars = avatars_from_wire(g.avatars(), &r);
+    refused += r;
+    if (g.source() != gateway) groups.emplace(g.source(), std::move(avatars));
+  }
+  presence.replace_groups(std::move(groups));
+  presence.set_shared_height(m.height());
+  std::lock_guard lock(mutex);
+  presence_heard = Clock::now();
+  ++st.presence_received;
+  st.avatars_refused += refused;
+}
+
+// The origin's avatars go presence_expiry after its last set (an origin that stopped, or the
+// stale set a new gateway reads from the stream). Worker thread, `mutex` held.
+void NatsGateway::Impl::expire_presence(Clock::time_point now) {
+  if (!options.presence || presence_heard == Clock::time_point{} ||
+      now - presence_heard < options.presence_expiry)
+    return;
+  presence_heard = {};
+  presence.replace_groups({});
+  presence.set_shared_height(0.0f);
+}
+
 void NatsGateway::Impl::run() {
   set_thread_name("irradcast-nats");
   std::uint64_t subscribed = 0;  // the connection generation the subscription belongs to
@@ -444,8 +493,11 @@ void NatsGateway::Impl::run() {
     cv.wait_for(lock, std::chrono::milliseconds(50));
     if (stopping || !conn->connected()) continue;
     const Clock::time_point now = Clock::now();
+    const bool avatars_moved = options.presence && presence.local_version() != avatars_sent;
     const bool send = (cameras_changed && now - cameras_sent >= options.camera_every) ||
+                      (avatars_moved && now - cameras_sent >= options.presence_every) ||
                       (!cameras.empty() && now - cameras_sent >= kCameraKeepalive);
+    expire_presence(now);
     lock.unlock();
     // Catch up after every (re)connection: read the stream again from its start.
     if (subscribed != conn->generation() && now >= retry) {
@@ -506,6 +558,12 @@ void NatsGateway::Impl::send_cameras() {
     cameras_changed = false;
     ++st.camera_requests;
   }
+  if (options.presence) {
+    std::uint64_t version = 0;
+    for (const AvatarState& a : presence.local(&version)) avatar_to_wire(a, m.add_avatars());
+    std::lock_guard lock(mutex);
+    avatars_sent = version;
+  }
   const std::string bytes = m.SerializeAsString();
   natsMsg* reply = nullptr;
   natsConnection_Request(&reply, conn->nc(), subjects.cameras.c_str(), bytes.data(),
@@ -533,6 +591,14 @@ NatsGateway::~NatsGateway() {
   }
   im.cv.notify_all();
   im.worker.join();
+  if (im.conn->connected()) {
+    // The origin forgets this gateway's cameras and avatars now rather than when they expire.
+    {
+      std::lock_guard lock(im.mutex);
+      im.cameras.clear();
+    }
+    im.send_cameras();  // (the Server went first: its sessions took their avatars away)
+  }
   im.sub.close();  // no handler runs after this: the state it uses can go
   im.conn.reset();
 }
@@ -544,6 +610,10 @@ std::shared_ptr<const ProbeVolumeFrames> NatsGateway::probe_volume() const {
 
 PoseBoard* NatsGateway::poses() {
   return &impl_->poses;
+}
+
+PresenceBoard* NatsGateway::presence() {
+  return impl_->options.presence ? &impl_->presence : nullptr;
 }
 
 bool NatsGateway::wait_ready(std::chrono::milliseconds limit) const {
@@ -675,6 +745,11 @@ std::string format_nats_gateway_metrics(const NatsGatewayStats& s) {
                 s.lag_seconds);
   append_metric(out, "irradcast_gateway_scene_revision", "gauge",
                 "The scene revision of the origin's package held.", d(s.revision));
+  append_metric(out, "irradcast_gateway_presence_received_total", "counter",
+                "Avatar sets received from the origin (--presence).", d(s.presence_received));
+  append_metric(out, "irradcast_gateway_avatars_refused_total", "counter",
+                "Avatars from the origin not shown: not finite, out of range or repeated.",
+                d(s.avatars_refused));
   return out;
 }
 

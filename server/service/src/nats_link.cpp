@@ -35,6 +35,7 @@ NatsSubjects nats_subjects(const std::string& scene_id) {
   s.volume = p + "s.volume";
   s.volume_prefix = p + "s.volchunk.";
   s.poses = p + "s.poses";
+  s.presence = p + "s.presence";
   s.cameras = p + "req.cameras";
   s.submit = p + "req.edit";
   return s;

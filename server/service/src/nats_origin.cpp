@@ -21,6 +21,7 @@
 #include "irradcast/wire/scene_package.h"
 #include "irradcast_nats.pb.h"
 #include "nats_link.h"
+#include "presence_board.h"
 #include "session_messages.h"
 
 namespace irradcast {
@@ -30,6 +31,10 @@ namespace {
 using Clock = std::chrono::steady_clock;
 constexpr std::size_t kMaxCamerasPerGateway = 4096;
 constexpr std::uint64_t kGatewayViewer = std::uint64_t{1} << 63;  // above every session id
+// s.presence: at least once a second while presence is on (a gateway forgets the avatars 5 s
+// after the last), and at most this many avatars (about 30 bytes each: within NATS's 1 MiB).
+constexpr auto kPresenceKeepalive = std::chrono::seconds(1);
+constexpr std::size_t kMaxPublishedAvatars = 16384;
 
 std::uint64_t random_id() {
   std::random_device rd;
@@ -63,6 +68,7 @@ struct NatsOrigin::Impl {
     std::size_t cameras = 0;
     Clock::time_point seen;
   };
+  PresenceBoard presence;  // with options.presence
   std::map<std::uint64_t, Gateway> gateways;
 
   std::unique_ptr<nats_link::Connection> conn;
@@ -81,6 +87,8 @@ struct NatsOrigin::Impl {
   std::shared_ptr<const ProbeVolumeFrames> published_volume;  // the newest volume published
   std::uint64_t published_poses = 0;                          // the pose sequence published
   Clock::time_point poses_published_at{};
+  std::uint64_t published_presence = ~std::uint64_t{0};  // the board version published
+  Clock::time_point presence_published_at{};
 
   // The host's poses changed (mutex): published at most every kPoseEvery.
   static constexpr auto kPoseEvery = std::chrono::milliseconds(16);
@@ -94,6 +102,7 @@ struct NatsOrigin::Impl {
              bool poses);
   bool publish_volume(bool full);
   bool publish_poses(bool full);
+  bool publish_presence(bool full);
   bool ensure_stream();
   bool stream_allows(std::uint64_t revision);
   bool stream_intact();
@@ -157,6 +166,7 @@ void NatsOrigin::Impl::run() {
       wait = due > now ? std::chrono::ceil<std::chrono::milliseconds>(due - now)
                        : std::chrono::milliseconds(0);
     }
+    if (options.presence) wait = std::min(wait, options.presence_every);
     if (wait.count() > 0) cv.wait_for(lock, wait);
     if (stopping) break;
     if (!conn->connected() || !refusal.empty()) continue;
@@ -208,6 +218,7 @@ bool NatsOrigin::Impl::round(bool full, const std::vector<std::uint32_t>& tiles,
   for (std::size_t i = 0; ok && i < tiles.size(); ++i) ok = publish_tile(tiles[i]);
   if (ok) ok = publish_volume(full);
   if (ok && (poses || full)) ok = publish_poses(full);
+  if (ok) ok = publish_presence(full);
   if (ok && Clock::now() >= next_stats) {
     ok = publish_stats();
     next_stats = Clock::now() + options.stats_every;
@@ -507,6 +518,42 @@ bool NatsOrigin::Impl::publish_poses(bool full) {
   return true;
 }
 
+// Every avatar (this origin's viewers' as group 0, then each gateway's), when they changed and
+// presence_every passed since the last set, or a second passed. An origin without presence
+// publishes an empty set on a whole publish: avatars an earlier origin left are not shown.
+bool NatsOrigin::Impl::publish_presence(bool full) {
+  if (!options.presence && !full) return true;
+  const Clock::time_point now = Clock::now();
+  const std::uint64_t version = presence.version();
+  if (!full &&
+      (now < presence_published_at + options.presence_every ||
+       (version == published_presence && now < presence_published_at + kPresenceKeepalive)))
+    return true;
+  wire::NatsPresence m;
+  m.set_origin(origin);
+  m.set_time_us(wall_clock_us());
+  if (options.presence) {
+    m.set_height(presence.height());
+    std::size_t n = 0;
+    auto add = [&](std::uint64_t source, const std::vector<AvatarState>& avatars) {
+      wire::NatsAvatarGroup* g = m.add_groups();
+      g->set_source(source);
+      for (const AvatarState& a : avatars)
+        if (n++ < kMaxPublishedAvatars) avatar_to_wire(a, g->add_avatars());
+    };
+    add(0, presence.local());
+    for (const auto& [source, avatars] : presence.groups()) add(source, avatars);
+    if (n > kMaxPublishedAvatars)
+      log::warn("nats", std::to_string(n) + " avatars: the gateways are sent the first " +
+                            std::to_string(kMaxPublishedAvatars));
+  }
+  if (!publish(subjects.presence, m)) return false;
+  published_presence = version;
+  presence_published_at = now;
+  count(&NatsOriginStats::presence_published);
+  return true;
+}
+
 bool NatsOrigin::Impl::publish_stats() {
   wire::Stats s;
   add_engine_stats(host.stats(), &s);
@@ -519,7 +566,10 @@ void NatsOrigin::Impl::expire_cameras() {
   std::lock_guard lock(camera_mutex);
   const Clock::time_point now = Clock::now();
   for (auto it = gateways.begin(); it != gateways.end();) {
-    if (now - it->second.seen < options.camera_expiry) {
+    const auto idle = now - it->second.seen;
+    if (options.presence && (idle >= options.presence_expiry || idle >= options.camera_expiry))
+      presence.remove_group(it->first);
+    if (idle < options.camera_expiry) {
       ++it;
       continue;
     }
@@ -565,6 +615,11 @@ void NatsOrigin::Impl::on_cameras(natsConnection* nc, natsMsg* msg) {
     for (std::size_t i = n; i < g.cameras; ++i) im.host.set_camera(base + i, std::nullopt);
     g.cameras = n;
     g.seen = Clock::now();
+    if (im.options.presence) {
+      std::size_t refused = 0;
+      im.presence.set_group(m.gateway(), avatars_from_wire(m.avatars(), &refused));
+      if (refused) im.count(&NatsOriginStats::avatars_refused, refused);
+    }
   }
   nats_link::reply(nc, msg, r);
   natsMsg_Destroy(msg);
@@ -682,6 +737,10 @@ NatsOrigin::~NatsOrigin() {
   im.conn.reset();
 }
 
+PresenceBoard* NatsOrigin::presence() {
+  return impl_->options.presence ? &impl_->presence : nullptr;
+}
+
 void NatsOrigin::set_listener(PublishListener listener) {
   impl_->listeners.set(std::move(listener));
 }
@@ -738,6 +797,11 @@ std::string format_nats_origin_metrics(const NatsOriginStats& s) {
                 "Scene edits from gateways refused (token or validation).", d(s.edits_refused));
   append_metric(out, "irradcast_nats_camera_requests_total", "counter",
                 "Camera requests from gateways.", d(s.camera_requests));
+  append_metric(out, "irradcast_nats_presence_published_total", "counter",
+                "Avatar sets published to the gateways (--presence).", d(s.presence_published));
+  append_metric(out, "irradcast_nats_avatars_refused_total", "counter",
+                "Gateways' avatars not shown: not finite, out of range, repeated or too many.",
+                d(s.avatars_refused));
   return out;
 }
 

@@ -52,7 +52,7 @@ struct Server::Impl {
             SessionContext{host, options, counters, peers, [this] { return stats(); },
                            std::min(options.max_frame,
                                     options.max_hello_frame + 32 * host.tiles().tile_count()),
-                           &tile_frames, options.presence ? &presence : nullptr},
+                           &tile_frames, options.presence ? presence : nullptr},
             nullptr, &proxies, [this](const std::shared_ptr<Session>& s) { remove(s); }} {}
 
   TileSource& host;
@@ -72,8 +72,9 @@ struct Server::Impl {
   std::optional<asio::executor_work_guard<asio::io_context::executor_type>> work;
   std::atomic<bool> stopping{false};
   std::atomic<std::uint64_t> next_session{1};
-  TileFrames tile_frames;  // the tile frames the sessions share
-  PresenceBoard presence;  // ServerOptions::presence
+  TileFrames tile_frames;      // the tile frames the sessions share
+  PresenceBoard own_presence;  // ServerOptions::presence, when the source shares none
+  PresenceBoard* presence = host.presence() ? host.presence() : &own_presence;
   asio::steady_timer presence_timer{io};
   SessionServer session_server;  // what the sessions use of the server
 
@@ -312,7 +313,7 @@ void Server::Impl::fan_out_poses() {
 // sends its client the nearest others'; presence_board.h).
 void Server::Impl::presence_tick() {
   if (stopping) return;
-  if (auto avatars = presence.take_changed()) {
+  if (auto avatars = presence->take_changed()) {
     std::lock_guard lock(sessions_mutex);
     for (const auto& s : sessions) s->presence_changed(avatars);
   }
@@ -389,7 +390,10 @@ void Server::start() {
   im.work.emplace(asio::make_work_guard(im.io));
   im.accept(false);
   if (im.options.http_port) im.accept(true);
-  if (im.options.presence) asio::post(im.io, [&im] { im.presence_tick(); });
+  if (im.options.presence) {
+    im.presence->set_height(im.options.presence_height);
+    asio::post(im.io, [&im] { im.presence_tick(); });
+  }
   for (int i = 0; i < im.options.io_threads; ++i)
     im.threads.emplace_back([&im] {
       set_thread_name("irradcast-io");

@@ -21,12 +21,110 @@ void PresenceBoard::place(std::uint64_t id, const CameraPose& camera) {
   auto [it, added] = avatars_.try_emplace(id, a);
   if (!added && it->second == a) return;
   it->second = a;
-  changed_ = true;
+  touch();
+  ++local_version_;
 }
 
 void PresenceBoard::remove(std::uint64_t id) {
   std::lock_guard lock(mutex_);
-  if (avatars_.erase(id) > 0) changed_ = true;
+  if (avatars_.erase(id) > 0) {
+    touch();
+    ++local_version_;
+  }
+}
+
+void PresenceBoard::set_group(std::uint64_t source, std::vector<AvatarState> avatars) {
+  std::lock_guard lock(mutex_);
+  set_group_locked(source, std::move(avatars));
+}
+
+void PresenceBoard::set_group_locked(std::uint64_t source, std::vector<AvatarState> avatars) {
+  if (avatars.empty()) {
+    if (groups_.erase(source) > 0) touch();
+    return;
+  }
+  std::map<std::uint64_t, AvatarState>& held = groups_[source];
+  std::map<std::uint64_t, AvatarState> next;
+  for (const AvatarState& a : avatars) {
+    if (next.size() >= kMaxGroupAvatars) break;
+    if (!valid_avatar(a) || next.contains(a.id)) continue;
+    const auto was = held.find(a.id);
+    AvatarState shown = a;
+    shown.id = was != held.end() ? was->second.id : next_group_id_++;
+    next.emplace(a.id, shown);
+  }
+  if (next != held) touch();
+  held = std::move(next);
+  if (held.empty()) groups_.erase(source);
+}
+
+void PresenceBoard::remove_group(std::uint64_t source) {
+  std::lock_guard lock(mutex_);
+  if (groups_.erase(source) > 0) touch();
+}
+
+void PresenceBoard::replace_groups(Groups groups) {
+  std::lock_guard lock(mutex_);
+  for (auto it = groups_.begin(); it != groups_.end();) {
+    if (groups.contains(it->first)) {
+      ++it;
+    } else {
+      it = groups_.erase(it);
+      touch();
+    }
+  }
+  for (auto& [source, avatars] : groups) set_group_locked(source, std::move(avatars));
+}
+
+PresenceBoard::Groups PresenceBoard::groups() const {
+  std::lock_guard lock(mutex_);
+  Groups out;
+  for (const auto& [source, avatars] : groups_) {
+    std::vector<AvatarState>& list = out[source];
+    for (const auto& [id, a] : avatars) {
+      list.push_back(a);
+      list.back().id = id;  // the source's own
+    }
+  }
+  return out;
+}
+
+std::vector<AvatarState> PresenceBoard::local(std::uint64_t* version) const {
+  std::lock_guard lock(mutex_);
+  if (version) *version = local_version_;
+  std::vector<AvatarState> out;
+  out.reserve(avatars_.size());
+  for (const auto& [id, a] : avatars_) out.push_back(a);
+  return out;
+}
+
+std::uint64_t PresenceBoard::local_version() const {
+  std::lock_guard lock(mutex_);
+  return local_version_;
+}
+
+void PresenceBoard::set_height(float metres) {
+  std::lock_guard lock(mutex_);
+  if (height_ == metres) return;
+  height_ = metres;
+  touch();
+}
+
+void PresenceBoard::set_shared_height(float metres) {
+  std::lock_guard lock(mutex_);
+  if (shared_height_ == metres) return;
+  shared_height_ = metres;
+  touch();
+}
+
+std::uint64_t PresenceBoard::version() const {
+  std::lock_guard lock(mutex_);
+  return version_;
+}
+
+float PresenceBoard::height() const {
+  std::lock_guard lock(mutex_);
+  return shared_height_ > 0.0f ? shared_height_ : height_;
 }
 
 std::shared_ptr<const AvatarSnapshot> PresenceBoard::take_changed() {
@@ -45,12 +143,22 @@ std::shared_ptr<const AvatarSnapshot> PresenceBoard::snapshot_locked() const {
   auto snapshot = std::make_shared<AvatarSnapshot>();
   snapshot->reserve(avatars_.size());
   for (const auto& [id, a] : avatars_) snapshot->push_back(a);
+  for (const auto& [source, avatars] : groups_)
+    for (const auto& [id, a] : avatars) snapshot->push_back(a);
   return snapshot;
 }
 
 std::size_t PresenceBoard::size() const {
   std::lock_guard lock(mutex_);
-  return avatars_.size();
+  std::size_t n = avatars_.size();
+  for (const auto& [source, avatars] : groups_) n += avatars.size();
+  return n;
+}
+
+bool valid_avatar(const AvatarState& a) {
+  const float m = PresenceBoard::kMaxCoordinate;
+  return a.id != 0 && std::abs(a.eye.x) <= m && std::abs(a.eye.y) <= m && std::abs(a.eye.z) <= m &&
+         std::isfinite(a.heading);
 }
 
 std::vector<AvatarState> nearest_avatars(const AvatarSnapshot& all, std::uint64_t self,

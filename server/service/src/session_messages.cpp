@@ -3,6 +3,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <set>
 #include <utility>
 
 #include <glm/geometric.hpp>
@@ -41,6 +42,32 @@ std::optional<CameraPose> camera_pose_of(const wire::CameraUpdate& c, std::strin
     return std::nullopt;
   }
   return pose;
+}
+
+void avatar_to_wire(const AvatarState& a, wire::Avatar* w) {
+  w->set_id(a.id);
+  w->mutable_eye()->set_x(a.eye.x);
+  w->mutable_eye()->set_y(a.eye.y);
+  w->mutable_eye()->set_z(a.eye.z);
+  w->set_heading(a.heading);
+}
+
+std::vector<AvatarState> avatars_from_wire(
+    const google::protobuf::RepeatedPtrField<wire::Avatar>& in, std::size_t* refused) {
+  std::vector<AvatarState> out;
+  std::set<std::uint64_t> seen;
+  std::size_t bad = 0;
+  for (const wire::Avatar& w : in) {
+    const AvatarState a{w.id(), {w.eye().x(), w.eye().y(), w.eye().z()}, w.heading()};
+    if (out.size() >= PresenceBoard::kMaxGroupAvatars || !valid_avatar(a) ||
+        !seen.insert(a.id).second) {
+      ++bad;
+      continue;
+    }
+    out.push_back(a);
+  }
+  if (refused) *refused = bad;
+  return out;
 }
 
 CloseReason reason_of(wire::ErrorCode code) {

@@ -14,6 +14,7 @@
 #include "irradcast/service/tile_source.h"
 #include "irradcast/service/tile_store.h"
 #include "irradcast/wire/frame.h"
+#include "presence_board.h"
 
 namespace irradcast {
 
@@ -36,6 +37,12 @@ EngineHostStats engine_stats_from(const wire::Stats& s);
 // A CameraUpdate's pose, or nullopt with the reason in `problem` (a number that is not finite, a
 // zero forward direction).
 std::optional<CameraPose> camera_pose_of(const wire::CameraUpdate& c, std::string& problem);
+// An avatar on the wire (Avatars, NatsCameras, NatsPresence).
+void avatar_to_wire(const AvatarState& a, wire::Avatar* w);
+// Another server's avatars: those valid_avatar() takes, each id once (the first), at most
+// PresenceBoard::kMaxGroupAvatars; `refused` (when given) counts the rest.
+std::vector<AvatarState> avatars_from_wire(
+    const google::protobuf::RepeatedPtrField<wire::Avatar>& in, std::size_t* refused = nullptr);
 // The TileUpdate that carries a snapshot of `tile`.
 wire::Envelope tile_update_message(const TileStore::Tile& tile, const TileStore::Snapshot& snap,
                                    wire::TileEncoding encoding);

@@ -248,21 +248,16 @@ std::shared_ptr<const std::string> SessionProtocol::next_avatars() {
   const std::shared_ptr<const AvatarSnapshot> all = std::exchange(avatars_, nullptr);
   std::vector<AvatarState> near = nearest_avatars(
       *all, id_, camera_ ? camera_->eye : glm::vec3(0.0f), ctx_.options.presence_nearest);
-  if (avatars_written_ && near == avatars_sent_) return nullptr;
+  const float height = ctx_.presence->height();
+  if (avatars_written_ && near == avatars_sent_ && height == height_sent_) return nullptr;
   avatars_written_ = true;
   avatars_sent_ = std::move(near);
+  height_sent_ = height;
   wire::Envelope e;
   wire::Avatars* m = e.mutable_avatars();
-  m->set_height(ctx_.options.presence_height);
+  m->set_height(height);
   m->set_time_us(wall_clock_us());
-  for (const AvatarState& a : avatars_sent_) {
-    wire::Avatar* w = m->add_avatars();
-    w->set_id(a.id);
-    w->mutable_eye()->set_x(a.eye.x);
-    w->mutable_eye()->set_y(a.eye.y);
-    w->mutable_eye()->set_z(a.eye.z);
-    w->set_heading(a.heading);
-  }
+  for (const AvatarState& a : avatars_sent_) avatar_to_wire(a, m->add_avatars());
   ++ctx_.counters.avatar_frames_sent;
   return std::make_shared<const std::string>(wire::encode_frame(e));
 }

@@ -204,6 +204,7 @@ class SessionProtocol {
   std::optional<CameraPose> camera_;               // the last CameraUpdate
   std::shared_ptr<const AvatarSnapshot> avatars_;  // newer than those sent, not yet written
   std::vector<AvatarState> avatars_sent_;
+  float height_sent_ = 0.0f;
   bool avatars_written_ = false;  // an Avatars frame was written (the first goes out if empty)
   bool volume_frame_has_layout_ = false;
   std::uint64_t volume_layout_epoch_ = 0, volume_version_ = 0;  // queued or written

@@ -26,6 +26,13 @@ struct NatsGatewayOptions {
   NatsCredentials credentials;                      // who the gateway is to NATS, and TLS
   std::chrono::milliseconds request_timeout{3000};  // an edit's answer from the origin
   std::chrono::milliseconds camera_every{250};
+  // irradcast-gateway --presence (docs/DYNAMIC.md#presence): this gateway's viewers' avatars go
+  // to the origin with the cameras (at most every presence_every while they change), and the
+  // origin's set of everybody else's (s.presence) is shown to them; forgotten presence_expiry
+  // after the origin's last.
+  bool presence = false;
+  std::chrono::milliseconds presence_every{100};
+  std::chrono::milliseconds presence_expiry{5000};
 };
 
 struct NatsGatewayStats {
@@ -43,8 +50,10 @@ struct NatsGatewayStats {
   // Seconds from the origin computing a tile version to its arrival here (the newest one).
   double lag_seconds = 0.0;
   std::uint64_t revision = 0;
-  std::uint64_t volumes_received = 0;  // complete, checked probe volume versions
-  std::uint64_t poses_received = 0;    // pose sets from the origin
+  std::uint64_t volumes_received = 0;   // complete, checked probe volume versions
+  std::uint64_t poses_received = 0;     // pose sets from the origin
+  std::uint64_t presence_received = 0;  // avatar sets from the origin (with presence)
+  std::uint64_t avatars_refused = 0;    // avatars in them not shown (not finite, repeated...)
 };
 
 class NatsGateway final : public TileSource {
@@ -73,6 +82,8 @@ class NatsGateway final : public TileSource {
   // is there from the start (empty until the origin posts poses).
   std::shared_ptr<const ProbeVolumeFrames> probe_volume() const override;
   PoseBoard* poses() override;
+  // With NatsGatewayOptions::presence: this gateway's viewers' avatars and the origin's others.
+  PresenceBoard* presence() override;
   void set_camera(std::uint64_t viewer, std::optional<CameraPose> pose) override;
   EngineHostStats stats() const override;
 

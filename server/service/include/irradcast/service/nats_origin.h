@@ -39,6 +39,13 @@ struct NatsOriginOptions {
   // Publish even when the stream holds a newer revision from another origin process (its edits
   // are then lost for the gateways). Off: such an origin publishes nothing (docs/DISTRIBUTION.md).
   bool replace_newer = false;
+  // --presence (docs/DYNAMIC.md#presence): the gateways' viewers' avatars (NatsCameras.avatars)
+  // are shown to this origin's viewers, and every avatar is published to the gateways
+  // (s.presence) at most every presence_every while they change and every second regardless. A
+  // gateway's avatars go presence_expiry after its last camera request.
+  bool presence = false;
+  std::chrono::milliseconds presence_every{100};
+  std::chrono::milliseconds presence_expiry{5000};
 };
 
 struct NatsOriginStats {
@@ -52,12 +59,14 @@ struct NatsOriginStats {
   std::uint64_t publish_errors = 0;
   std::uint64_t camera_requests = 0;
   std::uint64_t edit_requests = 0;
-  std::uint64_t edits_refused = 0;      // wrong token or invalid edit
-  std::uint64_t bad_requests = 0;       // requests that do not parse
-  std::uint64_t gateways_refused = 0;   // camera requests from a gateway beyond max_gateways
-  std::uint64_t stream_losses = 0;      // the stream was found deleted, purged or rewritten
-  std::uint64_t volumes_published = 0;  // probe volume versions (docs/DYNAMIC.md)
-  std::uint64_t poses_published = 0;    // complete pose sets
+  std::uint64_t edits_refused = 0;       // wrong token or invalid edit
+  std::uint64_t bad_requests = 0;        // requests that do not parse
+  std::uint64_t gateways_refused = 0;    // camera requests from a gateway beyond max_gateways
+  std::uint64_t stream_losses = 0;       // the stream was found deleted, purged or rewritten
+  std::uint64_t volumes_published = 0;   // probe volume versions (docs/DYNAMIC.md)
+  std::uint64_t poses_published = 0;     // complete pose sets
+  std::uint64_t presence_published = 0;  // avatar sets (s.presence)
+  std::uint64_t avatars_refused = 0;     // gateways' avatars not shown (not finite, too many...)
   // The stream holds a newer revision from another origin: this one publishes nothing.
   bool refused_newer_stream = false;
 };
@@ -91,6 +100,8 @@ class NatsOrigin final : public TileSource {
     host_.set_camera(viewer, std::move(pose));
   }
   EngineHostStats stats() const override { return host_.stats(); }
+  // With NatsOriginOptions::presence: the avatars of this origin's viewers and the gateways'.
+  PresenceBoard* presence() override;
 
   NatsOriginStats nats_stats() const;
   // Waits until the origin has compared its revision with the stream's (it does on every

@@ -23,6 +23,7 @@ struct NatsSubjects {
   std::string volume;          // irradcast.<token>.s.volume : NatsVolume (after its chunks)
   std::string volume_prefix;   // irradcast.<token>.s.volchunk. + index: NatsVolumeChunk
   std::string poses;           // irradcast.<token>.s.poses : NatsPoses
+  std::string presence;        // irradcast.<token>.s.presence : NatsPresence
   // Requests to the origin (core NATS request/reply, not stored):
   std::string cameras;  // irradcast.<token>.req.cameras : NatsCameras -> NatsReply
   std::string submit;   // irradcast.<token>.req.edit : SceneEdit with the token -> NatsReply

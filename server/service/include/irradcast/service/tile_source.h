@@ -81,6 +81,8 @@ struct ProbeVolumeFrames {
   std::shared_ptr<const std::string> with_layout, sh_only;
 };
 
+class PresenceBoard;
+
 class TileSource {
  public:
   virtual ~TileSource() = default;
@@ -124,6 +126,10 @@ class TileSource {
   // The dynamic nodes' poses (docs/DYNAMIC.md#poses); null when the scene has no dynamic nodes
   // (or a gateway, for now). Lives as long as the source.
   virtual PoseBoard* poses() { return nullptr; }
+  // The avatars shared beyond this server (NATS with --presence: a NatsOrigin or NatsGateway
+  // made with presence holds them; docs/DYNAMIC.md#presence); null: a Server with --presence
+  // keeps its own. Lives as long as the source.
+  virtual PresenceBoard* presence() { return nullptr; }
 };
 
 }  // namespace irradcast
