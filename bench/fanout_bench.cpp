@@ -170,6 +170,9 @@ int main(int argc, char** argv) {
                  "nats-server, an origin with --nats and irradcast-gateways, and spreads the "
                  "users over them (default users: 1024)");
   app.add_option("--gateway", o.gateway, "irradcast-gateway binary");
+  app.add_flag("--presence", o.presence,
+               "the servers run with --presence and every user shows itself as an avatar (the "
+               "rows add the avatars each user gets)");
   app.add_option("--nats-server", o.nats_server,
                  "nats-server binary (default: found in PATH dirs)");
   app.add_flag("--quick", o.quick, "1, 4 and 16 users, short windows (a smoke run)");
@@ -180,7 +183,8 @@ int main(int argc, char** argv) {
                "for --duration s; per --compare server, users decoding each tile or sharing "
                "decodes; writes fanout_fresh.json and .png");
   app.add_option("--duration", fo.duration_s, "--fresh: seconds of each run");
-  app.add_option("--repeat", fo.repeat, "--fresh: interleaved runs per variant (the median p99 is kept)");
+  app.add_option("--repeat", fo.repeat,
+                 "--fresh: interleaved runs per variant (the median p99 is kept)");
   app.add_option("--pin-load", fo.pin_load, "--fresh: CPU for the simulated users (-1: all)");
   app.add_option("--compare", fo.compare, "--fresh: LABEL=SERVER_PATH (repeat; default: --server)");
   CLI11_PARSE(app, argc, argv);

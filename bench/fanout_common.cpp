@@ -97,6 +97,7 @@ std::vector<std::string> server_command(const Options& o, std::uint16_t port) {
                                    // every simulated user comes from 127.0.0.1
                                    "--max-clients-per-peer", "0"};
   args.insert(args.end(), o.server_args.begin(), o.server_args.end());
+  if (o.presence) args.push_back("--presence");
   return args;
 }
 
@@ -149,6 +150,7 @@ LoadReport run_thin_users(const Options& o, const std::vector<HostPort>& servers
   lo.camera_hz = 5.0;
   lo.threads = 0;
   lo.name = "fanout";
+  lo.presence = o.presence;
   return run_load(lo, [&](const LoadProgress& pr) {
     if (static_cast<int>(pr.elapsed_s) % 5 == 0)
       std::fprintf(stderr, "[fanout] %d users: %.0f/%.0f s, %d full, %d failed, p99 %.1f ms\n", n,

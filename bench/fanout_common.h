@@ -35,6 +35,9 @@ struct Options {
   std::string out = "docs/images";
   std::vector<std::string> server_args;
   bool quick = false;
+  // --presence: the origin and gateways run with --presence and every user shows itself as an
+  // avatar (docs/DYNAMIC.md#presence); the rows add Avatars per user per second and their bytes.
+  bool presence = false;
 };
 
 // CPU seconds of a process's threads: the network threads ("irradcast-io"), the NATS threads

@@ -62,11 +62,23 @@ void resize_gateways(const Options& o, const std::string& url, std::vector<Gatew
     Gateway g;
     g.port = free_port();
     const std::string i = std::to_string(gws.size());
-    g.process = std::make_unique<Child>(
-        std::vector<std::string>{o.gateway, "--nats", url, "--scene", o.scene, "--bind",
-                                 "127.0.0.1", "--port", std::to_string(g.port), "--status-every",
-                                 "5", "--idle-timeout", "120", "--max-clients-per-peer", "0"},
-        fs::path(o.out) / ("fanout_gateway_" + i + ".log"));
+    std::vector<std::string> args{o.gateway,
+                                  "--nats",
+                                  url,
+                                  "--scene",
+                                  o.scene,
+                                  "--bind",
+                                  "127.0.0.1",
+                                  "--port",
+                                  std::to_string(g.port),
+                                  "--status-every",
+                                  "5",
+                                  "--idle-timeout",
+                                  "120",
+                                  "--max-clients-per-peer",
+                                  "0"};
+    if (o.presence) args.push_back("--presence");
+    g.process = std::make_unique<Child>(args, fs::path(o.out) / ("fanout_gateway_" + i + ".log"));
     wait_listening(g.port, 60, "irradcast-gateway " + i);
     gws.push_back(std::move(g));
   }
@@ -107,6 +119,10 @@ Row run_row(const Options& o, const Child& origin, std::uint16_t origin_port, co
       r.gateways, n, l.connected - l.failed, n, ms(l.steady_tile_latency_ms.p50).c_str(),
       ms(l.steady_tile_latency_ms.p99).c_str(), l.steady_tile_latency_ms.count, r.origin_network,
       r.origin_engine, r.gateway_cores, r.nats_cores, r.load_cores);
+  if (o.presence)
+    std::printf(
+        "  presence: %.2f avatars per message, %.1f Avatars and %.0f bytes per user per s\n",
+        l.avatars_per_message, l.avatar_messages_per_s.mean, l.avatar_bytes_per_s.mean);
   std::fflush(stdout);
   return r;
 }

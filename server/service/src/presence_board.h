@@ -42,8 +42,10 @@ class PresenceBoard {
 
   // The avatars of one source beyond this server, at most this many (the rest are not shown).
   static constexpr std::size_t kMaxGroupAvatars = 4096;
-  // The ids the board gives other servers' avatars start here (session ids count from 1).
-  static constexpr std::uint64_t kFirstGroupId = std::uint64_t{1} << 62;
+  // The ids the board gives other servers' avatars start here: session ids count from 1 (at a
+  // thousand connections a second they reach it in 35 years), and an id below 2^42 is at most 6
+  // bytes on the wire (2^62 took 9: 13 % more bytes per Avatars message through a gateway).
+  static constexpr std::uint64_t kFirstGroupId = std::uint64_t{1} << 40;
   using Groups = std::map<std::uint64_t, std::vector<AvatarState>>;
 
   // Session `id`'s avatar at `camera` (a finite pose, as camera_pose_of() checks): where it
