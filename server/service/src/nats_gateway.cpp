@@ -20,29 +20,16 @@
 #include "irradcast/wire/probe_volume_message.h"
 #include "irradcast/wire/scene_package.h"
 #include "irradcast_nats.pb.h"
+#include "nats_gateway_impl.h"
 #include "nats_link.h"
 #include "presence_board.h"
 #include "session_messages.h"
 
 namespace irradcast {
 
-namespace {
+using namespace nats_gateway;
 
-using Clock = std::chrono::steady_clock;
-constexpr std::uint32_t kMaxChunks = 1u << 14;      // 8 GiB of package at 512 KiB
-constexpr std::size_t kMaxEarlyTiles = 1u << 20;    // tiles before the first state
-constexpr std::size_t kMaxEarlyBytes = 256u << 20;  // their payloads
-// How far a tile's version may lead the origin's engine updates (its stats lag by up to a
-// second's updates).
-constexpr std::uint64_t kMaxVersionLead = 1000;
-constexpr std::uint32_t kMaxLightmaps = 1u << 20;
-constexpr std::size_t kMaxCameras = 4096;
-// A NatsPresence with more groups or avatars than an origin publishes is refused whole.
-constexpr int kMaxPresenceGroups = 4096;
-constexpr std::size_t kMaxPresenceAvatars = 16384;
-constexpr auto kCameraKeepalive = std::chrono::seconds(2);
-constexpr std::uint32_t kMaxVolumeChunks = 1u << 9;   // 256 MiB at 512 KiB
-constexpr std::uint64_t kMaxVolumeBytes = 96u << 20;  // 2^16 probes' layout and SH, with room
+namespace {
 
 // A state message's problem, or "" when it can be used.
 std::string check_state(const wire::NatsSceneState& s) {
@@ -67,84 +54,6 @@ std::vector<std::pair<int, int>> sizes_of(const wire::NatsSceneState& s) {
 }
 
 }  // namespace
-
-struct NatsGateway::Impl {
-  explicit Impl(NatsGatewayOptions o)
-      : options(std::move(o)), subjects(nats_subjects(options.scene_id)) {}
-
-  NatsGatewayOptions options;
-  NatsSubjects subjects;
-  const std::uint64_t gateway = [] {
-    std::random_device rd;
-    return (std::uint64_t{rd()} << 32 | rd()) | 1;
-  }();
-
-  nats_link::Listeners listeners;  // the Server's
-
-  mutable std::mutex mutex;  // guards the state below
-  mutable std::condition_variable cv;
-  bool stopping = false;
-  std::unique_ptr<TileStore> store;  // made once, from the first state
-  std::vector<std::pair<int, int>> sizes;
-  std::shared_ptr<const wire::ScenePackage> package;
-  std::uint64_t revision = 0, epoch = 0, origin = 0;
-  std::string backend;
-  EngineHostStats engine;
-  // The origin's engine updates from the stats read since the stream was last (re)subscribed
-  // (0: none yet): tiles replayed before the newest stats are not held to stale ones.
-  std::uint64_t updates_seen = 0;
-  NatsGatewayStats st;
-  std::map<std::uint64_t, CameraPose> cameras;
-  bool cameras_changed = false;
-
-  // The stream's messages, one at a time (the subscription's thread).
-  std::mutex handle_mutex;
-  std::optional<wire::NatsSceneState> pending_state;  // waiting for its chunks
-  std::map<std::uint32_t, wire::NatsPackageChunk> chunks;
-  std::map<std::uint32_t, wire::NatsTile> early_tiles;  // before the first state
-  std::size_t early_bytes = 0;
-  std::vector<std::uint64_t> tile_origin;          // the origin of each tile's version held
-  std::uint64_t reset_origin = 0;                  // a new lineage: its tiles replace what is held
-  std::uint64_t last_edit = 0;                     // the newest edit revision forwarded
-  std::optional<wire::NatsVolume> pending_volume;  // waiting for its chunks
-  std::map<std::uint32_t, wire::NatsVolumeChunk> volume_chunks;
-  std::shared_ptr<const ProbeVolumeFrames> volume;  // the newest checked version (mutex)
-  PoseBoard poses;                                  // the origin's poses, as they come
-  PresenceBoard presence;  // with options.presence: this gateway's avatars and the origin's set
-  std::uint64_t avatars_sent = 0;      // the board's local version sent to the origin (mutex)
-  Clock::time_point presence_heard{};  // the origin's newest s.presence (mutex)
-
-  std::unique_ptr<nats_link::Connection> conn;
-  nats_link::Subscription sub;  // the stream's; worker thread
-  std::thread worker;
-
-  void run();
-  void subscribe();
-  void send_cameras();
-  void on_message(natsMsg* msg);
-  void handle(const std::string& kind, const std::string& data);
-  void on_state(const std::string& data);
-  void on_chunk(const std::string& data);
-  void try_complete();
-  void apply_state(const wire::NatsSceneState& s, std::shared_ptr<const wire::ScenePackage> p);
-  void on_tile(wire::NatsTile t);
-  bool install(const wire::NatsTile& t);
-  void on_edit(const std::string& data);
-  void on_stats(const std::string& data);
-  void on_volume(const std::string& data);
-  void on_volume_chunk(const std::string& data);
-  void try_volume();
-  void on_poses(const std::string& data);
-  void on_presence(const std::string& data);
-  void expire_presence(Clock::time_point now);
-  void bad(const std::string& what) {
-    {
-      std::lock_guard lock(mutex);
-      ++st.bad_messages;
-    }
-    log::warn("gateway", "ignored a message from NATS: " + what);
-  }
-};
 
 void NatsGateway::Impl::on_message(natsMsg* msg) {
   Impl& im = *this;
@@ -336,152 +245,6 @@ void NatsGateway::Impl::on_stats(const std::string& data) {
   std::lock_guard lock(mutex);
   engine = engine_stats_from(s);
   updates_seen = engine.updates;
-}
-
-void NatsGateway::Impl::on_volume(const std::string& data) {
-  wire::NatsVolume v;
-  if (!v.ParseFromString(data)) return bad("the probe volume's announcement does not parse");
-  if (v.hash().empty() && v.chunks() == 0 && v.bytes() == 0) {  // the origin has none
-    pending_volume.reset();
-    volume_chunks.clear();
-    std::lock_guard lock(mutex);
-    volume = nullptr;
-    return;
-  }
-  if (v.hash().size() != 32 || v.chunks() == 0 || v.chunks() > kMaxVolumeChunks || v.bytes() == 0 ||
-      v.bytes() > kMaxVolumeBytes)
-    return bad("the probe volume's announcement is out of range");
-  pending_volume = std::move(v);
-  try_volume();
-}
-
-void NatsGateway::Impl::on_volume_chunk(const std::string& data) {
-  wire::NatsVolumeChunk c;
-  if (!c.ParseFromString(data) || c.index() >= kMaxVolumeChunks) return bad("a probe volume chunk");
-  // Bounded: chunks of older versions are dropped when the held bytes would pass twice a frame.
-  std::size_t held = 0;
-  for (const auto& [i, k] : volume_chunks) held += i == c.index() ? 0 : k.data().size();
-  if (held + c.data().size() > 2 * kMaxVolumeBytes) volume_chunks.clear();
-  volume_chunks[c.index()] = std::move(c);
-  try_volume();
-}
-
-// The announced volume once its chunks are there: the frame checked as a client checks it
-// (wire::apply_probe_volume), then served as the origin serves it.
-void NatsGateway::Impl::try_volume() {
-  if (!pending_volume) return;
-  const wire::NatsVolume& v = *pending_volume;
-  for (std::uint32_t i = 0; i < v.chunks(); ++i) {
-    auto it = volume_chunks.find(i);
-    if (it == volume_chunks.end() || it->second.hash() != v.hash()) return;  // not yet
-  }
-  std::string frame;
-  for (std::uint32_t i = 0; i < v.chunks() && frame.size() <= v.bytes(); ++i)
-    frame += volume_chunks[i].data();
-  const wire::NatsVolume announced = std::move(*pending_volume);
-  pending_volume.reset();
-  volume_chunks.clear();  // used (or refused) whole; the next version brings its own
-  if (frame.size() != announced.bytes() || wire::sha256(frame) != announced.hash())
-    return bad("the probe volume's chunks do not make the announced frame");
-  wire::FrameDecoder decoder(static_cast<std::size_t>(kMaxVolumeBytes));
-  decoder.feed(frame.data(), frame.size());
-  wire::Envelope e;
-  if (decoder.next(e) != wire::DecodeStatus::Frame || decoder.buffered() != 0 ||
-      !e.has_probe_volume() || e.probe_volume().layout().empty() ||
-      e.probe_volume().epoch() != announced.epoch() ||
-      e.probe_volume().version() != announced.version())
-    return bad("the probe volume's frame is not the announced ProbeVolume with its layout");
-  wire::ReceivedVolume check;
-  wire::apply_probe_volume(e.probe_volume(), check);  // throws on a bad volume: bad()
-  auto frames = std::make_shared<ProbeVolumeFrames>();
-  frames->epoch = announced.epoch();
-  frames->version = announced.version();
-  frames->with_layout = std::make_shared<const std::string>(std::move(frame));
-  e.mutable_probe_volume()->clear_layout();
-  frames->sh_only = std::make_shared<const std::string>(wire::encode_frame(e));
-  {
-    std::lock_guard lock(mutex);
-    volume = std::move(frames);
-    ++st.volumes_received;
-  }
-  listeners.tiles({});  // the sessions look at the volume in the fan-out
-}
-
-// The origin's poses: each node whose pose differs from the one held is posted to this
-// gateway's board (its sessions get them as from an origin's). Clients check them against the
-// scene; here the numbers and the count.
-void NatsGateway::Impl::on_poses(const std::string& data) {
-  wire::NatsPoses m;
-  if (!m.ParseFromString(data)) return bad("the poses do not parse");
-  if (m.poses().poses_size() > wire::kMaxWirePoses) return bad("too many poses");
-  const std::map<int, NodePoseState> held = poses.snapshot();
-  std::map<int, NodePoseState> set;  // the origin's whole set: a node not in it is not posed
-  std::vector<std::pair<int, NodePoseState>> changed;
-  for (const wire::NodePose& p : m.poses().poses()) {
-    if (p.matrix_size() != 16 || p.node() >= (1u << 24)) return bad("a pose is out of range");
-    NodePoseState s;
-    for (int c = 0; c < 4; ++c)
-      for (int r = 0; r < 4; ++r) {
-        const float x = p.matrix(4 * c + r);
-        if (!std::isfinite(x)) return bad("a pose is not finite");
-        s.local[c][r] = x;
-      }
-    s.visible = !p.hidden();
-    const int node = static_cast<int>(p.node());
-    auto it = held.find(node);
-    if (it == held.end() || it->second.local != s.local || it->second.visible != s.visible)
-      changed.emplace_back(node, s);
-    set[node] = s;
-  }
-  {
-    std::lock_guard lock(mutex);
-    ++st.poses_received;
-  }
-  bool gone = false;  // a node the origin no longer poses (an origin restarted without them)
-  for (const auto& [node, pose] : held) gone = gone || !set.count(node);
-  if (gone)
-    poses.replace(set, m.poses().posed_us());
-  else if (!changed.empty())
-    poses.post(changed, m.poses().posed_us());
-}
-
-// The origin's avatars (docs/DYNAMIC.md#presence): every group but this gateway's own replaces
-// what the board held of the others. Refused whole when it is larger than an origin publishes or
-// its height is no height; avatars that are no place are left out (avatars_refused).
-void NatsGateway::Impl::on_presence(const std::string& data) {
-  if (!options.presence) return;  // this gateway shows no avatars
-  wire::NatsPresence m;
-  if (!m.ParseFromString(data)) return bad("the avatars do not parse");
-  if (!(m.height() >= 0.0f && m.height() <= 100.0f)) return bad("the avatars' height is no height");
-  if (m.groups_size() > kMaxPresenceGroups) return bad("too many avatar groups");
-  std::size_t total = 0, refused = 0;
-  PresenceBoard::Groups groups;
-  for (const wire::NatsAvatarGroup& g : m.groups()) {
-    total += static_cast<std::size_t>(g.avatars_size());
-    if (total > kMaxPresenceAvatars) return bad("too many avatars");
-    if (groups.contains(g.source())) return bad("an avatar group is repeated");
-    std::size_t r = 0;
-    std::vector<AvatarState> avatars = avatars_from_wire(g.avatars(), &r);
-    refused += r;
-    if (g.source() != gateway) groups.emplace(g.source(), std::move(avatars));
-  }
-  presence.replace_groups(std::move(groups));
-  presence.set_shared_height(m.height());
-  std::lock_guard lock(mutex);
-  presence_heard = Clock::now();
-  ++st.presence_received;
-  st.avatars_refused += refused;
-}
-
-// The origin's avatars go presence_expiry after its last set (an origin that stopped, or the
-// stale set a new gateway reads from the stream). Worker thread, `mutex` held.
-void NatsGateway::Impl::expire_presence(Clock::time_point now) {
-  if (!options.presence || presence_heard == Clock::time_point{} ||
-      now - presence_heard < options.presence_expiry)
-    return;
-  presence_heard = {};
-  presence.replace_groups({});
-  presence.set_shared_height(0.0f);
 }
 
 void NatsGateway::Impl::run() {
