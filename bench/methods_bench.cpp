@@ -297,6 +297,13 @@ int main(int argc, char** argv) {
   app.add_option("--only", only, "run only the configurations whose label contains this");
   app.add_option("--threads", threads, "worker threads (0 = all)");
   app.add_option("--out", out_dir, "output directory");
+  std::vector<std::string> cell_sizes, tracing_ranges;
+  app.add_option("--cell-size", cell_sizes,
+                 "adds a configuration 'sized ...': the default cells with this cell size (a "
+                 "fraction, or metres: 2m); repeat with --tracing-range for more");
+  app.add_option("--tracing-range", tracing_ranges,
+                 "... and this tracing range (a fraction, metres or inf); the n-th goes with the "
+                 "n-th --cell-size");
   CLI11_PARSE(app, argc, argv);
   try {
     quiet_run();
@@ -304,7 +311,17 @@ int main(int argc, char** argv) {
     const std::vector<std::string> scenes = split_list(scenes_arg);
     fs::create_directories(out_dir);
     std::vector<Config> cfgs;
-    for (const Config& c : configs())
+    std::vector<Config> all_configs = configs();
+    if (cell_sizes.size() != tracing_ranges.size())
+      throw Error("--cell-size and --tracing-range come in pairs");
+    for (std::size_t i = 0; i < cell_sizes.size(); ++i) {
+      Config sized{"sized cell " + cell_sizes[i] + " range " + tracing_ranges[i], EngineParams{}};
+      sized.params.cell_size = parse_tracing_range(cell_sizes[i]);
+      sized.params.tracing_range = parse_tracing_range(tracing_ranges[i]);
+      sized.params.validate();
+      all_configs.push_back(sized);
+    }
+    for (const Config& c : all_configs)
       if (only.empty() || c.label.find(only) != std::string::npos) cfgs.push_back(c);
     json report = json::array();
     std::vector<std::vector<Curve>> all;
