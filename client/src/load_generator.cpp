@@ -578,18 +578,6 @@ class User : public std::enable_shared_from_this<User> {
   LoadUserResult result_;
 };
 
-void check(const LoadOptions& o) {
-  if (o.users < 1) throw Error("--users must be at least 1");
-  if (!(o.duration_s > 0.0)) throw Error("--duration must be positive");
-  if (o.render && (o.width < 1 || o.height < 1 || o.width > 8192 || o.height > 8192))
-    throw Error("--width and --height must be in 1..8192");
-  if (o.fps < 0.0 || o.camera_hz < 0.0 || o.ramp_s < 0.0)
-    throw Error("--fps, --camera-hz and --ramp must not be negative");
-  if (o.threads < 0) throw Error("--threads must not be negative");
-  if (o.ramp_s >= o.duration_s) throw Error("--ramp must be shorter than --duration");
-  o.backoff.validate();
-}
-
 // Camera keyframes, the server's address and the TLS context: everything that can fail before
 // a user starts.
 void prepare(Run& run) {
@@ -672,7 +660,7 @@ void join_io_threads(Run& run, std::vector<std::thread>& pool) {
 
 LoadReport run_load(const LoadOptions& options,
                     const std::function<void(const LoadProgress&)>& on_progress) {
-  check(options);
+  options.validate();
   Run run(options);
   prepare(run);
 

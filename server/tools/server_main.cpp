@@ -61,16 +61,9 @@ irradcast::Scene load_lit_scene(const Options& o) {
   return scene;
 }
 
-int run(const Options& o, const sigset_t& signals) {
-  using namespace irradcast;
-  log::set_level(log::parse_level(o.net.log_level));
-  Progress::set_enabled(false);
-  const auto token = o.net.token();
-  std::unique_ptr<tbb::global_control> threads;
-  if (o.threads > 0)
-    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
-                                                    static_cast<std::size_t>(o.threads));
-  EngineHostOptions ho;
+// The engine host's options from the command line.
+irradcast::EngineHostOptions host_options(const Options& o) {
+  irradcast::EngineHostOptions ho;
   ho.engine = o.engine.params();
   ho.backend = o.engine.backend_options();
   ho.atlas = o.engine.atlas();
@@ -83,6 +76,56 @@ int run(const Options& o, const sigset_t& signals) {
   ho.state_dir = o.state_dir;
   ho.journal_compact_after = o.journal_compact_after;
   ho.avatars = o.net.presence;
+  return ho;
+}
+
+// With --nats: the NatsOrigin the server serves, which publishes what the host makes; null
+// without. Throws when the stream holds a newer revision from another origin (one that ran
+// without this --state-dir): the gateways are never rolled back.
+std::unique_ptr<irradcast::NatsOrigin> start_origin(const Options& o, irradcast::EngineHost& host,
+                                                    bool accept_edits) {
+  using namespace irradcast;
+  if (o.nats.url.empty()) return nullptr;
+  NatsOriginOptions no;
+  no.url = o.nats.url;
+  no.credentials = o.nats.credentials;
+  no.accept_edits = accept_edits;
+  no.replace_newer = o.nats_replace_newer;
+  no.presence = o.net.presence;
+  no.presence_every = o.net.presence_every();
+  auto origin = std::make_unique<NatsOrigin>(host, no);
+  const std::string refusal = origin->check_stream(std::chrono::seconds(10));
+  if (!refusal.empty()) throw Error(refusal);
+  return origin;
+}
+
+// One status line: the engine's progress and the server's traffic.
+void log_status(const irradcast::EngineHost& host, const irradcast::Server& server) {
+  const irradcast::EngineHostStats es = host.stats();
+  const irradcast::ServerStats ss = server.stats();
+  char line[384];
+  std::snprintf(line, sizeof line,
+                "updates %llu%s (%.2f/s), convergence %.4f, %.2f Mrays/s, %u clients, "
+                "%.2f MB sent, %llu tiles sent, %llu coalesced, %llu queued (max %llu)",
+                static_cast<unsigned long long>(es.updates), es.idle ? " (final)" : "",
+                es.update_rate, es.convergence, es.rays_per_s * 1e-6, ss.clients,
+                ss.bytes_sent * 1e-6, static_cast<unsigned long long>(ss.tiles_sent),
+                static_cast<unsigned long long>(ss.tiles_coalesced),
+                static_cast<unsigned long long>(ss.queue_depth),
+                static_cast<unsigned long long>(ss.queue_depth_max));
+  irradcast::log::info("status", line);
+}
+
+int run(const Options& o, const sigset_t& signals) {
+  using namespace irradcast;
+  log::set_level(log::parse_level(o.net.log_level));
+  Progress::set_enabled(false);
+  const auto token = o.net.token();
+  std::unique_ptr<tbb::global_control> threads;
+  if (o.threads > 0)
+    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                    static_cast<std::size_t>(o.threads));
+  const EngineHostOptions ho = host_options(o);
   EngineHost host(load_lit_scene(o), o.scene, ho);
 
   ServerOptions so = o.net.server_options(token, "server");
@@ -91,22 +134,7 @@ int run(const Options& o, const sigset_t& signals) {
     log::info("server", "presence: avatars " + std::to_string(so.presence_height) +
                             " m tall, the nearest " + std::to_string(so.presence_nearest) +
                             " to each viewer");
-  // With --nats the server serves the NatsOrigin, which publishes what the host makes.
-  std::unique_ptr<NatsOrigin> origin;
-  if (!o.nats.url.empty()) {
-    NatsOriginOptions no;
-    no.url = o.nats.url;
-    no.credentials = o.nats.credentials;
-    no.accept_edits = !token.first.empty();
-    no.replace_newer = o.nats_replace_newer;
-    no.presence = o.net.presence;
-    no.presence_every = o.net.presence_every();
-    origin = std::make_unique<NatsOrigin>(host, no);
-    // Never roll the gateways back: a stream with a newer revision from another origin (one
-    // that ran without this --state-dir) stops this one here, when NATS answers in time.
-    const std::string refusal = origin->check_stream(std::chrono::seconds(10));
-    if (!refusal.empty()) throw Error(refusal);
-  }
+  std::unique_ptr<NatsOrigin> origin = start_origin(o, host, !token.first.empty());
   TileSource& source = origin ? static_cast<TileSource&>(*origin) : host;
   Server server(source, so);
   server.start();
@@ -126,19 +154,7 @@ int run(const Options& o, const sigset_t& signals) {
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
       if (o.net.status_every_s <= 0 || std::chrono::steady_clock::now() < next) continue;
       next += std::chrono::seconds(o.net.status_every_s);
-      const EngineHostStats es = host.stats();
-      const ServerStats ss = server.stats();
-      char line[384];
-      std::snprintf(line, sizeof line,
-                    "updates %llu%s (%.2f/s), convergence %.4f, %.2f Mrays/s, %u clients, "
-                    "%.2f MB sent, %llu tiles sent, %llu coalesced, %llu queued (max %llu)",
-                    static_cast<unsigned long long>(es.updates), es.idle ? " (final)" : "",
-                    es.update_rate, es.convergence, es.rays_per_s * 1e-6, ss.clients,
-                    ss.bytes_sent * 1e-6, static_cast<unsigned long long>(ss.tiles_sent),
-                    static_cast<unsigned long long>(ss.tiles_coalesced),
-                    static_cast<unsigned long long>(ss.queue_depth),
-                    static_cast<unsigned long long>(ss.queue_depth_max));
-      log::info("status", line);
+      log_status(host, server);
     }
   });
   int sig = 0;

@@ -67,6 +67,9 @@ struct LoadOptions {
   // Presence (irradcast-server --presence): every user is shown as an avatar at its camera,
   // moving along its camera path, and receives the nearest others' Avatars.
   bool presence = false;
+
+  // Throws irradcast::Error naming the first option out of range (run_load calls it first).
+  void validate() const;
 };
 
 // Distribution of a quantity over users or events.

@@ -67,6 +67,9 @@ struct EditEffect {
 const char* edit_kind_name(EditOp::Kind kind);
 // Throws irradcast::Error naming the valid kinds.
 EditOp::Kind parse_edit_kind(std::string_view name);
+// What an op of this kind names as its target, also its target's JSON key: "node", "light",
+// "material" or "sky".
+const char* edit_target_name(EditOp::Kind kind);
 
 // Throws irradcast::Error with a message that names the operation (by position and kind) and
 // what is wrong: an empty edit, an unknown target, a non-finite number, a zero rotation axis or
