@@ -33,6 +33,11 @@ struct PassRow {
   std::size_t texels = 0;
   std::uint64_t engine_rays = 0, traced_rays = 0, hits = 0;
   double pipeline_s = 0, rayscene_s = 0, raw_s = 0;  // sums over bounces of the fastest reps
+  // The direct pass: the engine's pass with its shadow rays forced into packets of 8 and one by
+  // one, and the share of the default's (ShadowRays::Auto) shadow rays it traced in packets.
+  double packets_s = 0, single_s = 0;
+  double auto_packet_share = 0;
+  std::uint64_t packet_disagreements = 0;  // shadow rays raw packets and single rays answer apart
   double max_rel_diff = 0;
   int reps = 0;
   double mrays(double s) const { return s > 0 ? traced_rays / s * 1e-6 : 0.0; }

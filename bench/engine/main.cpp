@@ -21,6 +21,7 @@
 #include <embree3/rtcore.h>
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -32,6 +33,7 @@
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/progress.h"
+#include "irradcast/engine/embree_backend.h"
 #include "plot.h"
 
 using namespace irradcast;
@@ -98,6 +100,67 @@ void report_passes(const std::vector<PassRow>& rows, json& result) {
       "max |pass output|.\n");
 }
 
+// Prints the direct pass with its shadow rays measured (the default), in packets and one by one,
+// and adds it to the JSON.
+void report_shadow_rays(const std::vector<PassRow>& rows, json& result) {
+  std::printf(
+      "\nThe direct pass's shadow rays: the default (auto: packets toward at most %d light "
+      "objects in front, else single rays) against packets of 8 and single rays, side by side "
+      "(fastest repetition); in packets: the share of the default's shadow rays it traced in "
+      "packets; disagree: rays raw packets and single rays answer apart\n",
+      EmbreeBackend::kPacketLights);
+  std::printf("%-10s %9s %12s %12s %12s %12s %14s %9s\n", "scene", "texels", "default ms",
+              "packets ms", "single ms", "in packets", "default/best", "disagree");
+  json table = json::array();
+  for (const PassRow& r : rows) {
+    if (r.pass != "direct" || r.packets_s <= 0.0) continue;
+    const double best = std::min(r.packets_s, r.single_s);
+    std::printf("%-10s %9zu %12.2f %12.2f %12.2f %11.1f%% %13.1f%% %9llu\n", r.scene.c_str(),
+                r.texels, r.pipeline_s * 1e3, r.packets_s * 1e3, r.single_s * 1e3,
+                100.0 * r.auto_packet_share, 100.0 * r.pipeline_s / best,
+                static_cast<unsigned long long>(r.packet_disagreements));
+    table.push_back({{"scene", r.scene},
+                     {"texels", r.texels},
+                     {"default_s", r.pipeline_s},
+                     {"packets_s", r.packets_s},
+                     {"single_s", r.single_s},
+                     {"auto_packet_share", r.auto_packet_share},
+                     {"default_over_best", r.pipeline_s / best},
+                     {"packet_disagreements", r.packet_disagreements}});
+  }
+  result["shadow_rays_table"] = table;
+}
+
+// The bar chart OUT_DIR/bench_shadow_rays.png: each way's direct pass over the faster forced way.
+void plot_shadow_rays(const std::vector<PassRow>& rows, int used_threads,
+                      const std::string& out_dir) {
+  plot::BarChart chart;
+  chart.title = "Direct pass: shadow rays in packets or single";
+  chart.note = std::to_string(used_threads) +
+               " thread(s), default engine params, the same update; under each scene: the share "
+               "of auto's rays in packets";
+  chart.y_label = "% of the faster way's time";
+  chart.series_labels = {"auto (default)", "packets of 8", "single rays"};
+  chart.colors = {plot::kBlue, plot::kOrange, plot::kGreen};
+  chart.mark_label = "the faster way";
+  chart.values.assign(3, {});
+  chart.width = 1400;
+  chart.value_decimals = 0;
+  for (const PassRow& r : rows) {
+    if (r.pass != "direct" || r.packets_s <= 0.0) continue;
+    const double best = std::min(r.packets_s, r.single_s);
+    chart.categories.push_back(r.scene + "\n" + fmt("%.0f%%", 100.0 * r.auto_packet_share));
+    chart.values[0].push_back(100.0 * r.pipeline_s / best);
+    chart.values[1].push_back(100.0 * r.packets_s / best);
+    chart.values[2].push_back(100.0 * r.single_s / best);
+    chart.marks.push_back(100.0);
+  }
+  if (chart.categories.empty()) return;
+  const std::string png = (fs::path(out_dir) / "bench_shadow_rays.png").string();
+  plot::write_bar_chart(png, chart);
+  std::printf("wrote %s\n", png.c_str());
+}
+
 // The bar chart OUT_DIR/bench_pass_vs_embree.png.
 void plot_passes(const std::vector<PassRow>& rows, int used_threads, const std::string& out_dir) {
   plot::BarChart chart;
@@ -134,7 +197,9 @@ void run_passes(const Options& o, int used_threads, json& result) {
   }
   result["passes"] = scenes;
   report_passes(rows, result);
+  report_shadow_rays(rows, result);
   plot_passes(rows, used_threads, o.out_dir);
+  plot_shadow_rays(rows, used_threads, o.out_dir);
 }
 
 json params_json(const Options& o) {

@@ -141,19 +141,6 @@ void for_each_texel_run(const PassInput& in, Body&& body) {
       });
 }
 
-// Runs body(texel) over every work unit (cell or object) in dispatch order, units in parallel
-// and large units split further; each worker adds its ray count.
-template <typename Body>
-std::uint64_t for_each_texel(const PassInput& in, Body&& body) {
-  std::atomic<std::uint64_t> rays{0};
-  for_each_texel_run(in, [&](const std::uint32_t* run, std::size_t size) {
-    std::uint64_t local = 0;
-    for (std::size_t k = 0; k < size; ++k) local += body(run[k]);
-    rays += local;
-  });
-  return rays.load();
-}
-
 }  // namespace
 
 glm::vec3 radiance_at(const RadianceField& f, const Hit& h) {
@@ -200,8 +187,22 @@ struct Uninitialized {
 
 }  // namespace
 
-glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i,
-                                     std::uint64_t* traced) const {
+bool EmbreeBackend::few_lights(const LightSampler::FrontLights& front) const {
+  // An object's emissive triangles are listed together, and so are the front lights (in the
+  // order of the list): each change of object along the list is one more object.
+  int objects = 0;
+  std::int32_t last = -1;
+  for (int k = 0; k < front.count; ++k) {
+    const std::int32_t o = light_object_[front.index[k]];
+    if (o == last) continue;
+    if (++objects > kPacketLights) return false;
+    last = o;
+  }
+  return true;
+}
+
+glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced,
+                                     std::uint64_t* packed) const {
   // direct_samples samples of the lights in front of the texel (LightSampler::front_lights),
   // stratified in the pick; every sample drawn first (4 at a time in SIMD lanes), then the shadow
   // rays of those that can contribute traced (8 to a packet), then summed in order.
@@ -211,6 +212,8 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i,
   LightSampler::FrontLights front;
   const bool culled = lights_->front_lights(p, nrm, front);
   if (culled && front.count == 0) return glm::vec3(0.0f);
+  const bool packets = shadow_rays_ == ShadowRays::Packets ||
+                       (shadow_rays_ == ShadowRays::Auto && culled && few_lights(front));
   Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
   constexpr int kBatch = 16;
   Uninitialized<LightSampler::ShadowSample, kBatch> sample;
@@ -222,7 +225,7 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i,
     const int m = std::min(kBatch, n - s0);
     lights_->direct_samples(*rays_, culled ? &front : nullptr, p, nrm, ng, rng, s0, m, n,
                             &sample[0], weight, lit);
-    // The shadow rays to trace, 8 to a packet (a texel's rays toward its lights are coherent).
+    // The shadow rays to trace, 8 to a packet or one by one (ShadowRays).
     Uninitialized<Ray, kBatch> shadow;
     int which[kBatch];
     int count = 0;
@@ -232,15 +235,31 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i,
         which[count++] = s;
       }
     bool blocked[kBatch];
-    for (int k = 0; k < count; k += 8)
-      rays_->occluded8(&shadow[k], std::min(8, count - k), blocked + k);
+    if (packets)
+      for (int k = 0; k < count; k += 8)
+        rays_->occluded8(&shadow[k], std::min(8, count - k), blocked + k);
+    else
+      for (int k = 0; k < count; ++k) blocked[k] = rays_->occluded(shadow[k]);
     for (int k = 0; k < count; ++k) lit[which[k]] = !blocked[k];
     rays += static_cast<std::uint64_t>(count);
     for (int s = 0; s < m; ++s)
       if (lit[s]) sum += weight[s];
   }
   *traced += rays;
+  if (packets) *packed += rays;
   return sum / static_cast<float>(n);
+}
+
+const char* shadow_rays_name(ShadowRays mode) {
+  switch (mode) {
+    case ShadowRays::Packets:
+      return "packets";
+    case ShadowRays::Single:
+      return "single";
+    case ShadowRays::Auto:
+      break;
+  }
+  return "auto";
 }
 
 PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& out) {
@@ -249,17 +268,30 @@ PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& ou
   const bool area = !lights_->emissive_triangles().empty();
   const std::uint64_t punctual = in.world.lights.size();
   const bool sky = lights_->has_sky();
-  PassResult r;
-  r.rays = for_each_texel(in, [&](std::uint32_t i) -> std::uint64_t {
-    const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
-                    ng = in.texels.geo_normal[i];
-    glm::vec3 e = punctual > 0 ? lights_->punctual_irradiance(*rays_, p, nrm, ng) : glm::vec3(0.0f);
-    std::uint64_t traced = punctual;
-    if (area) e += area_direct(in, i, &traced);
-    if (sky) e += sky_direct(in, i, &traced);
-    out[i] = e;
-    return traced;
+  // Each emissive triangle's object, for few_lights: taken anew each pass, as an edit replaces
+  // the light sampler (PreparedScene::apply).
+  light_object_.clear();
+  for (const EmissiveTriangle& t : lights_->emissive_triangles()) light_object_.push_back(t.object);
+  std::atomic<std::uint64_t> rays{0}, packed{0};
+  for_each_texel_run(in, [&](const std::uint32_t* run, std::size_t size) {
+    std::uint64_t traced = 0, in_packets = 0;
+    for (std::size_t k = 0; k < size; ++k) {
+      const std::uint32_t i = run[k];
+      const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
+                      ng = in.texels.geo_normal[i];
+      glm::vec3 e =
+          punctual > 0 ? lights_->punctual_irradiance(*rays_, p, nrm, ng) : glm::vec3(0.0f);
+      traced += punctual;
+      if (area) e += area_direct(in, i, &traced, &in_packets);
+      if (sky) e += sky_direct(in, i, &traced);
+      out[i] = e;
+    }
+    rays += traced;
+    packed += in_packets;
   });
+  direct_packet_rays_ = packed.load();
+  PassResult r;
+  r.rays = rays.load();
   r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return r;
 }

@@ -73,12 +73,38 @@ int pick_probe(const ProbeWeights& w, float u);
 
 }  // namespace embree_sampling
 
+// How the direct pass traces the shadow rays of a texel's area-light samples: in packets of 8
+// (RayScene::occluded8) or one by one. Packets halve their cost where a texel's rays converge on
+// the few lights in front of it, and cost more than single rays where they fan out to lights all
+// over a building (docs/BENCHMARKS.md, "Shadow rays: packets or single").
+enum class ShadowRays {
+  // Packets for a texel whose lights in front of it (LightSampler::front_lights) belong to at
+  // most EmbreeBackend::kPacketLights emissive objects, single rays for one with more, or whose
+  // lights the light hierarchy picks (scenes with more than LightSampler::kMaxFront emissive
+  // triangles). Decided by the scene alone, so the same seed gives the same lightmaps bit for bit.
+  Auto,
+  Packets,  // always (the direct pass from issue 22 until issue 33)
+  Single,   // always (the direct pass before issue 22)
+};
+const char* shadow_rays_name(ShadowRays mode);  // "auto" | "packets" | "single"
+
 class EmbreeBackend final : public TraceBackend {
  public:
+  // ShadowRays::Auto's packets: a texel's rays toward at most this many light objects (measured
+  // on rooms:1-12 and cornell: packets paid toward 1 or 2, single rays toward 3 or more).
+  static constexpr int kPacketLights = 2;
+
   // `rays` and `lights` must outlive the backend.
   EmbreeBackend(const RayScene& rays, const LightSampler& lights)
       : rays_(&rays), lights_(&lights) {}
   std::string name() const override { return "embree"; }
+  // How the direct pass traces its shadow rays (default Auto; the benchmarks force either way).
+  // Embree's packet and single-ray kernels agree on all but about one shadow ray in millions (at
+  // a triangle's edge), so a forced way can change a rare texel's estimate by one sample.
+  void set_shadow_rays(ShadowRays mode) { shadow_rays_ = mode; }
+  ShadowRays shadow_rays() const { return shadow_rays_; }
+  // Of the last direct pass's shadow rays toward area lights, those traced in packets.
+  std::uint64_t direct_packet_rays() const { return direct_packet_rays_; }
   PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) override;
   PassResult gather_probes(const PassInput& in, const RadianceField& prev,
                            std::vector<glm::vec3>& out) override;
@@ -93,11 +119,19 @@ class EmbreeBackend final : public TraceBackend {
   // Texel i's direct irradiance from the area lights: the mean of direct_samples
   // LightSampler::direct_sample estimates of the lights in front of it, stratified in the light
   // pick (LightSampler::direct_samples), their shadow rays traced 8 to a packet
-  // (RayScene::occluded8); the shadow rays it traced are added to *traced.
-  glm::vec3 area_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced) const;
+  // (RayScene::occluded8) or one by one (shadow_rays()); the shadow rays it traced are added to
+  // *traced, and to *packed too when they went in packets.
+  glm::vec3 area_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced,
+                        std::uint64_t* packed) const;
+  // Whether the lights of `front` belong to at most kPacketLights emissive objects (counted as
+  // changes of object along the list: an object listed apart twice counts twice).
+  bool few_lights(const LightSampler::FrontLights& front) const;
 
   const RayScene* rays_;
   const LightSampler* lights_;
+  ShadowRays shadow_rays_ = ShadowRays::Auto;
+  std::vector<std::int32_t> light_object_;  // per emissive triangle, its object (direct())
+  std::uint64_t direct_packet_rays_ = 0;
 };
 
 }  // namespace irradcast
