@@ -28,6 +28,27 @@ inline PreparedScene prepare_for_test(Scene s, float texels_per_scene) {
   return PreparedScene::build(std::move(s), po);
 }
 
+// A backend that hands every pass to an EmbreeBackend (`inner`): a test derives from it and
+// overrides the pass it watches or checks.
+class EmbreeForwarder : public TraceBackend {
+ public:
+  EmbreeForwarder(const RayScene& rays, const LightSampler& lights) : inner(rays, lights) {}
+  std::string name() const override { return "embree (watched)"; }
+  PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) override {
+    return inner.direct(in, out);
+  }
+  PassResult gather_probes(const PassInput& in, const RadianceField& prev,
+                           std::vector<glm::vec3>& out) override {
+    return inner.gather_probes(in, prev, out);
+  }
+  PassResult scatter(const PassInput& in, const RadianceField& prev,
+                     const std::vector<glm::vec3>& probe_radiance,
+                     std::vector<glm::vec3>& out) override {
+    return inner.scatter(in, prev, probe_radiance, out);
+  }
+  EmbreeBackend inner;
+};
+
 struct EngineSetup {
   EngineSetup(Scene s, float texels_per_scene)
       : prepared(prepare_for_test(std::move(s), texels_per_scene)),

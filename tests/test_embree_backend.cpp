@@ -21,34 +21,21 @@ using namespace irradcast;
 namespace {
 
 // The Embree backend with its shadow rays taken `mode`'s way, keeping every direct pass's output.
-class RecordingDirect final : public TraceBackend {
+class RecordingDirect final : public test::EmbreeForwarder {
  public:
   RecordingDirect(const RayScene& rays, const LightSampler& lights, ShadowRays mode)
-      : inner_(rays, lights) {
-    inner_.set_shadow_rays(mode);
+      : EmbreeForwarder(rays, lights) {
+    inner.set_shadow_rays(mode);
   }
-  std::string name() const override { return "recording-direct"; }
   PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) override {
-    const PassResult r = inner_.direct(in, out);
+    const PassResult r = inner.direct(in, out);
     outputs.push_back(out);
     rays += r.rays;
-    packet_rays += inner_.direct_packet_rays();
+    packet_rays += inner.direct_packet_rays();
     return r;
-  }
-  PassResult gather_probes(const PassInput& in, const RadianceField& prev,
-                           std::vector<glm::vec3>& out) override {
-    return inner_.gather_probes(in, prev, out);
-  }
-  PassResult scatter(const PassInput& in, const RadianceField& prev,
-                     const std::vector<glm::vec3>& probe_radiance,
-                     std::vector<glm::vec3>& out) override {
-    return inner_.scatter(in, prev, probe_radiance, out);
   }
   std::vector<std::vector<glm::vec3>> outputs;
   std::uint64_t rays = 0, packet_rays = 0;  // over the direct passes
-
- private:
-  EmbreeBackend inner_;
 };
 
 struct Case {

@@ -45,22 +45,14 @@ glm::vec3 scatter_ray_by_ray(const RayScene& rays, const PassInput& in, const Ra
 
 // The Embree backend, with every scatter pass's output checked against scatter_ray_by_ray on
 // every `step`-th texel.
-class CheckedScatter final : public TraceBackend {
+class CheckedScatter final : public test::EmbreeForwarder {
  public:
   CheckedScatter(const RayScene& rays, const LightSampler& lights, std::size_t step)
-      : inner_(rays, lights), rays_(&rays), step_(step) {}
-  std::string name() const override { return "checked-scatter"; }
-  PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) override {
-    return inner_.direct(in, out);
-  }
-  PassResult gather_probes(const PassInput& in, const RadianceField& prev,
-                           std::vector<glm::vec3>& out) override {
-    return inner_.gather_probes(in, prev, out);
-  }
+      : EmbreeForwarder(rays, lights), rays_(&rays), step_(step) {}
   PassResult scatter(const PassInput& in, const RadianceField& prev,
                      const std::vector<glm::vec3>& probe_radiance,
                      std::vector<glm::vec3>& out) override {
-    const PassResult r = inner_.scatter(in, prev, probe_radiance, out);
+    const PassResult r = inner.scatter(in, prev, probe_radiance, out);
     for (std::uint32_t i = 0; i < in.texels.size(); i += static_cast<std::uint32_t>(step_)) {
       const glm::vec3 expected = scatter_ray_by_ray(*rays_, in, prev, probe_radiance, i);
       ++checked;
@@ -79,7 +71,6 @@ class CheckedScatter final : public TraceBackend {
   std::size_t passes = 0, checked = 0, differ = 0, nonzero = 0;
 
  private:
-  EmbreeBackend inner_;
   const RayScene* rays_;
   std::size_t step_;
 };
