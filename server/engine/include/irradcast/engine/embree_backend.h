@@ -76,7 +76,7 @@ int pick_probe(const ProbeWeights& w, float u);
 // How the direct pass traces the shadow rays of a texel's area-light samples: in packets of 8
 // (RayScene::occluded8) or one by one. Packets halve their cost where a texel's rays converge on
 // the few lights in front of it, and cost more than single rays where they fan out to lights all
-// over a building (docs/BENCHMARKS.md, "Shadow rays: packets or single").
+// over a building (docs/bench/engine.md, "Shadow rays: packets or single").
 enum class ShadowRays {
   // Packets for a texel whose lights in front of it (LightSampler::front_lights) belong to at
   // most EmbreeBackend::kPacketLights emissive objects, single rays for one with more, or whose
