@@ -443,6 +443,9 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   s.log_lines_suppressed = 10;
   s.websocket_sessions = 23;
   s.http_requests = 29;
+  s.poses_streamed = 31;
+  s.poses_refused = 37;
+  s.avatar_frames_sent = 41;
   s.partial_bytes = 11;
   s.queue_depth = 40;
   s.queue_depth_max = 25;
@@ -512,6 +515,9 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   u("irradcast_log_lines_suppressed_total", 10);
   u("irradcast_websocket_sessions_total", 23);
   u("irradcast_http_requests_total", 29);
+  u("irradcast_poses_streamed_total", 31);
+  u("irradcast_poses_refused_total", 37);
+  u("irradcast_avatar_frames_sent_total", 41);
   u("irradcast_partial_frame_bytes", 11);
   for (std::size_t r = 0; r < kCloseReasons; ++r)
     u("irradcast_sessions_closed_total", 100 + r,
@@ -559,7 +565,7 @@ TEST(Metrics, FormatterWritesValidExpositionWithTheGivenValues) {
   u("irradcast_metrics_collections_total", 19);
   // Nothing else: every sample above was checked.
   EXPECT_EQ(checked.size(), x.samples.size()) << text;
-  EXPECT_EQ(x.samples.size(), 46 + kCloseReasons + 4 * e.passes.size());
+  EXPECT_EQ(x.samples.size(), 49 + kCloseReasons + 4 * e.passes.size());
 }
 
 TEST(Metrics, FormatterHandlesAnEmptySnapshotAndSpecialValues) {

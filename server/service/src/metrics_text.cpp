@@ -105,33 +105,10 @@ void pass_family(Writer& w, const EngineHostStats& e, std::string_view name, std
 
 void write_clients(Writer& w, const ServerStats& s) {
   w.gauge("irradcast_clients", "Connected clients (sessions).", std::uint64_t{s.clients});
-  w.counter("irradcast_connections_total", "TCP connections accepted, refused ones included.",
-            s.connections);
-  w.counter("irradcast_clients_refused_total",
-            "Connections closed at once because the server had its maximum number of clients.",
-            s.clients_refused);
-  w.counter("irradcast_peer_refused_total",
-            "Connections closed at once because their address had its maximum of sessions.",
-            s.peer_refused);
-  w.counter("irradcast_banned_refused_total",
-            "Connections closed at once because their address is refused after wrong tokens.",
-            s.banned_refused);
-  w.counter("irradcast_accept_errors_total",
-            "Failed accepts (out of file descriptors and the like); accepting pauses on them.",
-            s.accept_errors);
-  w.counter("irradcast_token_failures_total", "Scene edits with a wrong control token.",
-            s.token_failures);
-  w.counter("irradcast_edits_dropped_total",
-            "Edit broadcasts dropped for clients that lagged (they load the scene again).",
-            s.edits_dropped);
-  w.counter("irradcast_log_lines_suppressed_total",
-            "Log lines a session caused over its rate, not written.", s.log_lines_suppressed);
-  w.counter("irradcast_websocket_sessions_total",
-            "Web port connections upgraded to a WebSocket (each also counts as a session).",
-            s.websocket_sessions);
-  w.counter("irradcast_http_requests_total",
-            "Web port requests answered over plain HTTP (the page's files and refusals).",
-            s.http_requests);
+  // Every counter of server_counters.inc, in its order.
+#define IRRADCAST_SERVER_COUNTER(name, wire, metric, help) w.counter(metric, help, s.name);
+#include "irradcast/service/server_counters.inc"
+#undef IRRADCAST_SERVER_COUNTER
   w.gauge("irradcast_partial_frame_bytes", "Bytes of incomplete frames the sessions hold.",
           s.partial_bytes);
   w.family("irradcast_sessions_closed_total", "counter", "Sessions that ended, by reason.");
@@ -139,22 +116,8 @@ void write_clients(Writer& w, const ServerStats& s) {
     w.sample({{"reason", close_reason_name(static_cast<CloseReason>(r))}}, s.sessions_closed[r]);
 }
 
-// Traffic and tiles.
+// Queues and tiles (the traffic counters are in write_clients, from server_counters.inc).
 void write_traffic(Writer& w, const ServerStats& s, const EngineHostStats& e) {
-  w.counter("irradcast_bytes_sent_total", "Bytes written to clients (every frame).", s.bytes_sent);
-  w.counter("irradcast_tile_bytes_sent_total", "Bytes of TileUpdate frames written to clients.",
-            s.tile_bytes_sent);
-  w.counter("irradcast_scene_bytes_sent_total", "Bytes of SceneChunk frames written to clients.",
-            s.scene_bytes_sent);
-  w.counter("irradcast_bytes_received_total", "Bytes read from clients.", s.bytes_received);
-  w.counter("irradcast_frames_received_total", "Frames read from clients.", s.frames_received);
-  w.counter("irradcast_errors_sent_total", "Error frames sent to clients.", s.errors_sent);
-
-  // Tiles.
-  w.counter("irradcast_tiles_sent_total", "TileUpdate frames written to clients.", s.tiles_sent);
-  w.counter("irradcast_tiles_coalesced_total",
-            "Tile versions replaced by a newer one while waiting in a client's queue.",
-            s.tiles_coalesced);
   w.gauge("irradcast_queue_depth", "Tiles waiting to be sent, summed over all clients.",
           s.queue_depth);
   w.gauge("irradcast_queue_depth_max", "Tiles waiting for the client with the longest queue.",

@@ -463,7 +463,6 @@ bool NatsOrigin::Impl::publish_presence(bool full) {
 bool NatsOrigin::Impl::publish_stats() {
   wire::Stats s;
   add_engine_stats(host.stats(), &s);
-  s.set_bytes_per_texel(host.tiles().bytes_per_texel());
   s.set_backend(host.backend_name());
   return publish(subjects.stats, s);
 }

@@ -457,24 +457,9 @@ ServerStats Server::Impl::stats() const {
   const ServerCounters& c = counters;
   ServerStats s;
   s.clients = client_count();
-  s.connections = c.connections.load();
-  s.clients_refused = c.clients_refused.load();
-  s.bytes_sent = c.bytes_sent.load();
-  s.bytes_received = c.bytes_received.load();
-  s.frames_received = c.frames_received.load();
-  s.tiles_sent = c.tiles_sent.load();
-  s.tile_bytes_sent = c.tile_bytes_sent.load();
-  s.tiles_coalesced = c.tiles_coalesced.load();
-  s.scene_bytes_sent = c.scene_bytes_sent.load();
-  s.errors_sent = c.errors_sent.load();
-  s.peer_refused = c.peer_refused.load();
-  s.banned_refused = c.banned_refused.load();
-  s.accept_errors = c.accept_errors.load();
-  s.token_failures = c.token_failures.load();
-  s.edits_dropped = c.edits_dropped.load();
-  s.log_lines_suppressed = c.log_lines_suppressed.load();
-  s.websocket_sessions = c.websocket_sessions.load();
-  s.http_requests = c.http_requests.load();
+#define IRRADCAST_SERVER_COUNTER(name, wire, metric, help) s.name = c.name.load();
+#include "irradcast/service/server_counters.inc"
+#undef IRRADCAST_SERVER_COUNTER
   s.partial_bytes = static_cast<std::uint64_t>(std::max<std::int64_t>(0, c.partial_bytes.load()));
   for (std::size_t r = 0; r < kCloseReasons; ++r)
     s.sessions_closed[r] = c.sessions_closed[r].load();

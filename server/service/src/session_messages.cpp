@@ -136,6 +136,7 @@ void add_engine_stats(const EngineHostStats& es, wire::Stats* s) {
   s->set_scene_revision(es.revision);
   s->set_last_edit_ms(es.last_edit_ms);
   s->set_stale_texels(es.stale_texels);
+  s->set_bytes_per_texel(es.bytes_per_texel);
 }
 
 EngineHostStats engine_stats_from(const wire::Stats& s) {
@@ -164,18 +165,16 @@ EngineHostStats engine_stats_from(const wire::Stats& s) {
 // The server's part of a Stats reply.
 void add_server_stats(const ServerStats& ss, wire::Stats* s) {
   s->set_clients(ss.clients);
-  s->set_bytes_sent(ss.bytes_sent);
-  s->set_tiles_sent(ss.tiles_sent);
-  s->set_tiles_coalesced(ss.tiles_coalesced);
-  s->set_bytes_received(ss.bytes_received);
-  s->set_frames_received(ss.frames_received);
-  s->set_errors_sent(ss.errors_sent);
+  // The counters whose `wire` is Wire (server_counters.inc), each into its field of that name.
+#define IRRADCAST_SERVER_COUNTER_Wire(name) s->set_##name(ss.name);
+#define IRRADCAST_SERVER_COUNTER_Local(name)
+#define IRRADCAST_SERVER_COUNTER(name, wire, metric, help) IRRADCAST_SERVER_COUNTER_##wire(name)
+#include "irradcast/service/server_counters.inc"
+#undef IRRADCAST_SERVER_COUNTER
+#undef IRRADCAST_SERVER_COUNTER_Local
+#undef IRRADCAST_SERVER_COUNTER_Wire
   s->set_queue_depth_total(ss.queue_depth);
   s->set_queue_depth_max(ss.queue_depth_max);
-  s->set_connections(ss.connections);
-  s->set_clients_refused(ss.clients_refused);
-  s->set_scene_bytes_sent(ss.scene_bytes_sent);
-  s->set_tile_bytes_sent(ss.tile_bytes_sent);
   for (std::size_t r = 0; r < kCloseReasons; ++r) {
     wire::SessionsClosed* c = s->add_sessions_closed();
     c->set_reason(close_reason_name(static_cast<CloseReason>(r)));

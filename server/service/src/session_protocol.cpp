@@ -400,7 +400,6 @@ void SessionProtocol::send_stats() {
   s->set_uptime_ms(static_cast<std::uint64_t>(
       std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - ctx_.counters.started)
           .count()));
-  s->set_bytes_per_texel(ctx_.host.tiles().bytes_per_texel());
   s->set_backend(ctx_.host.backend_name());
   send(e);
 }

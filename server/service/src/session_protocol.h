@@ -31,14 +31,13 @@
 
 namespace irradcast {
 
-// The server's counters (ServerStats), which sessions add to from any I/O thread.
+// The server's counters (ServerStats, server_counters.inc), which sessions add to from any I/O
+// thread.
 struct ServerCounters {
   std::chrono::steady_clock::time_point started = std::chrono::steady_clock::now();
-  std::atomic<std::uint64_t> connections{0}, clients_refused{0}, bytes_sent{0}, bytes_received{0},
-      frames_received{0}, tiles_sent{0}, tile_bytes_sent{0}, tiles_coalesced{0},
-      scene_bytes_sent{0}, errors_sent{0}, peer_refused{0}, banned_refused{0}, accept_errors{0},
-      token_failures{0}, edits_dropped{0}, log_lines_suppressed{0}, websocket_sessions{0},
-      http_requests{0}, poses_streamed{0}, poses_refused{0}, avatar_frames_sent{0};
+#define IRRADCAST_SERVER_COUNTER(name, wire, metric, help) std::atomic<std::uint64_t> name{0};
+#include "irradcast/service/server_counters.inc"
+#undef IRRADCAST_SERVER_COUNTER
   std::atomic<std::int64_t> partial_bytes{0};  // incomplete frames in every session's decoder
   std::array<std::atomic<std::uint64_t>, kCloseReasons> sessions_closed{};
 };

@@ -129,28 +129,14 @@ void check_trusted_proxies(const std::vector<std::string>& cidrs);
 // returns the limit now in force.
 std::uint64_t raise_open_file_limit();
 
-// Counters count since the server was created; the rest is the state at the time of the call.
+// Counters count since the server was created (server_counters.inc); the rest is the state at
+// the time of the call.
 struct ServerStats {
+#define IRRADCAST_SERVER_COUNTER(name, wire, metric, help) std::uint64_t name = 0;
+#include "irradcast/service/server_counters.inc"
+#undef IRRADCAST_SERVER_COUNTER
   std::uint32_t clients = 0;
-  std::uint64_t connections = 0;           // accepted so far (refused ones included)
-  std::uint64_t clients_refused = 0;       // accepted and closed at once: max_clients reached
-  std::uint64_t peer_refused = 0;          // ... max_clients_per_peer reached
-  std::uint64_t banned_refused = 0;        // ... the address is refused after wrong tokens
-  std::uint64_t accept_errors = 0;         // accept() failures (out of file descriptors, ...)
-  std::uint64_t token_failures = 0;        // SceneEdits with a wrong token
-  std::uint64_t edits_dropped = 0;         // edit broadcasts dropped for clients that lagged
-  std::uint64_t log_lines_suppressed = 0;  // session log lines over the per-session rate
-  std::uint64_t websocket_sessions = 0;    // web port connections upgraded to a WebSocket
-  std::uint64_t http_requests = 0;         // web port requests answered with a page or an error
-  std::uint64_t partial_bytes = 0;         // incomplete frames held now, all sessions
-  std::uint64_t bytes_sent = 0;            // every frame
-  std::uint64_t bytes_received = 0;
-  std::uint64_t frames_received = 0;
-  std::uint64_t tiles_sent = 0;
-  std::uint64_t tile_bytes_sent = 0;   // TileUpdate frames
-  std::uint64_t tiles_coalesced = 0;   // versions replaced while waiting (counted as they happen)
-  std::uint64_t scene_bytes_sent = 0;  // SceneChunk frames
-  std::uint64_t errors_sent = 0;
+  std::uint64_t partial_bytes = 0;    // incomplete frames held now, all sessions
   std::uint64_t queue_depth = 0;      // tiles waiting, all clients
   std::uint64_t queue_depth_max = 0;  // tiles waiting for the client with the longest queue
   std::array<std::uint64_t, kCloseReasons> sessions_closed{};  // by CloseReason
