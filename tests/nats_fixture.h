@@ -12,7 +12,9 @@
 #include <sys/time.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -60,37 +62,35 @@ class NatsProcess {
   // With `config`: nats-server -c config, its port, storage and monitoring port replaced by
   // the test's (the config's users and permissions kept).
   explicit NatsProcess(std::string config = "")
-      : config_(std::move(config)),
-        port_(free_loopback_port()),
-        dir_(std::filesystem::temp_directory_path() /
-             ("irradcast_nats_" + std::to_string(::getpid()) + "_" + std::to_string(port_))) {
-    std::filesystem::create_directories(dir_);
-    // Ports are picked free and released, so under ctest -j another test's server can take one
-    // before ours binds it (ours then fails, and the port answers as another NATS server's
-    // monitoring port): a launch that does not come up speaking NATS is tried on new ports.
-    for (int attempt = 1; !launch(); ++attempt) {
-      process_.reset();
-      if (attempt == 3) {
-        ADD_FAILURE() << "nats-server did not start on 3 pairs of ports";
-        break;
-      }
-      port_ = free_loopback_port();
-    }
+      : config_(std::move(config)), dir_(std::filesystem::temp_directory_path() / unique_name()) {
+    std::filesystem::create_directories(dir_ / "ports");
+    // nats-server binds ports it picks itself and names them in its ports file: a port picked
+    // here and released could be taken by another test's server under ctest -j before ours
+    // bound it (our clients would then talk to that server).
+    EXPECT_TRUE(launch()) << output();
   }
   ~NatsProcess() {
     process_.reset();
     std::error_code ec;
     std::filesystem::remove_all(dir_, ec);
+    std::filesystem::remove(dir_.string() + ".conf", ec);
+    std::filesystem::remove(dir_.string() + ".log", ec);
   }
   std::string url() const { return "nats://127.0.0.1:" + std::to_string(port_); }
   std::uint16_t port() const { return port_; }
   std::string output() const { return process_ ? process_->output() : ""; }
   // Starts it again on the same port and storage (after stop()).
   void start() { EXPECT_TRUE(launch()) << output(); }
-  // Starts it; true once its port answers with a NATS INFO line.
+  // Starts it (on ports of its choosing the first time, on the same client port after stop());
+  // true once its port answers with a NATS INFO line.
   bool launch() {
-    std::vector<std::string> args{nats_server_exe(), "-p", std::to_string(port_), "-a",
-                                  "127.0.0.1"};
+    const std::filesystem::path ports = dir_ / "ports";
+    for (const auto& e : std::filesystem::directory_iterator(ports))
+      std::filesystem::remove(e.path());
+    const std::string port = port_ ? std::to_string(port_) : "-1";
+    std::vector<std::string> args{nats_server_exe(), "-a", "127.0.0.1", "-p", port};
+    for (const std::string& a : {std::string("--ports_file_dir"), ports.string()})
+      args.push_back(a);
     if (config_.empty()) {
       for (const char* a : {"-js", "-sd"}) args.push_back(a);
       args.push_back(dir_.string());
@@ -108,11 +108,10 @@ class NatsProcess {
         conf.replace(at, from.size(), "store_dir: \"" + dir_.string() + "\"");
       const std::string copy = dir_.string() + ".conf";
       std::ofstream(copy) << conf;
-      for (const std::string& a :
-           {std::string("-c"), copy, std::string("-m"), std::to_string(free_loopback_port())})
-        args.push_back(a);
+      for (const char* a : {"-c", copy.c_str(), "-m", "-1"}) args.push_back(a);
     }
     process_ = std::make_unique<Process>(args, dir_.string() + ".log");
+    if (!eventually([&] { return read_ports_file(); }, std::chrono::seconds(10))) return false;
     return eventually([&] { return speaks_nats(); }, std::chrono::seconds(10));
   }
   void stop() {
@@ -122,6 +121,27 @@ class NatsProcess {
   }
 
  private:
+  static std::string unique_name() {
+    static std::atomic<int> count{0};
+    return "irradcast_nats_" + std::to_string(::getpid()) + "_" + std::to_string(++count);
+  }
+  // The client port from the ports file nats-server writes once it listens
+  // ({"nats":["nats://127.0.0.1:PORT"],...}).
+  bool read_ports_file() {
+    for (const auto& e : std::filesystem::directory_iterator(dir_ / "ports")) {
+      std::ifstream in(e.path());
+      std::stringstream text;
+      text << in.rdbuf();
+      const std::string key = "nats://127.0.0.1:";
+      const std::size_t at = text.str().find(key);
+      if (at == std::string::npos) continue;  // written, not yet whole
+      const int port = std::atoi(text.str().c_str() + at + key.size());
+      if (port <= 0 || port > 65535) continue;
+      port_ = static_cast<std::uint16_t>(port);
+      return true;
+    }
+    return false;
+  }
   // Our port accepts and greets with "INFO " (a NATS server's first line), within a second.
   bool speaks_nats() const {
     const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
@@ -144,7 +164,7 @@ class NatsProcess {
     return got == sizeof head && std::string(head, sizeof head) == "INFO ";
   }
   std::string config_;
-  std::uint16_t port_;
+  std::uint16_t port_ = 0;
   std::filesystem::path dir_;
   std::unique_ptr<Process> process_;
 };

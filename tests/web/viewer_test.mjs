@@ -271,11 +271,14 @@ async function dynamic(o) {
     writeFileSync(lines, `${step}\n`.repeat(12));
     await run(o.edit, ['--connect', `127.0.0.1:${server.port}`, '--token', token, '--stream', lines]);
     await page.waitForFunction(() => window.irradcast.conn.poseSequence === 12, { timeout: 30000 });
-    await new Promise((r) => setTimeout(r, 500));  // a few frames
+    // Poses make the page draw again; converged again once the posed frame is drawn (a fixed
+    // wait was too short on a loaded machine).
+    await page.waitForFunction(() => document.title === 'irradcast: converged', { timeout: 30000, polling: 100 });
     const moved = path.join(tmpDir, 'page-dynamic-moved.png');
     await page.screenshot({ path: moved });
     await page.close();
-    const movedView = await viewPng(o, server, { width: W, height: H }, 'view-dynamic-moved');
+    const movedView = await viewPng(o, server, { width: W, height: H, extra: ['--dynamic-emitters', 'volume'] },
+      'view-dynamic-moved');
     compare(moved, movedView, 'page (dynamic, posed)');
     const m = readPng(moved);
     console.log(`page (dynamic, posed): the block's old region, mean level ${region(m).toFixed(1)} (was ${region(a).toFixed(1)})`);
