@@ -18,6 +18,7 @@
 #include "irradcast/common/log.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/scene_edit.h"
+#include "irradcast/wire/blocking_channel.h"
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/frame.h"
 #include "irradcast/wire/scene_package.h"
@@ -32,9 +33,7 @@ using Clock = std::chrono::steady_clock;
 namespace {
 
 // The connection dropped (EOF, reset, or the server closed it after an Error).
-struct ConnectionLost : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
+using ConnectionLost = wire::ChannelLost;
 
 ClientSessionOptions session_options(const ViewClientOptions& o) {
   ClientSessionOptions so;
@@ -49,14 +48,6 @@ ClientSessionOptions session_options(const ViewClientOptions& o) {
 }
 
 }  // namespace
-
-struct ViewClient::Net {
-  explicit Net(asio::ssl::context* tls) : socket(io.get_executor(), tls) {}
-  asio::io_context io;
-  wire::Stream socket;  // TCP, or TLS over it (--tls)
-  wire::FrameDecoder decoder;
-  std::array<char, 64 * 1024> buffer{};
-};
 
 ViewClient::ViewClient(ViewClientOptions options)
     : options_(std::move(options)),
@@ -124,77 +115,27 @@ void ViewClient::establish(bool after_loss) {
 // otherwise block for minutes) and by the reply timeout.
 void ViewClient::open_connection(Clock::time_point deadline) {
   ++connect_attempts_;
-  net_ = std::make_unique<Net>(tls_.get());
   const auto limit = std::chrono::duration_cast<std::chrono::milliseconds>(
       std::max(std::min<Clock::duration>(deadline - Clock::now(), options_.reply_timeout),
                Clock::duration(std::chrono::milliseconds(100))));
-  std::error_code ec;
-  std::string what;
-  connect_stream(net_->io, net_->socket, server().host, server().port, limit, ec, what);
-  if (!ec) return;
   // A certificate the client does not trust, or a server that does not speak TLS, will not
-  // change by trying again: a clear error. A connection cut during the handshake is retried.
-  if (ec.category() == asio::error::get_ssl_category())
-    throw Error("cannot connect to " + server().text() + ": " + what);
-  throw ConnectionLost(what);
+  // change by trying again: irradcast::Error. A connection cut during the handshake is retried.
+  net_ = std::make_unique<wire::BlockingChannel>(server().host, server().port, tls_, limit);
 }
 
 void ViewClient::drop_connection() {
   if (!net_) return;
   core_.disconnect();
-  net_->socket.close();
+  bytes_received_ += net_->bytes_received();
   net_.reset();
 }
 
 void ViewClient::send(const wire::Envelope& e) {
-  std::string frame = wire::encode_frame(e);
-  std::error_code ec;
-  asio::write(net_->socket, asio::buffer(frame), ec);
-  if (ec) throw ConnectionLost("write: " + wire::describe_tls_error(ec));
+  net_->send(e);
 }
 
 bool ViewClient::read_frame(wire::Envelope& out, Clock::time_point deadline) {
-  for (;;) {
-    switch (net_->decoder.next(out)) {
-      case wire::DecodeStatus::Frame:
-        return true;
-      case wire::DecodeStatus::TooLarge:
-      case wire::DecodeStatus::Malformed:
-        throw Error("the server sent a bad frame: " + net_->decoder.error());
-      case wire::DecodeStatus::NeedMore:
-        break;
-    }
-    const auto now = Clock::now();
-    if (now >= deadline) return false;
-    std::error_code result = asio::error::would_block;
-    std::size_t got = 0;
-    net_->socket.async_read_some(asio::buffer(net_->buffer),
-                                 [&](std::error_code ec, std::size_t n) {
-                                   result = ec;
-                                   got = n;
-                                 });
-    net_->io.restart();
-    net_->io.run_for(deadline - now);
-    if (result == asio::error::would_block) {
-      // Timed out: cancel the read and let its handler run before the buffer goes out of use.
-      std::error_code ignored;
-      net_->socket.socket().cancel(ignored);
-      net_->io.restart();
-      net_->io.run();
-      if (result == asio::error::would_block || result == asio::error::operation_aborted) {
-        if (got > 0) {
-          bytes_received_ += got;
-          net_->decoder.feed(net_->buffer.data(), got);
-        }
-        return false;
-      }
-    }
-    if (result && result != asio::error::operation_aborted)
-      throw ConnectionLost(result == asio::error::eof ? "the server closed the connection"
-                                                      : wire::describe_tls_error(result));
-    bytes_received_ += got;
-    net_->decoder.feed(net_->buffer.data(), got);
-  }
+  return net_->read(out, deadline);
 }
 
 void ViewClient::send_all(const ClientStep& step) {
@@ -347,13 +288,13 @@ void ViewClient::send_camera(const CameraPose& c) {
 
 void ViewClient::close() {
   if (!net_) return;
-  if (net_->socket.socket().is_open()) {
+  if (net_->open()) {
     try {
       send(wire::make_bye("viewer done"));
     } catch (const ConnectionLost&) {
     }
-    net_->socket.close();
   }
+  bytes_received_ += net_->bytes_received();
   net_.reset();
 }
 
@@ -391,7 +332,7 @@ const Atlas& ViewClient::atlas() const {
 ViewClientCounters ViewClient::counters() const {
   const ClientSessionCounters& p = core_.counters();
   ViewClientCounters c;
-  c.bytes_received = bytes_received_;
+  c.bytes_received = bytes_received_ + (net_ ? net_->bytes_received() : 0);
   c.frames_received = p.frames_received;
   c.tiles_applied = p.tiles_applied;
   c.scene_bytes_downloaded = p.scene_bytes_downloaded;

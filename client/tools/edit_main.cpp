@@ -11,7 +11,6 @@
 // (docs/DYNAMIC.md#poses). An edit that only moves dynamic nodes makes no revision: it prints
 // "poses N applied".
 #include <CLI/CLI.hpp>
-#include <asio.hpp>
 
 #include <array>
 #include <chrono>
@@ -39,6 +38,7 @@
 #include "irradcast/common/gltf.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/scene_edit.h"
+#include "irradcast/wire/blocking_channel.h"
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/frame.h"
 #include "irradcast/wire/pose_message.h"
@@ -68,9 +68,7 @@ struct Options {
 };
 
 // The connection is gone (refused, reset, closed): another server of the list may do.
-struct Lost : irradcast::Error {
-  using irradcast::Error::Error;
-};
+using Lost = irradcast::wire::ChannelLost;
 
 // The server answered with an Error frame.
 struct Refused : irradcast::Error {
@@ -197,73 +195,32 @@ std::string token_of(const Options& o) {
   return o.token;  // empty: the server will refuse the edit
 }
 
-// A blocking connection with read deadlines.
+// The server's connection (wire::BlockingChannel) as irradcast-edit reads it: pings answered,
+// Error frames thrown.
 class Connection {
  public:
   Connection(const irradcast::HostPort& hp, std::chrono::milliseconds timeout,
              const irradcast::ClientTls& tls)
-      : tls_(irradcast::make_tls_context(tls)), socket_(io_.get_executor(), tls_.get()) {
-    std::error_code ec;
-    std::string what;
-    irradcast::connect_stream(io_, socket_, hp.host, hp.port, timeout, ec, what);
-    if (ec && ec.category() == asio::error::get_ssl_category())
-      throw irradcast::Error("cannot connect to " + hp.text() + ": " + what);
-    if (ec) throw Lost(what);
-    timeout_ = timeout;
-  }
+      : channel_(hp.host, hp.port, irradcast::make_tls_context(tls), timeout), timeout_(timeout) {}
 
-  void send(const irradcast::wire::Envelope& e) {
-    const std::string frame = irradcast::wire::encode_frame(e);
-    std::error_code ec;
-    asio::write(socket_, asio::buffer(frame), ec);
-    if (ec) throw Lost("lost the connection to the server: " + ec.message());
-    last_send_ = Clock::now();
-  }
+  void send(const irradcast::wire::Envelope& e) { channel_.send(e); }
 
   // The next frame before `deadline` (nullopt on timeout). An Error frame throws Refused, or Lost
   // for one after which the server closes (shutting down, full, idle): another server may do.
   std::optional<irradcast::wire::Envelope> read(Clock::time_point deadline) {
     irradcast::wire::Envelope e;
-    for (;;) {
-      const irradcast::wire::DecodeStatus st = decoder_.next(e);
-      if (st == irradcast::wire::DecodeStatus::Frame) {
-        if (e.has_error() && irradcast::server_error_is_transient(e.error().code()))
-          throw Lost("the server says: " + e.error().message());
-        if (e.has_error())
-          throw Refused(e.error().code(), e.error().message(), e.error().request_id());
-        if (e.has_ping()) {
-          irradcast::wire::Envelope pong;
-          pong.mutable_pong()->set_nonce(e.ping().nonce());
-          pong.mutable_pong()->set_time_us(e.ping().time_us());
-          send(pong);
-          continue;
-        }
-        return e;
-      }
-      if (st != irradcast::wire::DecodeStatus::NeedMore)
-        throw irradcast::Error("the server sent a bad frame: " + decoder_.error());
-      const auto now = Clock::now();
-      if (now >= deadline) return std::nullopt;
-      std::error_code result = asio::error::would_block;
-      std::size_t n = 0;
-      socket_.async_read_some(asio::buffer(buffer_), [&](std::error_code ec, std::size_t got) {
-        result = ec;
-        n = got;
-      });
-      io_.restart();
-      io_.run_for(deadline - now);
-      if (result == asio::error::would_block) {
-        std::error_code ignored;
-        socket_.socket().cancel(ignored);
-        io_.restart();
-        io_.run();
-      }
-      if (result && result != asio::error::would_block && result != asio::error::operation_aborted)
-        throw Lost(result == asio::error::eof
-                       ? "the server closed the connection"
-                       : "read: " + irradcast::wire::describe_tls_error(result));
-      decoder_.feed(buffer_.data(), n);
+    while (channel_.read(e, deadline)) {
+      if (e.has_error() && irradcast::server_error_is_transient(e.error().code()))
+        throw Lost("the server says: " + e.error().message());
+      if (e.has_error())
+        throw Refused(e.error().code(), e.error().message(), e.error().request_id());
+      if (!e.has_ping()) return e;
+      irradcast::wire::Envelope pong;
+      pong.mutable_pong()->set_nonce(e.ping().nonce());
+      pong.mutable_pong()->set_time_us(e.ping().time_us());
+      send(pong);
     }
+    return std::nullopt;
   }
 
   // The next frame within the timeout; throws when none comes.
@@ -280,12 +237,12 @@ class Connection {
     const auto until =
         Clock::now() + std::chrono::microseconds(static_cast<std::int64_t>(ms * 1e3));
     while (Clock::now() < until) {
-      if (Clock::now() - last_send_ >= ping_every) {
+      if (Clock::now() - last_send() >= ping_every) {
         irradcast::wire::Envelope p;
         p.mutable_ping()->set_nonce(1);
         send(p);
       }
-      read(std::min(until, last_send_ + ping_every));
+      read(std::min(until, last_send() + ping_every));
     }
   }
 
@@ -294,20 +251,15 @@ class Connection {
       send(irradcast::wire::make_bye("edits sent"));
     } catch (const irradcast::Error&) {
     }
-    socket_.close();
+    channel_.close();
   }
 
   std::chrono::milliseconds ping_every{10000};  // a third of the server's idle timeout
-  Clock::time_point last_send() const { return last_send_; }
+  Clock::time_point last_send() const { return channel_.last_send(); }
 
  private:
-  asio::io_context io_;
-  std::shared_ptr<asio::ssl::context> tls_;  // null: plain TCP
-  irradcast::wire::Stream socket_;
-  irradcast::wire::FrameDecoder decoder_;
-  std::array<char, 64 * 1024> buffer_{};
+  irradcast::wire::BlockingChannel channel_;
   std::chrono::milliseconds timeout_{10000};
-  Clock::time_point last_send_ = Clock::now();
 };
 
 // A session on one server of the --connect list: Hello, Welcome, and on a lost connection the

@@ -35,6 +35,10 @@
 
 namespace irradcast {
 
+namespace wire {
+class BlockingChannel;
+}
+
 struct ViewClientOptions {
   std::string host = "127.0.0.1";
   std::uint16_t port = 7450;
@@ -137,7 +141,6 @@ class ViewClient {
   const HostPort& server() const { return servers_[current_]; }
 
  private:
-  struct Net;
   // Attempts connections (open_connection + handshake) until one sets up a session, moving to
   // the next address after each failure (and first of all when `after_loss`). Sleeps a back-off
   // delay before each round over the list but the first (and before the first too when
@@ -166,10 +169,10 @@ class ViewClient {
   std::size_t current_ = 0;                  // index into servers_
   std::shared_ptr<asio::ssl::context> tls_;  // null: plain TCP
   Backoff backoff_;
-  std::unique_ptr<Net> net_;
+  std::unique_ptr<wire::BlockingChannel> net_;  // the connection now, if any
   ClientSession core_;
   // Connection counts; the protocol's counts are the core's.
-  std::uint64_t bytes_received_ = 0;
+  std::uint64_t bytes_received_ = 0;  // on the connections before the current one
   std::uint32_t connections_ = 0, connections_lost_ = 0, connect_attempts_ = 0, failovers_ = 0;
   std::chrono::steady_clock::time_point last_ping_{};
 };
