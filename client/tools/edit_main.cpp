@@ -12,71 +12,39 @@
 // "poses N applied".
 #include <CLI/CLI.hpp>
 
-#include <array>
 #include <chrono>
-#include <cmath>
-#include <condition_variable>
 #include <csignal>
 #include <cstdio>
-#include <deque>
 #include <filesystem>
 #include <fstream>
-#include <iostream>
-#include <map>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <sstream>
 #include <string>
-#include <thread>
 #include <vector>
 
+#include "edit_session.h"
 #include "irradcast/client/backoff.h"
-#include "irradcast/client/client_tls.h"
 #include "irradcast/client/host_port.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/gltf.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/scene_edit.h"
-#include "irradcast/wire/blocking_channel.h"
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/frame.h"
 #include "irradcast/wire/pose_message.h"
 #include "irradcast/wire/scene_package.h"
 #include "tool_main.h"
 
+using irradcast::edit_tool::Options;
+
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-struct Options {
-  std::string connect;
-  irradcast::ClientTls tls;
-  std::string token;
-  std::string token_file;
-  std::string json;
-  std::string script;
-  std::vector<std::string> move, rotate, scale, show, hide, light_color, light_intensity, albedo,
-      emission;
-  std::string export_path;  // --export FILE.glb|.gltf
-  bool stream = false;      // --stream [FILE]: one edit per line, sent as streamed poses
-  std::string stream_path;  // empty: stdin
-  bool no_wait = false;
-  int timeout_ms = 10000;
-  std::string name = "irradcast-edit";
-  std::string log_level = "warn";
-};
-
-// The connection is gone (refused, reset, closed): another server of the list may do.
-using Lost = irradcast::wire::ChannelLost;
-
-// The server answered with an Error frame.
-struct Refused : irradcast::Error {
-  Refused(irradcast::wire::ErrorCode c, const std::string& message, std::uint64_t request = 0)
-      : irradcast::Error(message), code(c), request_id(request) {}
-  irradcast::wire::ErrorCode code;
-  std::uint64_t request_id;  // the request it answers (0: none)
-};
+using irradcast::edit_tool::Clock;
+using irradcast::edit_tool::Connection;
+using irradcast::edit_tool::Lost;
+using irradcast::edit_tool::Refused;
+using irradcast::edit_tool::Session;
 
 float number(const std::string& text, const std::string& flag) {
   try {
@@ -195,128 +163,6 @@ std::string token_of(const Options& o) {
   return o.token;  // empty: the server will refuse the edit
 }
 
-// The server's connection (wire::BlockingChannel) as irradcast-edit reads it: pings answered,
-// Error frames thrown.
-class Connection {
- public:
-  Connection(const irradcast::HostPort& hp, std::chrono::milliseconds timeout,
-             const irradcast::ClientTls& tls)
-      : channel_(hp.host, hp.port, irradcast::make_tls_context(tls), timeout), timeout_(timeout) {}
-
-  void send(const irradcast::wire::Envelope& e) { channel_.send(e); }
-
-  // The next frame before `deadline` (nullopt on timeout). An Error frame throws Refused, or Lost
-  // for one after which the server closes (shutting down, full, idle): another server may do.
-  std::optional<irradcast::wire::Envelope> read(Clock::time_point deadline) {
-    irradcast::wire::Envelope e;
-    while (channel_.read(e, deadline)) {
-      if (e.has_error() && irradcast::server_error_is_transient(e.error().code()))
-        throw Lost("the server says: " + e.error().message());
-      if (e.has_error())
-        throw Refused(e.error().code(), e.error().message(), e.error().request_id());
-      if (!e.has_ping()) return e;
-      irradcast::wire::Envelope pong;
-      pong.mutable_pong()->set_nonce(e.ping().nonce());
-      pong.mutable_pong()->set_time_us(e.ping().time_us());
-      send(pong);
-    }
-    return std::nullopt;
-  }
-
-  // The next frame within the timeout; throws when none comes.
-  irradcast::wire::Envelope expect(const std::string& what) {
-    auto e = read(Clock::now() + timeout_);
-    if (!e)
-      throw irradcast::Error("no " + what + " from the server within " +
-                             std::to_string(timeout_.count()) + " ms");
-    return *e;
-  }
-
-  // Waits `ms`, reading (and dropping) frames and pinging so the server's idle timer is happy.
-  void wait(double ms, std::chrono::milliseconds ping_every) {
-    const auto until =
-        Clock::now() + std::chrono::microseconds(static_cast<std::int64_t>(ms * 1e3));
-    while (Clock::now() < until) {
-      if (Clock::now() - last_send() >= ping_every) {
-        irradcast::wire::Envelope p;
-        p.mutable_ping()->set_nonce(1);
-        send(p);
-      }
-      read(std::min(until, last_send() + ping_every));
-    }
-  }
-
-  void close() {
-    try {
-      send(irradcast::wire::make_bye("edits sent"));
-    } catch (const irradcast::Error&) {
-    }
-    channel_.close();
-  }
-
-  std::chrono::milliseconds ping_every{10000};  // a third of the server's idle timeout
-  Clock::time_point last_send() const { return channel_.last_send(); }
-
- private:
-  irradcast::wire::BlockingChannel channel_;
-  std::chrono::milliseconds timeout_{10000};
-};
-
-// A session on one server of the --connect list: Hello, Welcome, and on a lost connection the
-// next server.
-class Session {
- public:
-  Session(const Options& o, std::vector<irradcast::HostPort> servers)
-      : o_(o), servers_(std::move(servers)) {
-    connect();
-  }
-  Connection& connection() { return *c_; }
-  const irradcast::HostPort& server() const { return servers_[current_]; }
-
-  // The first server that answers, trying each once from the one after the current (the
-  // first: from the start of the list). An Error frame that ends the session (server full,
-  // shutting down) counts as no answer; every failure is in the error.
-  void connect() {
-    using namespace irradcast;
-    std::string failures;
-    for (std::size_t i = 0; i < servers_.size(); ++i) {
-      if (c_ || i > 0) current_ = (current_ + 1) % servers_.size();
-      c_.reset();
-      try {
-        c_ = std::make_unique<Connection>(server(), std::chrono::milliseconds(o_.timeout_ms),
-                                          tools::tls_of(o_.tls));
-        hello();
-        return;
-      } catch (const Lost& e) {
-        failures += "; " + server().text() + ": " + e.what();
-      }
-    }
-    c_.reset();
-    throw Error("no server of --connect answered" + failures);
-  }
-
- private:
-  void hello() {
-    using namespace irradcast;
-    wire::Envelope hello;
-    hello.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
-    hello.mutable_hello()->set_client_name(o_.name);
-    c_->send(hello);
-    wire::Envelope w = c_->expect("welcome");
-    if (!w.has_welcome())
-      throw Error(std::string("expected welcome, got ") + wire::message_name(w));
-    if (w.welcome().idle_timeout_ms() > 0)
-      c_->ping_every =
-          std::min(c_->ping_every, std::chrono::milliseconds(w.welcome().idle_timeout_ms() / 3));
-    if (servers_.size() > 1) log::info("edit", "connected to " + server().text());
-  }
-
-  const Options& o_;
-  std::vector<irradcast::HostPort> servers_;
-  std::size_t current_ = 0;
-  std::unique_ptr<Connection> c_;
-};
-
 // Sends one edit and returns its acknowledgement. A connection lost before the edit was written
 // moves to the next server and sends it there.
 irradcast::wire::SceneEdit send_edit(Session& session, const irradcast::wire::Envelope& e,
@@ -392,216 +238,6 @@ int run_export(const Options& o, const std::string& token) {
         "note: glTF has no sky; give irradcast-bake or irradcast-server the sky again "
         "(--sky, --sky-strength, --sun)\n");
   return 0;
-}
-
-// The lines of a file or stdin, read on their own thread so that the connection is served (pings,
-// refusals) while no line comes. The thread is detached (stdin may block for good after the last
-// line the tool needs) and shares the lines with the reader: it may outlive it.
-class LineReader {
- public:
-  explicit LineReader(const std::string& path) : shared_(std::make_shared<Shared>()) {
-    auto in = std::make_shared<std::ifstream>();
-    if (!path.empty()) {
-      in->open(path);
-      if (!*in) throw irradcast::Error("--stream: cannot read '" + path + "'");
-    }
-    std::thread([shared = shared_, in, use_stdin = path.empty()] {
-      std::istream& from = use_stdin ? std::cin : *in;
-      std::string line;
-      while (std::getline(from, line)) {
-        std::unique_lock lock(shared->mutex);
-        // A bounded backlog: a file is read no faster than the poses go out.
-        shared->cv.wait(lock, [&] { return shared->lines.size() < 1024 || shared->abandoned; });
-        if (shared->abandoned) return;
-        shared->lines.push_back(std::move(line));
-        shared->cv.notify_all();
-      }
-      std::lock_guard lock(shared->mutex);
-      shared->done = true;
-      shared->cv.notify_all();
-    }).detach();
-  }
-  ~LineReader() {
-    std::lock_guard lock(shared_->mutex);
-    shared_->abandoned = true;
-    shared_->cv.notify_all();
-  }
-  LineReader(const LineReader&) = delete;
-  LineReader& operator=(const LineReader&) = delete;
-
-  // The next line within `wait`; nullopt when none came (`ended`: none will).
-  std::optional<std::string> next(std::chrono::milliseconds wait, bool& ended) {
-    Shared& s = *shared_;
-    std::unique_lock lock(s.mutex);
-    s.cv.wait_for(lock, wait, [&] { return !s.lines.empty() || s.done; });
-    ended = s.lines.empty() && s.done;
-    if (s.lines.empty()) return std::nullopt;
-    std::string line = std::move(s.lines.front());
-    s.lines.pop_front();
-    s.cv.notify_all();
-    return line;
-  }
-
- private:
-  struct Shared {
-    std::mutex mutex;
-    std::condition_variable cv;
-    std::deque<std::string> lines;
-    bool done = false, abandoned = false;
-  };
-  std::shared_ptr<Shared> shared_;
-};
-
-// --stream: every line an edit of dynamic nodes (JSON, as --json; blank lines and lines starting
-// with '#' are skipped), sent as a streamed pose as soon as it comes, but no more than
-// kStreamRate times a second per node (a faster line waits). Refusals name their line; they do
-// not stop the stream, except a refused token.
-int run_stream(const Options& o, const std::string& token) {
-  using namespace irradcast;
-  constexpr auto kGap = std::chrono::microseconds(1000000 / 60);  // PoseBoard::kStreamRate
-  LineReader reader(o.stream_path);
-  Session session(o, tools::start_run(o.log_level, o.connect));
-  std::map<std::string, Clock::time_point> last_sent;  // per target
-  std::uint64_t line_no = 0, sent = 0, refused = 0, refused_by_server = 0;
-  // Lines sent since the server last answered (a ping's pong), and those that a lost connection
-  // may have taken with it.
-  std::uint64_t sent_since_answer = 0, answered = 0, lost_lines = 0, lost_unsent = 0;
-  const auto began = Clock::now();
-  Clock::time_point last_poll = began, last_mark = began;
-  constexpr std::uint64_t kMark = std::uint64_t{1} << 62;  // our pings' nonces: kMark | sent
-  std::map<std::uint64_t, std::uint64_t> marks;            // sent count at a ping -> its line
-  // A refused line is printed with its number; a refused token ends the stream.
-  const auto refusal = [&](const Refused& r) {
-    if (r.code == wire::PERMISSION_DENIED) throw r;
-    ++refused;
-    ++refused_by_server;
-    std::fprintf(stderr, "irradcast-edit: line %llu: %s\n",
-                 static_cast<unsigned long long>(r.request_id), r.what());
-  };
-  // Reads what the server sent until `until`: refusals are printed, the rest dropped.
-  const auto serve = [&](Clock::time_point until) {
-    for (;;) {
-      try {
-        Connection& c = session.connection();
-        // A ping every 250 ms while lines go out (and as the idle timeout needs): its pong
-        // says the server read every line sent before it.
-        if (Clock::now() - last_mark >= std::chrono::milliseconds(250) ||
-            Clock::now() - c.last_send() >= c.ping_every) {
-          wire::Envelope p;
-          p.mutable_ping()->set_nonce(kMark | sent);
-          c.send(p);
-          marks[sent] = line_no;
-          last_mark = Clock::now();
-        }
-        // A look at the socket at least every 20 ms, so that refusals do not pile up unread,
-        // but not a wait for every line of a fast stream.
-        const auto now = Clock::now();
-        if (until <= now && now - last_poll < std::chrono::milliseconds(20)) return;
-        last_poll = now;
-        const std::optional<wire::Envelope> a =
-            c.read(std::max(until, now + std::chrono::milliseconds(1)));
-        if (!a) return;
-        if (a->has_pong() && (a->pong().nonce() & kMark)) {
-          const std::uint64_t at = a->pong().nonce() & ~kMark;
-          if (auto it = marks.find(at); it != marks.end()) {
-            answered = it->second;
-            sent_since_answer = sent - at;
-            marks.erase(marks.begin(), std::next(it));
-          }
-        }
-      } catch (const Refused& r) {
-        refusal(r);
-      } catch (const Lost& lost) {
-        // Poses written since the last answer may be lost with the connection: said, not
-        // counted as taken.
-        std::fprintf(stderr,
-                     "irradcast-edit: %s: %s; poses sent after line %llu may be lost; trying the "
-                     "next server\n",
-                     session.server().text().c_str(), lost.what(),
-                     static_cast<unsigned long long>(answered));
-        lost_lines += sent_since_answer;
-        sent_since_answer = 0;
-        marks.clear();
-        session.connect();
-        return;
-      }
-    }
-  };
-  for (;;) {
-    bool ended = false;
-    std::optional<std::string> line = reader.next(std::chrono::milliseconds(50), ended);
-    if (ended) break;
-    if (!line) {
-      serve(Clock::now());
-      continue;
-    }
-    ++line_no;
-    const std::size_t first = line->find_first_not_of(" \t\r");
-    if (first == std::string::npos || (*line)[first] == '#') continue;
-    SceneEdit edit;
-    try {
-      edit = parse_edit_json(*line);
-    } catch (const Error& e) {
-      ++refused;
-      std::fprintf(stderr, "irradcast-edit: line %llu: %s\n",
-                   static_cast<unsigned long long>(line_no), e.what());
-      continue;
-    }
-    Clock::time_point at = Clock::now();
-    for (const EditOp& op : edit.ops)
-      if (auto it = last_sent.find(op.target); it != last_sent.end())
-        at = std::max(at, it->second + kGap);
-    serve(at);  // waits for the node's rate, serving the connection meanwhile
-    wire::Envelope e;
-    wire::to_proto(edit, e.mutable_scene_edit());
-    e.mutable_scene_edit()->set_token(token);
-    e.mutable_scene_edit()->set_request_id(line_no);
-    e.mutable_scene_edit()->set_stream(true);
-    try {
-      session.connection().send(e);
-    } catch (const Lost& lost) {
-      std::fprintf(stderr,
-                   "irradcast-edit: %s: %s; line %llu and those sent after line %llu may be "
-                   "lost; trying the next server\n",
-                   session.server().text().c_str(), lost.what(),
-                   static_cast<unsigned long long>(line_no),
-                   static_cast<unsigned long long>(answered));
-      lost_lines += sent_since_answer;
-      ++lost_unsent;
-      sent_since_answer = 0;
-      marks.clear();
-      session.connect();
-      continue;
-    }
-    ++sent;
-    ++sent_since_answer;
-    const auto now = Clock::now();
-    for (const EditOp& op : edit.ops) last_sent[op.target] = now;
-  }
-  // Every refusal is in before the answer to a ping sent after the last pose.
-  wire::Envelope ping;
-  ping.mutable_ping()->set_nonce(0x5157);
-  session.connection().send(ping);
-  const auto deadline = Clock::now() + std::chrono::milliseconds(o.timeout_ms);
-  for (bool ponged = false; !ponged;) {
-    std::optional<wire::Envelope> a;
-    try {
-      a = session.connection().read(deadline);
-    } catch (const Refused& r) {
-      refusal(r);
-      continue;
-    }
-    if (!a) throw Error("no answer from the server within " + std::to_string(o.timeout_ms) + " ms");
-    ponged = a->has_pong() && a->pong().nonce() == 0x5157;
-  }
-  session.connection().close();
-  std::printf("streamed %llu poses from %llu lines in %.2f s, %llu refused, %llu lost\n",
-              static_cast<unsigned long long>(sent - refused_by_server - lost_lines),
-              static_cast<unsigned long long>(line_no),
-              std::chrono::duration<double>(Clock::now() - began).count(),
-              static_cast<unsigned long long>(refused),
-              static_cast<unsigned long long>(lost_lines));
-  return refused == 0 && lost_lines == 0 ? 0 : 1;
 }
 
 int run(const Options& o, const std::vector<irradcast::EditStep>& steps, const std::string& token) {
