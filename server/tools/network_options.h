@@ -52,6 +52,14 @@ struct NetworkOptions {
   float presence_height = 0.0f;  // 0: the program's default (presence_default_height)
 
   void add_to(CLI::App& app) {
+    add_ports(app);
+    add_proxies(app);
+    add_access(app);
+    add_presence(app);
+  }
+
+  // Ports, threads, timeouts, the web and metrics ports.
+  void add_ports(CLI::App& app) {
     app.add_option("--bind", bind, "address to listen on");
     app.add_option("--port", port, "TCP port (0 = any free port)")->check(CLI::Range(0, 65535));
     app.add_option("--io-threads", io_threads, "network threads")->check(CLI::Range(1, 64));
@@ -71,6 +79,18 @@ struct NetworkOptions {
                    "WebSocket besides pages of this server's own host (repeat or "
                    "comma-separate; docs/OPERATIONS.md)")
         ->delimiter(',');
+    app.add_option("--metrics-port", metrics_port,
+                   "serve Prometheus metrics at http://ADDR:PORT/metrics (0 = any free port; off "
+                   "when not given)")
+        ->check(CLI::Range(0, 65535))
+        ->default_str("off");
+    app.add_option("--metrics-bind", metrics_bind,
+                   "address for the metrics endpoint (default: the --bind address)");
+    app.add_option("--log-level", log_level, "debug | info | warn | error | off");
+  }
+
+  // Reverse proxies: whose client addresses are believed, and how they are told.
+  void add_proxies(CLI::App& app) {
     app.add_option("--trusted-proxy", trusted_proxies,
                    "reverse proxies or load balancers (CIDR[,CIDR...], e.g. 10.0.0.0/8) whose "
                    "PROXY protocol v2 header, and on the web port whose --forwarded-header, name "
@@ -97,13 +117,10 @@ struct NetworkOptions {
                    "health checks): none, protocol, web or both; one without is refused, and "
                    "on other ports no PROXY header is read")
         ->check(CLI::IsMember({"none", "protocol", "web", "both"}, CLI::ignore_case));
-    app.add_option("--metrics-port", metrics_port,
-                   "serve Prometheus metrics at http://ADDR:PORT/metrics (0 = any free port; off "
-                   "when not given)")
-        ->check(CLI::Range(0, 65535))
-        ->default_str("off");
-    app.add_option("--metrics-bind", metrics_bind,
-                   "address for the metrics endpoint (default: the --bind address)");
+  }
+
+  // Who may edit, how many may connect, TLS.
+  void add_access(CLI::App& app) {
     app.add_option("--control-token", control_token,
                    "accept live scene edits (irradcast-edit) from clients that give this token "
                    "(visible in the process list: prefer --control-token-file); without a token "
@@ -125,7 +142,10 @@ struct NetworkOptions {
                    "certificate chain (with --tls-key; docs/OPERATIONS.md)")
         ->default_str("none");
     app.add_option("--tls-key", tls_key, "the PEM private key of --tls-cert")->default_str("none");
-    app.add_option("--log-level", log_level, "debug | info | warn | error | off");
+  }
+
+  // --presence and its settings (docs/DYNAMIC.md#presence).
+  void add_presence(CLI::App& app) {
     app.add_flag("--presence", presence,
                  "show each viewer that asks (irradcast-view --presence) to the others as an "
                  "avatar at its camera, lit like the dynamic objects (docs/DYNAMIC.md#presence)");

@@ -159,11 +159,10 @@ bool hit_triangle(const GpuTriangle& tri, const ShearedRay& r, float tmin, float
   return true;
 }
 
-}  // namespace
-
-GpuBvh build_gpu_bvh(const World& world) {
-  std::vector<GpuTriangle> source;
-  std::vector<RTCBuildPrimitive> prims;
+// The static scene's triangles, and their bounds as Embree's builder takes them (primID: the
+// index into `source`).
+void collect_triangles(const World& world, std::vector<GpuTriangle>& source,
+                       std::vector<RTCBuildPrimitive>& prims) {
   for (const WorldObject& o : world.objects) {
     if (!o.in_static_scene()) continue;  // hidden by an edit, or dynamic: rays pass through
     const auto& tris = o.triangles();
@@ -190,6 +189,14 @@ GpuBvh build_gpu_bvh(const World& world) {
       prims.push_back(p);
     }
   }
+}
+
+}  // namespace
+
+GpuBvh build_gpu_bvh(const World& world) {
+  std::vector<GpuTriangle> source;
+  std::vector<RTCBuildPrimitive> prims;
+  collect_triangles(world, source, prims);
   GpuBvh out;
   if (prims.empty()) {  // one node, no children: every ray misses
     GpuBvhNode n{};

@@ -182,6 +182,8 @@ struct VulkanBackend::Impl {
 
   // vulkan_scene_upload.cpp: the scene and the engine's data.
   void upload_scene();
+  void upload_materials();
+  void upload_lights();
   // The sky (kSky) and its flags: a constant's radiance, or the map with LightSampler's
   // sampling tables.
   void upload_sky();

@@ -18,6 +18,22 @@ void VulkanBackend::Impl::upload_scene() {
   const GpuBvh bvh = build_gpu_bvh(*world);
   write(kNodes, bvh.nodes);
   write(kTris, bvh.triangles);
+  upload_materials();
+  upload_lights();
+  std::vector<glm::vec4> normals;
+  for (const WorldObject& o : world->objects) {
+    const bool has = !o.normals.empty();
+    for (const glm::uvec3& t : o.triangles())
+      for (int k = 0; k < 3; ++k)
+        normals.emplace_back(has ? o.normals[t[k]] : glm::vec3(0.0f), k == 0 && has ? 1.0f : 0.0f);
+  }
+  write(kTriNormals, normals);
+  write_surfaces(nullptr);
+  upload_sky();
+}
+
+// Materials (base colour, emission, alpha; texture indices) and the textures' texels.
+void VulkanBackend::Impl::upload_materials() {
   const Scene& scene = *world->scene;
   const int textures = static_cast<int>(scene.textures.size());
   auto texture = [&](int t) { return as_float(t >= 0 && t < textures ? t : -1); };
@@ -42,7 +58,11 @@ void VulkanBackend::Impl::upload_scene() {
   }
   write(kTexHeaders, headers);
   write(kTexTexels, texels);
+}
 
+// The emissive triangles with the light hierarchy's nodes, the punctual lights, and each
+// triangle's entry in the emissive list.
+void VulkanBackend::Impl::upload_lights() {
   std::vector<glm::vec4> em;
   const auto& tris = lights->emissive_triangles();
   for (std::size_t k = 0; k < tris.size(); ++k) {
@@ -94,17 +114,6 @@ void VulkanBackend::Impl::upload_scene() {
   for (std::size_t k = 0; k < tris.size(); ++k)
     emissive_of[base[static_cast<std::size_t>(tris[k].object)] + tris[k].triangle] =
         static_cast<std::int32_t>(k);
-
-  std::vector<glm::vec4> normals;
-  for (const WorldObject& o : world->objects) {
-    const bool has = !o.normals.empty();
-    for (const glm::uvec3& t : o.triangles())
-      for (int k = 0; k < 3; ++k)
-        normals.emplace_back(has ? o.normals[t[k]] : glm::vec3(0.0f), k == 0 && has ? 1.0f : 0.0f);
-  }
-  write(kTriNormals, normals);
-  write_surfaces(nullptr);
-  upload_sky();
 }
 
 // The sky as common.glsl describes it: a header (a constant's radiance x strength, the map's

@@ -230,6 +230,33 @@ void EditJournal::write_fresh(const std::string& records) {
   }
 }
 
+// One record read back: the header first (its format and scene checked), then edits in
+// revision order.
+void EditJournal::take_record(const wire::JournalRecord& r, const std::string& where,
+                              bool& header) {
+  if (!header) {
+    if (!r.has_header() || r.header().format() != kFormat)
+      throw Error(where + " is not a journal header of format " + std::to_string(kFormat));
+    if (r.header().scene_hash() != options_.scene_hash)
+      throw Error("--state-dir " + options_.dir.string() + " holds the edits of scene '" +
+                  r.header().scene_id() + "' (content hash " + wire::hex(r.header().scene_hash()) +
+                  "), but this scene '" + options_.scene_id + "' hashes to " +
+                  wire::hex(options_.scene_hash) +
+                  ": start with that scene, or give another --state-dir");
+    header = true;
+  } else {
+    if (!r.has_edit()) throw Error(where + " is a second header");
+    JournalEntry e = entry_of(r.edit(), where);
+    const bool first = entries_.empty();
+    if (e.snapshot ? !first : e.revision != last_revision_ + 1)
+      throw Error(where + " has revision " + std::to_string(e.revision) + " after revision " +
+                  std::to_string(last_revision_) + (e.snapshot ? " (a snapshot not first)" : ""));
+    last_revision_ = e.revision;
+    if (!e.snapshot) ++records_;
+    entries_.push_back(std::move(e));
+  }
+}
+
 void EditJournal::read_existing() {
   const int fd = ::open(path_.c_str(), O_RDWR | O_CLOEXEC);
   if (fd < 0) throw Error("edit journal: cannot open " + path_.string() + ": " + errno_text());
@@ -272,27 +299,7 @@ void EditJournal::read_existing() {
         "edit journal " + path_.string() + ": the record at byte " + std::to_string(at);
     if (!r.ParseFromString(payload))
       throw Error(where + " does not parse (its checksum matches: not a torn write)");
-    if (!header) {
-      if (!r.has_header() || r.header().format() != kFormat)
-        throw Error(where + " is not a journal header of format " + std::to_string(kFormat));
-      if (r.header().scene_hash() != options_.scene_hash)
-        throw Error("--state-dir " + options_.dir.string() + " holds the edits of scene '" +
-                    r.header().scene_id() + "' (content hash " +
-                    wire::hex(r.header().scene_hash()) + "), but this scene '" + options_.scene_id +
-                    "' hashes to " + wire::hex(options_.scene_hash) +
-                    ": start with that scene, or give another --state-dir");
-      header = true;
-    } else {
-      if (!r.has_edit()) throw Error(where + " is a second header");
-      JournalEntry e = entry_of(r.edit(), where);
-      const bool first = entries_.empty();
-      if (e.snapshot ? !first : e.revision != last_revision_ + 1)
-        throw Error(where + " has revision " + std::to_string(e.revision) + " after revision " +
-                    std::to_string(last_revision_) + (e.snapshot ? " (a snapshot not first)" : ""));
-      last_revision_ = e.revision;
-      if (!e.snapshot) ++records_;
-      entries_.push_back(std::move(e));
-    }
+    take_record(r, where, header);
     at += kRecordHead + n;
   }
   if (!header) throw Error("edit journal: " + path_.string() + " has no header");

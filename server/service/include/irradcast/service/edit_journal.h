@@ -22,6 +22,10 @@
 
 namespace irradcast {
 
+namespace wire {
+class JournalRecord;
+}
+
 struct EditJournalOptions {
   std::filesystem::path dir;  // created if missing (one level)
   std::string scene_id;       // for messages
@@ -91,6 +95,7 @@ class EditJournal {
 
  private:
   void read_existing();
+  void take_record(const wire::JournalRecord& r, const std::string& where, bool& header);
   void create_new();
   // Writes magic, header and `records` to a temporary file, renames it over the journal and
   // appends to it from then on.
