@@ -148,21 +148,18 @@ void write_crops(const Options& o, const std::vector<const ImageRGB*>& images) {
   write_png((fs::path(o.out) / "denoise_crops.png").string(), cw, ch, crops);
 }
 
-int run(Options o) {
-  auto limit = start_run(o.threads, o.out, o.json, "denoise_bench.json");
-  const PreparedScene p = prepare(load_scene(o.scene), density(o.texels));
-  const CameraPose cam = default_camera(p.scene(), p.world());
-  const auto view = [&](const std::vector<Lightmap>& maps) {
-    return compose(p.world(), p.rays(), p.atlas(), maps, cam, o.width, o.height);
-  };
-  const ImageRGB ref_a = view(reference_half(o, p, 0)), ref_b = view(reference_half(o, p, 1));
-  ImageRGB ref = ref_a;
-  for (std::size_t i = 0; i < ref.pixels.size(); ++i)
-    ref.pixels[i] = 0.5f * (ref_a.pixels[i] + ref_b.pixels[i]);
-  const double level = mean_of(ref);
-  // (A - B) / 2 has the variance of the mean's noise.
-  const double ref_noise = 0.5 * rel_rms(ref_a, ref_b, level);
+// The engine's error against the reference, plain and denoised, update by update.
+struct Series {
+  std::vector<double> xs, plain_err, denoised_err;
+  ImageRGB few_plain, few_denoised, many_plain;
+  double diff = 0.0, denoise_s = 0.0, update_s = 0.0;
+  DenoiseStats ds;
+  std::size_t texels = 0;
+};
 
+template <class View>
+Series measure(const Options& o, const PreparedScene& p, const View& view, const ImageRGB& ref,
+               double level, double ref_noise) {
   EngineParams ep;
   ep.denoise = true;
   if (!o.tracing_range.empty()) ep.tracing_range = parse_tracing_range(o.tracing_range);
@@ -173,10 +170,10 @@ int run(Options o) {
   const auto corrected = [&](double e) {
     return std::sqrt(std::max(0.0, e * e - ref_noise * ref_noise));
   };
-  std::vector<double> xs, plain_err, denoised_err;
-  ImageRGB few_plain, few_denoised, many_plain;
-  double diff = 0.0, denoise_s = 0.0, update_s = 0.0;
-  DenoiseStats ds;
+  Series r;
+  auto& [xs, plain_err, denoised_err, few_plain, few_denoised, many_plain, diff, denoise_s,
+         update_s, ds, texels] = r;
+  texels = engine.texel_count();
   const int last = std::max(o.converged, o.many);
   for (int u = 1; u <= last; ++u) {
     update_s += engine.update().total_seconds;
@@ -197,9 +194,34 @@ int run(Options o) {
     if (u == o.few) few_plain = plain, few_denoised = denoised;
     if (u == o.many) many_plain = plain;
   }
+  return r;
+}
+
+int run(Options o) {
+  auto limit = start_run(o.threads, o.out, o.json, "denoise_bench.json");
+  const PreparedScene p = prepare(load_scene(o.scene), density(o.texels));
+  const CameraPose cam = default_camera(p.scene(), p.world());
+  const auto view = [&](const std::vector<Lightmap>& maps) {
+    return compose(p.world(), p.rays(), p.atlas(), maps, cam, o.width, o.height);
+  };
+  const ImageRGB ref_a = view(reference_half(o, p, 0)), ref_b = view(reference_half(o, p, 1));
+  ImageRGB ref = ref_a;
+  for (std::size_t i = 0; i < ref.pixels.size(); ++i)
+    ref.pixels[i] = 0.5f * (ref_a.pixels[i] + ref_b.pixels[i]);
+  const double level = mean_of(ref);
+  // (A - B) / 2 has the variance of the mean's noise.
+  const double ref_noise = 0.5 * rel_rms(ref_a, ref_b, level);
+
+  Series r = measure(o, p, view, ref, level, ref_noise);
+  const auto& [xs, plain_err, denoised_err, few_plain, few_denoised, many_plain, diff, denoise_s,
+               update_s, ds, texels] = r;
+  const int last = std::max(o.converged, o.many);
+  const auto corrected = [&](double e) {
+    return std::sqrt(std::max(0.0, e * e - ref_noise * ref_noise));
+  };
   const double few_d = denoised_err[o.few - 1], many_p = plain_err[o.many - 1];
   std::printf("\n%s, %zu texels, %dx%d view, reference %d spp per texel (own noise %.4f)\n",
-              o.scene.c_str(), engine.texel_count(), o.width, o.height, o.ref_spp, ref_noise);
+              o.scene.c_str(), texels, o.width, o.height, o.ref_spp, ref_noise);
   std::printf(
       "denoised after %d updates: %.4f (corrected %.4f)  vs plain after %d: %.4f "
       "(corrected %.4f)  -> %s\n",
@@ -223,7 +245,7 @@ int run(Options o) {
 
   nlohmann::json j = {{"bench", "irradcast-bench-denoise"},
                       {"scene", o.scene},
-                      {"texels", engine.texel_count()},
+                      {"texels", texels},
                       {"view", {o.width, o.height}},
                       {"ref_spp", o.ref_spp},
                       {"ref_noise", ref_noise},

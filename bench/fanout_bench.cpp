@@ -146,6 +146,25 @@ void plot_cpu(const Options& o, const std::vector<Point>& points) {
   plot::write_xy_plot((fs::path(o.out) / "fanout_cpu.png").string(), cpu);
 }
 
+// The users of one server, row by row (--users), after the engine's warm-up.
+void run_users_bench(const Options& o) {
+  const std::uint16_t port = free_port();
+  Child server(server_command(o, port), fs::path(o.out) / "fanout_server.log");
+  std::printf("irradcast-bench-fanout: %s on port %u (pid %d), %u cores\n", o.scene.c_str(), port,
+              server.pid(), std::thread::hardware_concurrency());
+
+  warm_up(o, port, server);
+  std::vector<Point> points;
+  for (int n : o.users) {
+    points.push_back(run_users(o, port, server, n));
+    std::this_thread::sleep_for(std::chrono::seconds(2));  // let the sessions close
+  }
+  const fs::path json_path = write_report(o, points);
+  plot_latency(o, points);
+  plot_cpu(o, points);
+  std::printf("wrote %s, fanout_latency.png, fanout_cpu.png\n", json_path.string().c_str());
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -212,21 +231,7 @@ int main(int argc, char** argv) {
       run_gateway_bench(o);
       return 0;
     }
-    const std::uint16_t port = free_port();
-    Child server(server_command(o, port), fs::path(o.out) / "fanout_server.log");
-    std::printf("irradcast-bench-fanout: %s on port %u (pid %d), %u cores\n", o.scene.c_str(), port,
-                server.pid(), std::thread::hardware_concurrency());
-
-    warm_up(o, port, server);
-    std::vector<Point> points;
-    for (int n : o.users) {
-      points.push_back(run_users(o, port, server, n));
-      std::this_thread::sleep_for(std::chrono::seconds(2));  // let the sessions close
-    }
-    const fs::path json_path = write_report(o, points);
-    plot_latency(o, points);
-    plot_cpu(o, points);
-    std::printf("wrote %s, fanout_latency.png, fanout_cpu.png\n", json_path.string().c_str());
+    run_users_bench(o);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "irradcast-bench-fanout: error: %s\n", e.what());
     return 1;

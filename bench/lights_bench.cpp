@@ -80,6 +80,68 @@ void run_texel(const LightSampler& l, const RayScene& rays, glm::vec3 p, glm::ve
   var = std::max(sq / samples - mean * mean, 0.0) / samples;  // of the mean
 }
 
+// One scene: the power and hierarchy estimators on every step-th texel, a row printed; its
+// JSON.
+nlohmann::json measure_scene(const std::string& spec, int samples, int step) {
+  Scene scene = load_scene(spec);
+  PreparedSceneOptions o;
+  o.name = spec;
+  PreparedScene s = PreparedScene::build(std::move(scene), o);
+  const LightSampler& l = s.lights();
+  Estimator power, tree;
+  Rng rng(1);
+  std::size_t k = 0, texels = 0;
+  double mean_power = 0.0, mean_tree = 0.0, truth_sq = 0.0;
+  for (const TexelGBuffer& g : s.gbuffers())
+    for (std::size_t i = 0; i < g.size(); ++i) {
+      if (!g.valid(i) || k++ % static_cast<std::size_t>(step) != 0) continue;
+      double m[2], v[2];
+      run_texel(l, s.rays(), g.position[i], g.normal[i], false, samples, rng, power, m[0], v[0]);
+      run_texel(l, s.rays(), g.position[i], g.normal[i], true, samples, rng, tree, m[1], v[1]);
+      // The variance of each texel's mean relative to its squared mean (both estimators'
+      // means averaged: the same truth), so bright and dim texels count alike.
+      const double truth = 0.5 * (m[0] + m[1]);
+      if (truth > 0.0) {
+        power.variance_sum += v[0] / (truth * truth);
+        tree.variance_sum += v[1] / (truth * truth);
+      }
+      power.raw_variance += v[0];
+      tree.raw_variance += v[1];
+      truth_sq += truth * truth;
+      mean_power += m[0];
+      mean_tree += m[1];
+      ++texels;
+    }
+  auto ns = [](const Estimator& e) { return 1e9 * e.seconds / static_cast<double>(e.samples); };
+  auto occl = [](const Estimator& e) {
+    return e.rays ? static_cast<double>(e.occluded) / static_cast<double>(e.rays) : 0.0;
+  };
+  const double rv_power = power.variance_sum / texels, rv_tree = tree.variance_sum / texels;
+  const double speedup = (power.seconds * rv_power) / (tree.seconds * rv_tree);
+  // The same over the whole scene: summed variance over summed squared means (bright texels
+  // weigh more, as in a lightmap's RMSE).
+  const double sv_power = power.raw_variance / truth_sq, sv_tree = tree.raw_variance / truth_sq;
+  const double scene_speedup = (power.seconds * sv_power) / (tree.seconds * sv_tree);
+  std::printf(
+      "%-16s %9zu %7zu %9d | %10.1f %7.1f%% %10.4f | %10.1f %7.1f%% %10.4f | %7.3f %8.1fx "
+      "%8.1fx\n",
+      spec.c_str(), l.emissive_triangles().size(), texels, samples, ns(power), 100.0 * occl(power),
+      rv_power, ns(tree), 100.0 * occl(tree), rv_tree, mean_tree / mean_power, speedup,
+      scene_speedup);
+  return nlohmann::json{
+      {"scene", spec},
+      {"emissive_triangles", l.emissive_triangles().size()},
+      {"tree_used", !l.tree().empty()},
+      {"texels", texels},
+      {"samples_per_texel", samples},
+      {"power",
+       {{"ns_per_sample", ns(power)}, {"occluded", occl(power)}, {"relative_variance", rv_power}}},
+      {"tree",
+       {{"ns_per_sample", ns(tree)}, {"occluded", occl(tree)}, {"relative_variance", rv_tree}}},
+      {"mean_ratio_tree_power", mean_tree / mean_power},
+      {"speedup_at_equal_error", speedup}};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -103,65 +165,7 @@ int main(int argc, char** argv) {
     const std::string spec = scenes.substr(from, comma - from);
     from = comma + 1;
     if (spec.empty()) continue;
-    Scene scene = load_scene(spec);
-    PreparedSceneOptions o;
-    o.name = spec;
-    PreparedScene s = PreparedScene::build(std::move(scene), o);
-    const LightSampler& l = s.lights();
-    Estimator power, tree;
-    Rng rng(1);
-    std::size_t k = 0, texels = 0;
-    double mean_power = 0.0, mean_tree = 0.0, truth_sq = 0.0;
-    for (const TexelGBuffer& g : s.gbuffers())
-      for (std::size_t i = 0; i < g.size(); ++i) {
-        if (!g.valid(i) || k++ % static_cast<std::size_t>(step) != 0) continue;
-        double m[2], v[2];
-        run_texel(l, s.rays(), g.position[i], g.normal[i], false, samples, rng, power, m[0], v[0]);
-        run_texel(l, s.rays(), g.position[i], g.normal[i], true, samples, rng, tree, m[1], v[1]);
-        // The variance of each texel's mean relative to its squared mean (both estimators'
-        // means averaged: the same truth), so bright and dim texels count alike.
-        const double truth = 0.5 * (m[0] + m[1]);
-        if (truth > 0.0) {
-          power.variance_sum += v[0] / (truth * truth);
-          tree.variance_sum += v[1] / (truth * truth);
-        }
-        power.raw_variance += v[0];
-        tree.raw_variance += v[1];
-        truth_sq += truth * truth;
-        mean_power += m[0];
-        mean_tree += m[1];
-        ++texels;
-      }
-    auto ns = [](const Estimator& e) { return 1e9 * e.seconds / static_cast<double>(e.samples); };
-    auto occl = [](const Estimator& e) {
-      return e.rays ? static_cast<double>(e.occluded) / static_cast<double>(e.rays) : 0.0;
-    };
-    const double rv_power = power.variance_sum / texels, rv_tree = tree.variance_sum / texels;
-    const double speedup = (power.seconds * rv_power) / (tree.seconds * rv_tree);
-    // The same over the whole scene: summed variance over summed squared means (bright texels
-    // weigh more, as in a lightmap's RMSE).
-    const double sv_power = power.raw_variance / truth_sq, sv_tree = tree.raw_variance / truth_sq;
-    const double scene_speedup = (power.seconds * sv_power) / (tree.seconds * sv_tree);
-    std::printf(
-        "%-16s %9zu %7zu %9d | %10.1f %7.1f%% %10.4f | %10.1f %7.1f%% %10.4f | %7.3f %8.1fx "
-        "%8.1fx\n",
-        spec.c_str(), l.emissive_triangles().size(), texels, samples, ns(power),
-        100.0 * occl(power), rv_power, ns(tree), 100.0 * occl(tree), rv_tree,
-        mean_tree / mean_power, speedup, scene_speedup);
-    report.push_back(
-        {{"scene", spec},
-         {"emissive_triangles", l.emissive_triangles().size()},
-         {"tree_used", !l.tree().empty()},
-         {"texels", texels},
-         {"samples_per_texel", samples},
-         {"power",
-          {{"ns_per_sample", ns(power)},
-           {"occluded", occl(power)},
-           {"relative_variance", rv_power}}},
-         {"tree",
-          {{"ns_per_sample", ns(tree)}, {"occluded", occl(tree)}, {"relative_variance", rv_tree}}},
-         {"mean_ratio_tree_power", mean_tree / mean_power},
-         {"speedup_at_equal_error", speedup}});
+    report.push_back(measure_scene(spec, samples, step));
   }
   std::printf(
       "rel var: variance of a texel's mean over its squared mean, averaged over texels; "

@@ -76,6 +76,88 @@ Scene with_spheres(Scene s, const Bounds& b, int n) {
   return s;
 }
 
+// Bytes of every tile of the lightmaps (ts x ts, RGB9E5 + zstd).
+std::size_t all_tile_bytes(const std::vector<Lightmap>& maps, int ts) {
+  std::size_t bytes = 0;
+  for (const Lightmap& m : maps)
+    for (int ty = 0; ty < wire::tiles_along(m.height, ts); ++ty)
+      for (int tx = 0; tx < wire::tiles_along(m.width, ts); ++tx)
+        bytes += wire::encode_tile(m, wire::tile_rect(m.width, m.height, ts, tx, ty),
+                                   wire::TILE_RGB9E5_ZSTD)
+                     .size();
+  return bytes;
+}
+
+// The lightmaps indexed like each scene's objects: the static ones first, then the dynamic
+// spheres' (no texels).
+std::vector<std::vector<Lightmap>> maps_per_scene(
+    const std::vector<std::unique_ptr<PreparedScene>>& scenes, const std::vector<Lightmap>& maps) {
+  std::vector<std::vector<Lightmap>> scene_maps;
+  for (const auto& s : scenes) {
+    std::vector<Lightmap> m;
+    for (std::size_t k = 0; k < s->atlas().objects.size(); ++k) {
+      const ObjectLightmap& a = s->atlas().objects[k];
+      if (k < maps.size() && (a.width != maps[k].width || a.height != maps[k].height))
+        throw Error("the scenes' static objects differ");
+      m.push_back(k < maps.size() ? maps[k] : Lightmap(a.width, a.height));
+    }
+    scene_maps.push_back(std::move(m));
+  }
+  return scene_maps;
+}
+
+// Per count, each frame's milliseconds three ways, and the pixels the spheres cover.
+struct FrameTimes {
+  std::vector<std::vector<double>> plain, full, volume_only;
+  std::vector<std::size_t> covered;
+};
+
+// Frame times, interleaved by count: compose() as irradcast-view draws (the emitters' direct
+// light traced: 8 shadow rays per dynamic pixel where the scene has emitters), with the client
+// passes, and as the browser page does (from the volume).
+FrameTimes time_frames(const Options& o, const std::vector<std::unique_ptr<PreparedScene>>& scenes,
+                       const std::vector<Lightmap>& maps, const IrradianceVolume& v) {
+  const PreparedScene& first = *scenes.front();
+  const CameraPose camera = default_camera(first.scene(), first.world());
+  std::vector<std::unique_ptr<RayScene>> dynamic;
+  std::vector<ClientPasses> passes;
+  for (const auto& s : scenes) {
+    dynamic.push_back(std::make_unique<RayScene>(s->world(), true, RaySceneContent::Dynamic));
+    ClientPassOptions cpo;
+    cpo.ssao = cpo.reproject = true;
+    passes.emplace_back(cpo);
+  }
+  const std::vector<std::vector<Lightmap>> scene_maps = maps_per_scene(scenes, maps);
+  const std::size_t n = scenes.size();
+  FrameTimes ft{std::vector<std::vector<double>>(n), std::vector<std::vector<double>>(n),
+                std::vector<std::vector<double>>(n), std::vector<std::size_t>(n, 0)};
+  for (int f = 0; f < o.frames; ++f)
+    for (std::size_t i = 0; i < n; ++i) {
+      const PreparedScene& s = *scenes[i];
+      const DynamicView view{dynamic[i].get(), &v, &s.lights()};
+      Stopwatch t;
+      compose(s.world(), s.rays(), s.atlas(), scene_maps[i], camera, o.width, o.height, nullptr,
+              &view);
+      ft.plain[i].push_back(1e3 * t.seconds());
+      const DynamicView page{dynamic[i].get(), &v, nullptr};
+      t.restart();
+      compose(s.world(), s.rays(), s.atlas(), scene_maps[i], camera, o.width, o.height, nullptr,
+              &page);
+      ft.volume_only[i].push_back(1e3 * t.seconds());
+      t.restart();
+      passes[i].compose(s.world(), s.rays(), s.atlas(), scene_maps[i], camera, o.width, o.height,
+                        nullptr, &view);
+      ft.full[i].push_back(1e3 * t.seconds());
+      if (f == 0) {
+        std::atomic<std::size_t> covered{0};
+        trace_dynamic(s.world(), s.rays(), view, camera, o.width, o.height,
+                      [&](const DynamicPixel&) { ++covered; });
+        ft.covered[i] = covered;
+      }
+    }
+  return ft;
+}
+
 int run(const Options& o) {
   std::string json_path;
   const auto threads = start_run(o.threads, o.out, json_path, "dynamic.json");
@@ -110,14 +192,8 @@ int run(const Options& o) {
   // Bytes: the volume's messages against every tile of the lightmaps.
   const std::size_t with_layout = wire::probe_volume_to_proto(v, 1, 1, true).ByteSizeLong();
   const std::size_t sh_only = wire::probe_volume_to_proto(v, 1, 2, false).ByteSizeLong();
-  std::size_t tile_bytes = 0;
   const int ts = 32;
-  for (const Lightmap& m : maps)
-    for (int ty = 0; ty < wire::tiles_along(m.height, ts); ++ty)
-      for (int tx = 0; tx < wire::tiles_along(m.width, ts); ++tx)
-        tile_bytes += wire::encode_tile(m, wire::tile_rect(m.width, m.height, ts, tx, ty),
-                                        wire::TILE_RGB9E5_ZSTD)
-                          .size();
+  const std::size_t tile_bytes = all_tile_bytes(maps, ts);
   std::printf("probe volume: %zu probes (spacing %.2f), placed in %.2f s, %.2f s per refine\n",
               v.probe_count(), v.grid.spacing, place_s, refine_s);
   std::printf(
@@ -125,59 +201,8 @@ int run(const Options& o) {
       "tile of %d x %d, RGB9E5 + zstd): a version is %.2f %% of the lightmaps\n",
       with_layout, sh_only, tile_bytes, ts, ts, 100.0 * double(sh_only) / double(tile_bytes));
 
-  // Frame times, interleaved by count.
-  const CameraPose camera = default_camera(first.scene(), first.world());
-  std::vector<std::unique_ptr<RayScene>> dynamic;
-  std::vector<ClientPasses> passes;
-  for (const auto& s : scenes) {
-    dynamic.push_back(std::make_unique<RayScene>(s->world(), true, RaySceneContent::Dynamic));
-    ClientPassOptions cpo;
-    cpo.ssao = cpo.reproject = true;
-    passes.emplace_back(cpo);
-  }
-  // The lightmaps indexed like each scene's objects: the static ones first, then the dynamic
-  // spheres' (no texels).
-  std::vector<std::vector<Lightmap>> scene_maps;
-  for (const auto& s : scenes) {
-    std::vector<Lightmap> m;
-    for (std::size_t k = 0; k < s->atlas().objects.size(); ++k) {
-      const ObjectLightmap& a = s->atlas().objects[k];
-      if (k < maps.size() && (a.width != maps[k].width || a.height != maps[k].height))
-        throw Error("the scenes' static objects differ");
-      m.push_back(k < maps.size() ? maps[k] : Lightmap(a.width, a.height));
-    }
-    scene_maps.push_back(std::move(m));
-  }
-  // compose() as irradcast-view draws (the emitters' direct light traced: 8 shadow rays per
-  // dynamic pixel where the scene has emitters), and as the browser page does (from the volume).
-  std::vector<std::vector<double>> plain(counts.size()), full(counts.size()),
-      volume_only(counts.size());
-  std::vector<std::size_t> covered(counts.size(), 0);
-  for (int f = 0; f < o.frames; ++f)
-    for (std::size_t i = 0; i < counts.size(); ++i) {
-      const PreparedScene& s = *scenes[i];
-      const DynamicView view{dynamic[i].get(), &v, &s.lights()};
-      Stopwatch t;
-      const ImageRGB img = compose(s.world(), s.rays(), s.atlas(), scene_maps[i], camera, o.width,
-                                   o.height, nullptr, &view);
-      plain[i].push_back(1e3 * t.seconds());
-      const DynamicView page{dynamic[i].get(), &v, nullptr};
-      t.restart();
-      compose(s.world(), s.rays(), s.atlas(), scene_maps[i], camera, o.width, o.height, nullptr,
-              &page);
-      volume_only[i].push_back(1e3 * t.seconds());
-      t.restart();
-      passes[i].compose(s.world(), s.rays(), s.atlas(), scene_maps[i], camera, o.width, o.height,
-                        nullptr, &view);
-      full[i].push_back(1e3 * t.seconds());
-      if (f == 0) {
-        std::atomic<std::size_t> n{0};
-        trace_dynamic(s.world(), s.rays(), view, camera, o.width, o.height,
-                      [&](const DynamicPixel&) { ++n; });
-        covered[i] = n;
-      }
-      (void)img;
-    }
+  const FrameTimes ft = time_frames(o, scenes, maps, v);
+  const auto& [plain, full, volume_only, covered] = ft;
   json j = {{"scene", o.scene},
             {"machine", machine_json(tbb_threads())},
             {"width", o.width},

@@ -64,13 +64,12 @@ std::string pose_lines(int moving, double seconds) {
   return out.str();
 }
 
-int run(const Options& o) {
+// The rows: --moving's counts, then the presence rows.
+std::vector<Row> rows_of(const Options& o) {
   std::vector<Row> rows;
-  {
-    std::stringstream ss(o.moving);
-    std::string part;
-    while (std::getline(ss, part, ',')) rows.push_back({part, std::stoi(part), false, 1.0});
-  }
+  std::stringstream ss(o.moving);
+  std::string part;
+  while (std::getline(ss, part, ',')) rows.push_back({part, std::stoi(part), false, 1.0});
   for (const Row& row : rows)
     if (row.moving < 0 || row.moving > o.nodes)
       throw Error("--moving: " + row.label + " is not in 0.." + std::to_string(o.nodes));
@@ -78,6 +77,97 @@ int run(const Options& o) {
     rows.push_back({"cameras", 0, false, 10.0});
     rows.push_back({"avatars", 0, true, 10.0});
   }
+  return rows;
+}
+
+// irradcast-edit --stream of `lines` to the server; its output.
+std::string stream_poses(std::uint16_t port, const fs::path& lines) {
+  const std::string cmd = std::string(IRRADCAST_EDIT_EXE) +
+                          " --connect 127.0.0.1:" + std::to_string(port) + " --token " + kToken +
+                          " --stream " + lines.string() + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) throw Error("cannot run irradcast-edit");
+  char buf[512];
+  std::string output;
+  while (std::fgets(buf, sizeof buf, p)) output += buf;
+  pclose(p);
+  return output;
+}
+
+// The bytes all users had received, once a second (the load generator's progress).
+struct Received {
+  std::mutex mutex;
+  std::vector<std::pair<double, std::uint64_t>> samples;  // (elapsed s, bytes)
+
+  void add(const LoadProgress& p) {
+    std::lock_guard lock(mutex);
+    samples.emplace_back(p.elapsed_s, p.bytes_received);
+  }
+  // At `t` s, interpolated between the samples.
+  double at(double t) {
+    std::lock_guard lock(mutex);
+    for (std::size_t i = 1; i < samples.size(); ++i)
+      if (samples[i].first >= t) {
+        const auto& [ta, ba] = samples[i - 1];
+        const auto& [tb, bb] = samples[i];
+        const double f = tb > ta ? (t - ta) / (tb - ta) : 1.0;
+        return double(ba) + f * (double(bb) - double(ba));
+      }
+    return samples.empty() ? 0.0 : double(samples.back().second);
+  }
+};
+
+struct Measured {
+  double window = 0.0, poses_per_s = 0.0, cores = 0.0, bytes_per_viewer = 0.0;
+  unsigned long long refused = 0;
+  LoadReport report;
+};
+
+// One row: the users connect, and once every one has its image the row's poses stream for the
+// window, the server's network threads timed.
+Measured measure(const Options& o, const Row& row, std::uint16_t port, pid_t server) {
+  const fs::path lines = fs::path(o.out) / ("poses_" + std::to_string(row.moving) + ".jsonl");
+  std::ofstream(lines) << pose_lines(row.moving, o.window_s);
+  LoadOptions lo;
+  lo.port = port;
+  lo.users = o.users;
+  lo.ramp_s = 1.0;
+  const double start_s = 4.0;  // every user has its full image by then (a tiny scene)
+  lo.duration_s = start_s + o.window_s + 2.0;
+  lo.camera_hz = row.camera_hz;
+  lo.camera_path = row.camera_hz > 1.0 ? "random-walk" : "orbit";
+  lo.presence = row.presence;
+  lo.name = "bench-poses";
+  Received received;
+  Measured m;
+  std::thread load(
+      [&] { m.report = run_load(lo, [&](const LoadProgress& p) { received.add(p); }); });
+  const auto t0 = Clock::now();
+  std::this_thread::sleep_until(t0 + std::chrono::milliseconds(static_cast<int>(1e3 * start_s)));
+  const fanout::ThreadCpu cpu0 = fanout::thread_cpu(server);
+  const auto w0 = Clock::now();
+  std::string edit_output = "no poses";
+  if (row.moving > 0)
+    edit_output = stream_poses(port, lines);
+  else
+    std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int>(1e3 * o.window_s)));
+  const auto w1 = Clock::now();
+  const fanout::ThreadCpu cpu1 = fanout::thread_cpu(server);
+  load.join();
+  m.window = std::chrono::duration<double>(w1 - w0).count();
+  const double from = std::chrono::duration<double>(w0 - t0).count(), to = from + m.window;
+  m.bytes_per_viewer = (received.at(to) - received.at(from)) / m.window / o.users;
+  m.cores = (cpu1.io - cpu0.io) / m.window;
+  unsigned long long taken = 0;
+  if (const auto at = edit_output.find("streamed "); at != std::string::npos)
+    std::sscanf(edit_output.c_str() + at, "streamed %llu poses from %*u lines in %*f s, %llu",
+                &taken, &m.refused);
+  m.poses_per_s = static_cast<double>(taken) / m.window;
+  return m;
+}
+
+int run(const Options& o) {
+  const std::vector<Row> rows = rows_of(o);
   fs::create_directories(o.out);
   const fs::path gltf = fs::path(o.out) / "balls.glb";
   write_balls_gltf(o.nodes, gltf.string());
@@ -105,91 +195,28 @@ int run(const Options& o) {
               "bytes/viewer/s", "edit refused");
   double base_cores = 0.0, base_bytes = 0.0;
   for (std::size_t r = 0; r < rows.size(); ++r) {
-    const int moving = rows[r].moving;
-    const fs::path lines = fs::path(o.out) / ("poses_" + std::to_string(moving) + ".jsonl");
-    std::ofstream(lines) << pose_lines(moving, o.window_s);
-    LoadOptions lo;
-    lo.port = port;
-    lo.users = o.users;
-    lo.ramp_s = 1.0;
-    const double start_s = 4.0;  // every user has its full image by then (a tiny scene)
-    lo.duration_s = start_s + o.window_s + 2.0;
-    lo.camera_hz = rows[r].camera_hz;
-    lo.camera_path = rows[r].camera_hz > 1.0 ? "random-walk" : "orbit";
-    lo.presence = rows[r].presence;
-    lo.name = "bench-poses";
-    std::mutex mutex;
-    std::vector<std::pair<double, std::uint64_t>> received;  // (elapsed s, bytes), each second
-    LoadReport report;
-    std::thread load([&] {
-      report = run_load(lo, [&](const LoadProgress& p) {
-        std::lock_guard lock(mutex);
-        received.emplace_back(p.elapsed_s, p.bytes_received);
-      });
-    });
-    const auto t0 = Clock::now();
-    std::this_thread::sleep_until(t0 + std::chrono::milliseconds(static_cast<int>(1e3 * start_s)));
-    const fanout::ThreadCpu cpu0 = fanout::thread_cpu(server.pid());
-    const auto w0 = Clock::now();
-    std::string edit_output = "no poses";
-    if (moving > 0) {
-      const std::string cmd = std::string(IRRADCAST_EDIT_EXE) +
-                              " --connect 127.0.0.1:" + std::to_string(port) + " --token " +
-                              kToken + " --stream " + lines.string() + " 2>&1";
-      FILE* p = popen(cmd.c_str(), "r");
-      if (!p) throw Error("cannot run irradcast-edit");
-      char buf[512];
-      edit_output.clear();
-      while (std::fgets(buf, sizeof buf, p)) edit_output += buf;
-      pclose(p);
-    } else {
-      std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int>(1e3 * o.window_s)));
-    }
-    const auto w1 = Clock::now();
-    const fanout::ThreadCpu cpu1 = fanout::thread_cpu(server.pid());
-    load.join();
-    const double window = std::chrono::duration<double>(w1 - w0).count();
-    const double from = std::chrono::duration<double>(w0 - t0).count(), to = from + window;
-    // Bytes all users received in the window, from the once-a-second progress (interpolated).
-    const auto bytes_at = [&](double t) {
-      std::lock_guard lock(mutex);
-      for (std::size_t i = 1; i < received.size(); ++i)
-        if (received[i].first >= t) {
-          const auto& [ta, ba] = received[i - 1];
-          const auto& [tb, bb] = received[i];
-          const double f = tb > ta ? (t - ta) / (tb - ta) : 1.0;
-          return double(ba) + f * (double(bb) - double(ba));
-        }
-      return received.empty() ? 0.0 : double(received.back().second);
-    };
-    const double bytes_per_viewer = (bytes_at(to) - bytes_at(from)) / window / o.users;
-    const double cores = (cpu1.io - cpu0.io) / window;
-    unsigned long long taken = 0, refused = 0;
-    if (const auto at = edit_output.find("streamed "); at != std::string::npos)
-      std::sscanf(edit_output.c_str() + at, "streamed %llu poses from %*u lines in %*f s, %llu",
-                  &taken, &refused);
-    const double poses_per_s = static_cast<double>(taken) / window;
+    const Measured m = measure(o, rows[r], port, server.pid());
     if (r == 0) {
-      base_cores = cores;
-      base_bytes = bytes_per_viewer;
+      base_cores = m.cores;
+      base_bytes = m.bytes_per_viewer;
     }
-    std::printf("%-8s %12.0f %14.3f %18.0f %14llu\n", rows[r].label.c_str(), poses_per_s, cores,
-                bytes_per_viewer, refused);
+    std::printf("%-8s %12.0f %14.3f %18.0f %14llu\n", rows[r].label.c_str(), m.poses_per_s, m.cores,
+                m.bytes_per_viewer, m.refused);
     std::fflush(stdout);
     j["rows"].push_back({{"row", rows[r].label},
-                         {"moving", moving},
+                         {"moving", rows[r].moving},
                          {"presence", rows[r].presence},
                          {"camera_hz", rows[r].camera_hz},
-                         {"avatar_messages", report.avatar_messages},
-                         {"avatars_per_message", report.avatars_per_message},
-                         {"poses_per_s", poses_per_s},
-                         {"server_network_cores", cores},
-                         {"server_network_cores_over_baseline", cores - base_cores},
-                         {"bytes_per_viewer_per_s", bytes_per_viewer},
-                         {"bytes_per_viewer_per_s_over_baseline", bytes_per_viewer - base_bytes},
-                         {"poses_refused", refused},
-                         {"users_failed", report.failed},
-                         {"window_s", window}});
+                         {"avatar_messages", m.report.avatar_messages},
+                         {"avatars_per_message", m.report.avatars_per_message},
+                         {"poses_per_s", m.poses_per_s},
+                         {"server_network_cores", m.cores},
+                         {"server_network_cores_over_baseline", m.cores - base_cores},
+                         {"bytes_per_viewer_per_s", m.bytes_per_viewer},
+                         {"bytes_per_viewer_per_s_over_baseline", m.bytes_per_viewer - base_bytes},
+                         {"poses_refused", m.refused},
+                         {"users_failed", m.report.failed},
+                         {"window_s", m.window}});
   }
   const std::string path = (fs::path(o.out) / "poses.json").string();
   write_json(path, j);
