@@ -18,6 +18,7 @@
 #include <thread>
 #include <utility>
 
+#include "irradcast/client/load_generator.h"
 #include "irradcast/client/view_client.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/progress.h"
@@ -85,19 +86,30 @@ bool eventually(F condition, std::chrono::milliseconds limit = std::chrono::mill
   return condition();
 }
 
-// A SceneEdit frame that nudges the Cornell box's tall block, with `token`.
-inline wire::Envelope nudge_edit_frame(const std::string& token, std::uint64_t request_id) {
-  SceneEdit edit;
-  EditOp op;
-  op.kind = EditOp::Kind::Move;
-  op.target = "tall_block";
-  op.vector = {0.0001f, 0.0f, 0.0f};
-  edit.ops.push_back(op);
+// A SceneEdit frame of `json` (docs/EDITS.md) with `token`; `stream`: a streamed pose.
+inline wire::Envelope edit_frame(const std::string& json, const std::string& token,
+                                 std::uint64_t request_id = 0, bool stream = false) {
   wire::Envelope e;
-  wire::to_proto(edit, e.mutable_scene_edit());
+  wire::to_proto(parse_edit_json(json), e.mutable_scene_edit());
   e.mutable_scene_edit()->set_token(token);
   e.mutable_scene_edit()->set_request_id(request_id);
+  if (stream) e.mutable_scene_edit()->set_stream(true);
   return e;
+}
+
+// A SceneEdit frame that nudges the Cornell box's tall block, with `token`.
+inline wire::Envelope nudge_edit_frame(const std::string& token, std::uint64_t request_id) {
+  return edit_frame(R"({"op": "move", "node": "tall_block", "by": [0.0001, 0, 0]})", token,
+                    request_id);
+}
+
+// irradcast-load's options: `users` users of the server at 127.0.0.1:`port` for `seconds`.
+inline LoadOptions load_of(std::uint16_t port, int users, double seconds) {
+  LoadOptions o;
+  o.port = port;
+  o.users = users;
+  o.duration_s = seconds;
+  return o;
 }
 
 inline wire::Envelope hello_frame(const std::string& name = "raw",
@@ -202,6 +214,17 @@ struct RawConnection {
       if (result && result != asio::error::operation_aborted) eof = true;
       decoder.feed(buf.data(), n);
     }
+  }
+
+  // Sends an edit; its answer (the SceneEdit acknowledgement or an Error), other frames
+  // skipped; nullopt at EOF or when none comes within `limit` of a frame.
+  std::optional<wire::Envelope> edit(
+      const wire::Envelope& e, std::chrono::milliseconds limit = std::chrono::milliseconds(5000)) {
+    send(e);
+    std::optional<wire::Envelope> a;
+    while ((a = read(limit)) && !a->has_scene_edit() && !a->has_error()) {
+    }
+    return a;
   }
 
   // Reads until the server closes the connection (or the limit); the first Error frame.

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -19,6 +20,23 @@ inline void feed(SessionProtocol& s, const wire::Envelope& e) {
   s.receive(bytes.data(), bytes.size());
   wire::Envelope env;
   while (s.next_frame(env)) s.handle(env);
+}
+
+// A new session of `context` (the `n`-th, from 10.0.0.1) that has said Hello, and with
+// `subscribe` subscribed to every tile (`presence`: shown to the others).
+inline std::unique_ptr<SessionProtocol> joined(SessionContext& context, std::size_t n,
+                                               bool subscribe, bool presence = false) {
+  auto s = std::make_unique<SessionProtocol>(context, n, "10.0.0.1", "10.0.0.1:5000");
+  wire::Envelope h;
+  h.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
+  feed(*s, h);
+  if (subscribe) {
+    wire::Envelope sub;
+    sub.mutable_subscribe()->set_all(true);
+    if (presence) sub.mutable_subscribe()->set_presence(true);
+    feed(*s, sub);
+  }
+  return s;
 }
 
 // The frames the session writes now, in order, until it has none; those `keep` refuses are

@@ -6,15 +6,12 @@
 // tile versions that settle as without it.
 #include <gtest/gtest.h>
 
-#include <CLI/CLI.hpp>
-
 #include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
 #include <vector>
 
-#include "engine_options.h"
 #include "engine_setup.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/sampling.h"
@@ -211,20 +208,6 @@ TEST(Denoise, EnginePublishesADenoisedCopyCloserToTheConvergedImage) {
     }
   RecordProperty("squared_error_ratio", std::to_string(e_denoised / e_plain));
   EXPECT_LT(e_denoised, 0.7 * e_plain) << e_denoised << " vs " << e_plain;
-}
-
-TEST(Denoise, ParsesAndIsOffByDefault) {
-  const auto parse = [](std::vector<std::string> args) {
-    tools::EngineOptions options;
-    CLI::App app;
-    options.add_to(app);
-    std::reverse(args.begin(), args.end());  // CLI11 takes them last first
-    app.parse(args);
-    return options.params();
-  };
-  EXPECT_FALSE(EngineParams{}.denoise);
-  EXPECT_FALSE(parse({}).denoise);
-  EXPECT_TRUE(parse({"--denoise"}).denoise);
 }
 
 // A host with --denoise publishes the denoised lightmaps (those of an engine with the same

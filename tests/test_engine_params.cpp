@@ -88,6 +88,12 @@ EngineParams parse(std::vector<std::string> args) {
   return options.params();
 }
 
+TEST(EngineParams, DenoiseIsOffByDefaultAndSetByItsFlag) {
+  EXPECT_FALSE(EngineParams{}.denoise);
+  EXPECT_FALSE(parse({}).denoise);
+  EXPECT_TRUE(parse({"--denoise"}).denoise);
+}
+
 std::string first_flag(const ParamSpec& s) {
   const std::string flags = s.flags;
   return flags.substr(0, flags.find(','));

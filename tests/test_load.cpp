@@ -116,10 +116,7 @@ TEST(Load, RenderModeUsersComposeFrames) {
   Server server(host, loopback());
   server.start();
   host.start();
-  LoadOptions o;
-  o.port = server.port();
-  o.users = 3;
-  o.duration_s = 3.0;
+  LoadOptions o = test::load_of(server.port(), 3, 3.0);
   o.render = true;
   o.width = 48;
   o.height = 32;
@@ -157,10 +154,7 @@ TEST(Load, NoServerMeansFailedUsersAndExitThree) {
     asio::ip::tcp::acceptor a(io, asio::ip::tcp::endpoint(asio::ip::make_address("127.0.0.1"), 0));
     port = a.local_endpoint().port();
   }
-  LoadOptions o;
-  o.port = port;
-  o.users = 4;
-  o.duration_s = 1.0;
+  const LoadOptions o = test::load_of(port, 4, 1.0);
   const LoadReport r = run_load(o);
   EXPECT_EQ(r.connected, 0);
   EXPECT_EQ(r.failed, 4);

@@ -154,15 +154,8 @@ TEST(Nats, AnEditSentThroughAGatewayReachesEveryViewer) {
   // The editor talks to gateway a: its acknowledgement carries the origin's revision.
   test::RawConnection editor(a.server->port());
   ASSERT_TRUE(editor.join("editor"));
-  wire::Envelope e;
-  wire::to_proto(parse_edit_json(R"({"op": "move", "node": "tall_block", "by": [0.05, 0, 0]})"),
-                 e.mutable_scene_edit());
-  e.mutable_scene_edit()->set_token(kToken);
-  e.mutable_scene_edit()->set_request_id(5);
-  editor.send(e);
-  std::optional<wire::Envelope> ack;
-  while ((ack = editor.read()) && !ack->has_scene_edit() && !ack->has_error()) {
-  }
+  const std::optional<wire::Envelope> ack = editor.edit(
+      test::edit_frame(R"({"op": "move", "node": "tall_block", "by": [0.05, 0, 0]})", kToken, 5));
   ASSERT_TRUE(ack && ack->has_scene_edit())
       << (ack && ack->has_error() ? ack->error().message() : std::string("no answer"));
   EXPECT_EQ(ack->scene_edit().revision(), 1u);
@@ -236,12 +229,8 @@ TEST(Nats, GatewaysServeTheProbeVolumeAndThePoses) {
   // A pose streamed to the gateway: the origin takes it, both viewers show it.
   test::RawConnection editor(gw.server->port());
   ASSERT_TRUE(editor.join("editor"));
-  wire::Envelope e;
-  wire::to_proto(parse_edit_json(R"({"op": "move", "node": "prop", "by": [0.1, 0, 0]})"),
-                 e.mutable_scene_edit());
-  e.mutable_scene_edit()->set_token(kToken);
-  e.mutable_scene_edit()->set_request_id(3);
-  e.mutable_scene_edit()->set_stream(true);
+  const wire::Envelope e =
+      test::edit_frame(R"({"op": "move", "node": "prop", "by": [0.1, 0, 0]})", kToken, 3, true);
   editor.send(e);
   const auto prop = static_cast<std::size_t>(make_cornell_box().nodes.size()) + 1;
   for (ViewClient* v : {&direct, &via})
@@ -271,12 +260,8 @@ TEST(Nats, AnOriginWithoutDynamicNodesClearsTheLastOnesPosesAndVolume) {
     ASSERT_TRUE(first.settle());
     test::RawConnection editor(first.server.port());
     ASSERT_TRUE(editor.join("editor"));
-    wire::Envelope e;
-    wire::to_proto(parse_edit_json(R"({"op": "move", "node": "prop", "by": [0.1, 0, 0]})"),
-                   e.mutable_scene_edit());
-    e.mutable_scene_edit()->set_token(kToken);
-    e.mutable_scene_edit()->set_request_id(1);
-    e.mutable_scene_edit()->set_stream(true);
+    const wire::Envelope e =
+        test::edit_frame(R"({"op": "move", "node": "prop", "by": [0.1, 0, 0]})", kToken, 1, true);
     editor.send(e);
     ASSERT_TRUE(test::eventually([&] {
       return first.origin.nats_stats().poses_published >= 1 &&
@@ -316,14 +301,8 @@ TEST(Nats, EditsCrossNatsWithoutTheToken) {
   {  // A viewer of the gateway edits with the token.
     test::RawConnection editor(gw.server->port());
     ASSERT_TRUE(editor.join("editor"));
-    wire::Envelope e;
-    wire::to_proto(parse_edit_json(R"({"op": "move", "node": "tall_block", "by": [0, 0.01, 0]})"),
-                   e.mutable_scene_edit());
-    e.mutable_scene_edit()->set_token(kToken);
-    editor.send(e);
-    std::optional<wire::Envelope> ack;
-    while ((ack = editor.read(5000ms)) && !ack->has_scene_edit() && !ack->has_error()) {
-    }
+    const std::optional<wire::Envelope> ack = editor.edit(
+        test::edit_frame(R"({"op": "move", "node": "tall_block", "by": [0, 0.01, 0]})", kToken));
     ASSERT_TRUE(ack && ack->has_scene_edit())
         << (ack && ack->has_error() ? ack->error().message() : "no answer");
     EXPECT_EQ(ack->scene_edit().revision(), 1u);

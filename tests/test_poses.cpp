@@ -150,17 +150,8 @@ class PoseSessionTest : public ::testing::Test {
   }
 
   SessionProtocol& session(bool subscribed) {
-    sessions.push_back(std::make_unique<SessionProtocol>(*context, sessions.size() + 1, "10.0.0.1",
-                                                         "10.0.0.1:5000"));
+    sessions.push_back(test::joined(*context, sessions.size() + 1, subscribed));
     SessionProtocol& s = *sessions.back();
-    wire::Envelope h;
-    h.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
-    feed(s, h);
-    if (subscribed) {
-      wire::Envelope sub;
-      sub.mutable_subscribe()->set_all(true);
-      feed(s, sub);
-    }
     written(s);  // the Welcome, the tiles, the first Poses
     return s;
   }

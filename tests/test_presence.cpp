@@ -159,17 +159,8 @@ class PresenceSessionTest : public ::testing::Test {
                                    options.max_hello_frame, nullptr, presence ? &board : nullptr});
   }
   SessionProtocol& session(bool presence) {
-    sessions.push_back(std::make_unique<SessionProtocol>(*context, sessions.size() + 1, "10.0.0.1",
-                                                         "10.0.0.1:5000"));
-    SessionProtocol& s = *sessions.back();
-    wire::Envelope h;
-    h.mutable_hello()->set_protocol_version(wire::kProtocolVersion);
-    feed(s, h);
-    wire::Envelope sub;
-    sub.mutable_subscribe()->set_all(true);
-    sub.mutable_subscribe()->set_presence(presence);
-    feed(s, sub);
-    return s;
+    sessions.push_back(test::joined(*context, sessions.size() + 1, true, presence));
+    return *sessions.back();
   }
   // The server's presence tick.
   void tick() {
@@ -418,10 +409,7 @@ TEST(Presence, LoadUsersSeeEachOtherAtMostPresenceHzTimesASecond) {
   Server server(host, so);
   server.start();
   host.start();
-  LoadOptions o;
-  o.port = server.port();
-  o.users = 3;
-  o.duration_s = 3.0;
+  LoadOptions o = test::load_of(server.port(), 3, 3.0);
   o.camera_hz = 20.0;
   o.camera_path = "random-walk";
   o.presence = true;

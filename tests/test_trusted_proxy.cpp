@@ -151,11 +151,7 @@ TEST(TrustedProxy, WrongTokensBanTheClientNotTheProxy) {
   // Another client through the same proxy edits with the right token.
   Raw other(server.port(), nullptr, proxy_v2("203.0.113.67", 5002));
   ASSERT_TRUE(other.join());
-  wire::Envelope edit = wrong_edit(kToken);
-  other.send(edit);
-  std::optional<wire::Envelope> ack;
-  while ((ack = other.read(5000ms)) && !ack->has_scene_edit() && !ack->has_error()) {
-  }
+  const std::optional<wire::Envelope> ack = other.edit(wrong_edit(kToken));
   ASSERT_TRUE(ack.has_value());
   EXPECT_TRUE(ack->has_scene_edit()) << ack->DebugString();
   // The proxy's own page request (no X-Forwarded-For) is served.

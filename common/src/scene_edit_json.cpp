@@ -153,9 +153,6 @@ Json op_to_json(const EditOp& op) {
       j["matrix"] = m;
       break;
     }
-    case Kind::Show:
-    case Kind::Hide:
-      break;
     case Kind::LightColor:
     case Kind::MaterialAlbedo:
       j["color"] = vec(op.vector);
@@ -167,8 +164,10 @@ Json op_to_json(const EditOp& op) {
       j["color"] = vec(op.vector);
       j["strength"] = op.value;
       break;
+    case Kind::Show:
+    case Kind::Hide:
     case Kind::Sky:
-      break;
+      break;  // the target is all (the sky: written above)
   }
   return j;
 }

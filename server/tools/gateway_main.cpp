@@ -43,26 +43,20 @@ int take_signal(const sigset_t& signals, std::chrono::milliseconds limit) {
 }
 
 void status_line(const irradcast::Server& server, const irradcast::NatsGateway& gateway) {
-  const irradcast::ServerStats ss = server.stats();
   const irradcast::NatsGatewayStats gs = gateway.nats_stats();
-  char line[384];
+  char line[192];
   std::snprintf(line, sizeof line,
-                "NATS %s, revision %llu, %llu tiles received (%llu new), lag %.3f s, %u clients, "
-                "%.2f MB sent, %llu tiles sent, %llu queued (max %llu)",
+                "NATS %s, revision %llu, %llu tiles received (%llu new), lag %.3f s",
                 gs.connected ? "connected" : "away", static_cast<unsigned long long>(gs.revision),
                 static_cast<unsigned long long>(gs.tiles_received),
-                static_cast<unsigned long long>(gs.tiles_installed), gs.lag_seconds, ss.clients,
-                ss.bytes_sent * 1e-6, static_cast<unsigned long long>(ss.tiles_sent),
-                static_cast<unsigned long long>(ss.queue_depth),
-                static_cast<unsigned long long>(ss.queue_depth_max));
-  irradcast::log::info("status", line);
+                static_cast<unsigned long long>(gs.tiles_installed), gs.lag_seconds);
+  irradcast::log::info("status",
+                       std::string(line) + ", " + irradcast::tools::traffic_status(server.stats()));
 }
 
 int run(const Options& o, const sigset_t& signals) {
   using namespace irradcast;
-  log::set_level(log::parse_level(o.net.log_level));
-  Progress::set_enabled(false);
-  const auto token = o.net.token();
+  const auto token = o.net.begin_serving();
   ServerOptions so = o.net.server_options(token, "gateway");
   NatsGatewayOptions go;
   go.url = o.nats.url;

@@ -21,11 +21,24 @@
 
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
+#include "irradcast/common/progress.h"
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/net_server.h"
 #include "irradcast/service/web_origin.h"
 
 namespace irradcast::tools {
+
+// The server's part of a status line: clients and traffic.
+inline std::string traffic_status(const ServerStats& ss) {
+  char text[192];
+  std::snprintf(text, sizeof text,
+                "%u clients, %.2f MB sent, %llu tiles sent, %llu coalesced, %llu queued (max %llu)",
+                ss.clients, ss.bytes_sent * 1e-6, static_cast<unsigned long long>(ss.tiles_sent),
+                static_cast<unsigned long long>(ss.tiles_coalesced),
+                static_cast<unsigned long long>(ss.queue_depth),
+                static_cast<unsigned long long>(ss.queue_depth_max));
+  return text;
+}
 
 struct NetworkOptions {
   std::string bind = "0.0.0.0";
@@ -170,6 +183,14 @@ struct NetworkOptions {
   float presence_default_height(float scene_extent) const {
     if (presence_height > 0.0f) return presence_height;
     return scene_extent > 0.0f ? std::min(1.7f, 0.25f * scene_extent) : 1.7f;
+  }
+
+  // What a serving program does first: its log level, no progress bars (a service logs
+  // lines), and its control token (token()).
+  std::pair<std::string, std::string> begin_serving() const {
+    log::set_level(log::parse_level(log_level));
+    Progress::set_enabled(false);
+    return token();
   }
 
   // The control token for scene edits (docs/EDITS.md) and where it came from, for the log (the

@@ -1,8 +1,8 @@
 // The options that change the loaded scene, shared by irradcast-bake and irradcast-server:
 // --sky R,G,B | FILE.exr, --sky-strength S and --sun DX,DY,DZ,W (docs/ENGINE.md "Sky and sun"),
-// and --dynamic NAME[,NAME...] (docs/DYNAMIC.md). The sky becomes Scene::sky; the sun a directional light on a
-// node of its own, exactly as a glTF directional light loads, so edits and the scene package see
-// an ordinary light.
+// and --dynamic NAME[,NAME...] (docs/DYNAMIC.md). The sky becomes Scene::sky; the sun a directional
+// light on a node of its own, exactly as a glTF directional light loads, so edits and the scene
+// package see an ordinary light.
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -79,7 +79,7 @@ inline int add_sun(Scene& scene, glm::vec3 direction, float w) {
 struct SceneOptions {
   std::string sky;  // "" (none), "R,G,B" or FILE.exr
   float sky_strength = 1.0f;
-  std::string sun;  // "" (none) or "DX,DY,DZ,W"
+  std::string sun;                   // "" (none) or "DX,DY,DZ,W"
   std::vector<std::string> dynamic;  // node names
 
   // What apply() did, for the log and the report.
@@ -119,7 +119,8 @@ struct SceneOptions {
     }
   }
 
-  // Puts the sky and the sun into `scene`, and marks the --dynamic nodes. Throws irradcast::Error naming the bad option.
+  // Puts the sky and the sun into `scene`, and marks the --dynamic nodes. Throws irradcast::Error
+  // naming the bad option.
   void apply(Scene& scene) {
     if (sky == "none") sky.clear();  // the defaults --help shows
     if (sun == "none") sun.clear();

@@ -102,25 +102,17 @@ std::unique_ptr<irradcast::NatsOrigin> start_origin(const Options& o, irradcast:
 // One status line: the engine's progress and the server's traffic.
 void log_status(const irradcast::EngineHost& host, const irradcast::Server& server) {
   const irradcast::EngineHostStats es = host.stats();
-  const irradcast::ServerStats ss = server.stats();
-  char line[384];
-  std::snprintf(line, sizeof line,
-                "updates %llu%s (%.2f/s), convergence %.4f, %.2f Mrays/s, %u clients, "
-                "%.2f MB sent, %llu tiles sent, %llu coalesced, %llu queued (max %llu)",
+  char line[192];
+  std::snprintf(line, sizeof line, "updates %llu%s (%.2f/s), convergence %.4f, %.2f Mrays/s",
                 static_cast<unsigned long long>(es.updates), es.idle ? " (final)" : "",
-                es.update_rate, es.convergence, es.rays_per_s * 1e-6, ss.clients,
-                ss.bytes_sent * 1e-6, static_cast<unsigned long long>(ss.tiles_sent),
-                static_cast<unsigned long long>(ss.tiles_coalesced),
-                static_cast<unsigned long long>(ss.queue_depth),
-                static_cast<unsigned long long>(ss.queue_depth_max));
-  irradcast::log::info("status", line);
+                es.update_rate, es.convergence, es.rays_per_s * 1e-6);
+  irradcast::log::info("status",
+                       std::string(line) + ", " + irradcast::tools::traffic_status(server.stats()));
 }
 
 int run(const Options& o, const sigset_t& signals) {
   using namespace irradcast;
-  log::set_level(log::parse_level(o.net.log_level));
-  Progress::set_enabled(false);
-  const auto token = o.net.token();
+  const auto token = o.net.begin_serving();
   std::unique_ptr<tbb::global_control> threads;
   if (o.threads > 0)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
