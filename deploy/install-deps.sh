@@ -21,7 +21,7 @@ PACKAGES=(
   # tests and benchmarks (Chromium: the browser viewer's tests)
   chromium
   libgtest-dev libgmock-dev libbenchmark-dev
-  # a real reverse proxy in front of the server (tests/test_trusted_proxy.cpp)
+  # a real reverse proxy in front of the server (tests/scenario/test_trusted_proxy.cpp)
   haproxy
   # libFuzzer targets (deploy/fuzz.sh)
   clang libclang-rt-14-dev
