@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_options.h"
 #include "bench_scene.h"
 #include "bench_util.h"
 #include "irradcast/common/atlas.h"
@@ -302,8 +303,7 @@ int main(int argc, char** argv) {
                  "backends, comma separated: embree, vulkan, vulkan-host (the probes' means on "
                  "the host)");
   app.add_option("--vulkan-device", o.vulkan_device, "Vulkan device index (--list-devices)");
-  app.add_option("--texels-per-scene", o.texels_per_scene, "lightmap density")
-      ->check(CLI::Range(4.0f, 8192.0f));
+  add_texels_per_scene(app, o.texels_per_scene)->check(CLI::Range(4.0f, 8192.0f));
   app.add_option("--tracing-range", o.range, "tracing range (fraction of the scene)");
   app.add_option("--updates", o.updates, "timed updates per backend")->check(CLI::Range(1, 1000));
   app.add_option("--warmup", o.warmup, "untimed updates first (uploads, shader compilation)")

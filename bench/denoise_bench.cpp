@@ -23,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_options.h"
 #include "bench_scene.h"
 #include "bench_util.h"
 #include "irradcast/common/builtin.h"
@@ -274,8 +275,7 @@ int main(int argc, char** argv) {
   CLI::App app{"irradcast-bench-denoise: per-pixel error of plain and denoised lightmaps"};
   Options o;
   app.add_option("--scene", o.scene, "scene spec (cornell, rooms:N, sponza, FILE)");
-  app.add_option("--texels", o.texels, "lightmap texels per scene extent")
-      ->check(CLI::Range(8.0f, 4096.0f));
+  add_texels_per_scene(app, o.texels)->check(CLI::Range(8.0f, 4096.0f));
   app.add_option("--ref-spp", o.ref_spp, "reference samples per texel (two halves)")
       ->check(CLI::Range(2, 1 << 20));
   app.add_option("--few", o.few, "denoised updates of the goal")->check(CLI::Range(2, 1000));

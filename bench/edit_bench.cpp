@@ -27,6 +27,7 @@
 #include <thread>
 #include <vector>
 
+#include "bench_options.h"
 #include "bench_util.h"
 #include "irradcast/client/view_client.h"
 #include "irradcast/common/builtin.h"
@@ -439,7 +440,7 @@ int main(int argc, char** argv) {
   app.add_option("--scenes", scenes_arg, "comma-separated built-in scenes")->capture_default_str();
   app.add_option("--updates", updates, "engine updates to converge (max_updates)")
       ->capture_default_str();
-  app.add_option("--density", density, "atlas texels per scene unit (0 = default)");
+  irradcast::bench::add_texels_per_scene(app, density, "0: the default");
   app.add_option("--threads", threads, "worker threads (0 = all cores)");
   app.add_flag("--verbose", verbose, "log the server's info lines (edit timings)");
   app.add_option("--replot", replot, "only redraw the plot from an edit.json this tool wrote");

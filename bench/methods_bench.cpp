@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_options.h"
 #include "bench_util.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
@@ -289,7 +290,7 @@ int main(int argc, char** argv) {
   float density = 64.0f;
   app.add_option("--scenes", scenes_arg, "comma-separated scene specs");
   app.add_option("--updates", st.updates, "updates per configuration")->check(CLI::Range(2, 1000));
-  app.add_option("--density", density, "lightmap texels across the scene");
+  add_texels_per_scene(app, density);
   app.add_option("--ref-spp", st.ref_spp, "reference paths per texel")
       ->check(CLI::Range(1, 1 << 16));
   app.add_option("--image-spp", st.image_spp, "reference image samples per pixel");

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_options.h"
 #include "bench_scene.h"
 #include "bench_util.h"
 #include "irradcast/common/builtin.h"
@@ -87,9 +88,8 @@ int main(int argc, char** argv) {
   std::string out_dir = "docs/images", json_path;
   app.add_option("--rounds", rounds, "timed updates per variant (interleaved)")
       ->check(CLI::Range(1, 1000));
-  app.add_option("--texels", texels, "lightmap texels per scene extent (atlas density)")
-      ->check(CLI::Range(16.0f, 4096.0f));
-  app.add_option("--threads", threads, "TBB threads (0 = all cores)");
+  add_texels_per_scene(app, texels)->check(CLI::Range(16.0f, 4096.0f));
+  add_threads(app, threads);
   app.add_option("--out", out_dir, "output directory");
   app.add_option("--json", json_path, "JSON report (default OUT/sky_bench.json)");
   CLI11_PARSE(app, argc, argv);

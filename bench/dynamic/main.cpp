@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_options.h"
 #include "bench_util.h"
 #include "irradcast/client/client_passes.h"
 #include "irradcast/common/builtin.h"
@@ -242,7 +243,7 @@ int main(int argc, char** argv) {
       "irradcast-bench-dynamic: a viewer's frame time with dynamic objects, and the probe "
       "volume's bytes against the lightmaps'"};
   app.add_option("--scene", o.scene, "scene spec (default sponza)");
-  app.add_option("--texels-per-scene", o.texels, "lightmap density");
+  add_texels_per_scene(app, o.texels);
   app.add_option("--updates", o.updates, "engine updates before measuring");
   app.add_option("--counts", o.counts, "dynamic sphere counts, comma-separated (first: baseline)");
   app.add_option("--frames", o.frames, "frames per count");

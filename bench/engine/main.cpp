@@ -28,6 +28,7 @@
 #include <thread>
 #include <vector>
 
+#include "bench_options.h"
 #include "bench_util.h"
 #include "engine_bench.h"
 #include "irradcast/common/error.h"
@@ -247,10 +248,9 @@ int main(int argc, char** argv) {
   app.add_option("--out", o.out_dir, "directory for the PNG plots (and the JSON by default)");
   app.add_option("--json", o.json_path, "JSON results file (default OUT/bench_engine.json)");
   app.add_option("--scenes", o.scenes_text, "scenes for the pass benchmark, comma separated");
-  app.add_option("--texels-per-scene", o.texels_per_scene,
-                 "atlas density for the pass benchmark (the engine default)");
+  add_texels_per_scene(app, o.texels_per_scene, "for the pass benchmark");
   app.add_option("--sizes", o.scaling.sizes_text, "N of rooms:N for the scaling benchmark");
-  app.add_option("--density", o.scaling.density, "texels per metre for the scaling benchmark");
+  add_texels_per_metre(app, o.scaling.density, "for the scaling benchmark");
   app.add_option("--sweep-size", o.scaling.sweep_size, "M of rooms:M for the density sweep");
   app.add_option("--sweep-densities", o.scaling.sweep_text,
                  "texels per metre for the density sweep, comma separated (empty: none)");
