@@ -82,7 +82,8 @@ void for_each_texel_in_order(const PassInput& in, Body&& body) {
 
 // Direct pass rays: LightSampler's punctual and area samples, as EmbreeBackend::direct (through
 // punctual_irradiance and area_irradiance) takes them.
-Capture capture_direct(const RayScene& rays, const LightSampler& lights, const PassInput& in) {
+Capture capture_direct(const RayScene& rays, const LightSampler& lights, const LightCache& cache,
+                       const PassInput& in) {
   Capture c;
   c.kind = Kind::Occlusion;
   const int n = in.params.direct_samples;
@@ -100,6 +101,8 @@ Capture capture_direct(const RayScene& rays, const LightSampler& lights, const P
     LightSampler::FrontLights front;
     const bool culled = lights.front_lights(p, nrm, front);
     if (culled && front.count == 0) return;
+    const LightCache::Table* table =
+        !culled && cache.valid() ? cache.find(cache.region(p, nrm)) : nullptr;
     Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
     int packet_rays = 0, packet_batch = -1;  // the current packet's rays and sample batch
     for (int k = 0; k < n; ++k) {
@@ -107,7 +110,7 @@ Capture capture_direct(const RayScene& rays, const LightSampler& lights, const P
       glm::vec2 pos = rng.next_2d();
       glm::vec3 w;
       if (!lights.direct_sample(rays, culled ? &front : nullptr, p, nrm, ng, glm::vec3(pick, pos),
-                                s, w))
+                                s, w, table))
         continue;
       std::int32_t index = -1;
       if (s.shadow.tmax > 0.0f) {
@@ -456,13 +459,20 @@ class BenchBackend final : public TraceBackend {
 
   PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) override {
     if (!measuring) return inner_.direct(in, out);
-    Capture c = capture_direct(*rays_, *lights_, in);
-    auto run = [&] { return inner_.direct(in, out); };
+    // The learned light cache as the pass about to run sees it (each run learns from its
+    // samples): the captured rays and the forced ways use that state.
+    Capture c = capture_direct(*rays_, *lights_, inner_.light_cache(), in);
+    LightCache before;
+    auto run = [&] {
+      before = inner_.light_cache();
+      return inner_.direct(in, out);
+    };
     auto shade = [&](std::vector<glm::vec3>& est) { shade_direct(*rays_, *lights_, in, c, est); };
     std::vector<glm::vec3> forced_out;
     auto forced = [&](ShadowRays mode) {
-      const PassResult r =
-          (mode == ShadowRays::Packets ? packets_ : single_).direct(in, forced_out);
+      EmbreeBackend& way = mode == ShadowRays::Packets ? packets_ : single_;
+      way.set_light_cache(before);
+      const PassResult r = way.direct(in, forced_out);
       if (forced_out.size() != out.size())
         throw Error("direct: a forced way's output has another size");
       std::uint64_t differ = 0;

@@ -264,11 +264,12 @@ glm::vec3 LightSampler::triangle_irradiance(const RayScene& rays, std::size_t in
   return triangle_emitted(s);
 }
 
-bool LightSampler::pick(glm::vec3 p, glm::vec3 n, float u, std::size_t& index, float& pdf) const {
+bool LightSampler::pick(glm::vec3 p, glm::vec3 n, float u, std::size_t& index, float& pdf,
+                        const LightCache::Table* learned) const {
   if (triangles_.empty()) return false;
   if (!tree_.empty()) {
     std::uint32_t i;
-    if (!tree_.sample(p, n, u, i, pdf)) return false;
+    if (!LightCache::pick(tree_, learned, p, n, u, i, pdf)) return false;
     index = i;
     return true;
   }
@@ -308,7 +309,7 @@ bool LightSampler::front_lights(glm::vec3 p, glm::vec3 n, FrontLights& f) const 
 
 inline bool LightSampler::draw_direct(const RayScene& rays, const FrontLights* front, glm::vec3 p,
                                       glm::vec3 n, glm::vec3 ng, glm::vec3 u, ShadowSample& s,
-                                      glm::vec3& weight) const {
+                                      glm::vec3& weight, const LightCache::Table* learned) const {
   std::size_t li;
   float pdf;
   if (front) {
@@ -318,7 +319,7 @@ inline bool LightSampler::draw_direct(const RayScene& rays, const FrontLights* f
     pdf = pick_pdf_[li] / front->total;
     if (!point_sample(rays, li, p, n, ng, glm::vec2(u.y, u.z), s)) return false;
   } else {
-    if (!pick(p, n, u.x, li, pdf)) return false;
+    if (!pick(p, n, u.x, li, pdf, learned)) return false;
     if (!triangle_sample(rays, li, p, n, ng, glm::vec2(u.y, u.z), s)) return false;
   }
   weight = triangle_emitted(s) / pdf;
@@ -327,20 +328,20 @@ inline bool LightSampler::draw_direct(const RayScene& rays, const FrontLights* f
 
 bool LightSampler::direct_sample(const RayScene& rays, const FrontLights* front, glm::vec3 p,
                                  glm::vec3 n, glm::vec3 ng, glm::vec3 u, ShadowSample& s,
-                                 glm::vec3& weight) const {
-  return draw_direct(rays, front, p, n, ng, u, s, weight);
+                                 glm::vec3& weight, const LightCache::Table* learned) const {
+  return draw_direct(rays, front, p, n, ng, u, s, weight, learned);
 }
 
 void LightSampler::direct_samples(const RayScene& rays, const FrontLights* front, glm::vec3 p,
                                   glm::vec3 n, glm::vec3 ng, Rng& rng, int first, int count,
-                                  int samples, ShadowSample* s, glm::vec3* weight,
-                                  bool* lit) const {
+                                  int samples, ShadowSample* s, glm::vec3* weight, bool* lit,
+                                  const LightCache::Table* learned) const {
   if (!front || front->count == 0) {  // one sample at a time (none lights p: all false)
     for (int k = 0; k < count; ++k) {
       const float pick =
           (static_cast<float>(first + k) + rng.next_float()) / static_cast<float>(samples);
       const glm::vec2 pos = rng.next_2d();
-      lit[k] = draw_direct(rays, front, p, n, ng, glm::vec3(pick, pos), s[k], weight[k]);
+      lit[k] = draw_direct(rays, front, p, n, ng, glm::vec3(pick, pos), s[k], weight[k], learned);
     }
     return;
   }

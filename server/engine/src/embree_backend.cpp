@@ -1,6 +1,7 @@
 #include "irradcast/engine/embree_backend.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -202,7 +203,7 @@ bool EmbreeBackend::few_lights(const LightSampler::FrontLights& front) const {
 }
 
 glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced,
-                                     std::uint64_t* packed) const {
+                                     std::uint64_t* packed, LightCache::Record* learned) const {
   // direct_samples samples of the lights in front of the texel (LightSampler::front_lights),
   // stratified in the pick; every sample drawn first (4 at a time in SIMD lanes), then the shadow
   // rays of those that can contribute traced (8 to a packet), then summed in order.
@@ -214,6 +215,10 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::
   if (culled && front.count == 0) return glm::vec3(0.0f);
   const bool packets = shadow_rays_ == ShadowRays::Packets ||
                        (shadow_rays_ == ShadowRays::Auto && culled && few_lights(front));
+  // Past kMaxFront lights: the hierarchy mixed with what the texel's region has learned.
+  const bool learn = !culled && learned != nullptr;
+  const std::uint64_t region = learn ? cache_.region(p, nrm) : 0;
+  const LightCache::Table* table = learn ? cache_.find(region) : nullptr;
   Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
   constexpr int kBatch = 16;
   Uninitialized<LightSampler::ShadowSample, kBatch> sample;
@@ -224,7 +229,7 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::
   for (int s0 = 0; s0 < n; s0 += kBatch) {
     const int m = std::min(kBatch, n - s0);
     lights_->direct_samples(*rays_, culled ? &front : nullptr, p, nrm, ng, rng, s0, m, n,
-                            &sample[0], weight, lit);
+                            &sample[0], weight, lit, table);
     // The shadow rays to trace, 8 to a packet or one by one (ShadowRays).
     Uninitialized<Ray, kBatch> shadow;
     int which[kBatch];
@@ -243,7 +248,12 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::
     for (int k = 0; k < count; ++k) lit[which[k]] = !blocked[k];
     rays += static_cast<std::uint64_t>(count);
     for (int s = 0; s < m; ++s)
-      if (lit[s]) sum += weight[s];
+      if (lit[s]) {
+        sum += weight[s];
+        if (learn)
+          learned->add(region, static_cast<std::uint32_t>(sample[s].triangle),
+                       luminance(weight[s]));
+      }
   }
   *traced += rays;
   if (packets) *packed += rays;
@@ -262,6 +272,20 @@ const char* shadow_rays_name(ShadowRays mode) {
   return "auto";
 }
 
+void EmbreeBackend::prepare_light_cache(const PassInput& in) {
+  const std::size_t lights = lights_->emissive_triangles().size();
+  if (!learn_lights_ || lights_->tree().empty()) {
+    cache_ = LightCache();
+    return;
+  }
+  if (cache_.valid() && cache_.lights() == lights) return;
+  // The fixed point's unit: the brightest uniform emitter's radiance (1 without one).
+  float unit = 0.0f;
+  for (const EmissiveTriangle& t : lights_->emissive_triangles())
+    if (t.uniform_emission) unit = std::max(unit, luminance(t.emission));
+  cache_ = LightCache(in.world.bounds, lights, unit > 0.0f ? unit : 1.0f);
+}
+
 PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& out) {
   auto start = Clock::now();
   out.assign(in.texels.size(), glm::vec3(0.0f));
@@ -272,9 +296,14 @@ PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& ou
   // the light sampler (PreparedScene::apply).
   light_object_.clear();
   for (const EmissiveTriangle& t : lights_->emissive_triangles()) light_object_.push_back(t.object);
+  prepare_light_cache(in);
+  const bool learn = cache_.valid();
+  tbb::enumerable_thread_specific<LightCache::Record> records(
+      [&] { return LightCache::Record(cache_.unit()); });
   std::atomic<std::uint64_t> rays{0}, packed{0};
   for_each_texel_run(in, [&](const std::uint32_t* run, std::size_t size) {
     std::uint64_t traced = 0, in_packets = 0;
+    LightCache::Record* learned = learn ? &records.local() : nullptr;
     for (std::size_t k = 0; k < size; ++k) {
       const std::uint32_t i = run[k];
       const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
@@ -282,7 +311,7 @@ PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& ou
       glm::vec3 e =
           punctual > 0 ? lights_->punctual_irradiance(*rays_, p, nrm, ng) : glm::vec3(0.0f);
       traced += punctual;
-      if (area) e += area_direct(in, i, &traced, &in_packets);
+      if (area) e += area_direct(in, i, &traced, &in_packets, learned);
       if (sky) e += sky_direct(in, i, &traced);
       out[i] = e;
     }
@@ -290,6 +319,11 @@ PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& ou
     packed += in_packets;
   });
   direct_packet_rays_ = packed.load();
+  if (learn) {
+    std::vector<LightCache::Record*> learned;
+    for (LightCache::Record& r : records) learned.push_back(&r);
+    cache_.learn(std::move(learned));
+  }
   PassResult r;
   r.rays = rays.load();
   r.seconds = std::chrono::duration<double>(Clock::now() - start).count();

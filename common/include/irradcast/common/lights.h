@@ -8,6 +8,7 @@
 
 #include <glm/glm.hpp>
 
+#include "irradcast/common/light_cache.h"
 #include "irradcast/common/light_tree.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/sampling.h"
@@ -82,8 +83,10 @@ class LightSampler {
   std::size_t pick_triangle(float u) const;
   // The area light that u picks for the point p with normal n, and its probability: by power
   // (pick_triangle), or with more than kMaxFront emissive triangles by the light hierarchy
-  // (light_tree.h: power, distance and orientation at p). false: none can light p.
-  bool pick(glm::vec3 p, glm::vec3 n, float u, std::size_t& index, float& pdf) const;
+  // (light_tree.h: power, distance and orientation at p), mixed with p's region's `learned`
+  // table where there is one (LightCache::pick). false: none can light p.
+  bool pick(glm::vec3 p, glm::vec3 n, float u, std::size_t& index, float& pdf,
+            const LightCache::Table* learned = nullptr) const;
   // The light hierarchy (empty with at most kMaxFront emissive triangles).
   const LightTree& tree() const { return tree_; }
   // triangle_irradiance before its shadow ray; false: no contribution (no ray).
@@ -105,18 +108,21 @@ class LightSampler {
     std::uint32_t index[kMaxFront];  // emissive triangle
   };
   bool front_lights(glm::vec3 p, glm::vec3 n, FrontLights& f) const;
-  // One direct-pass sample: u.x picks the light (among *front, or among all when front is null),
-  // (u.y, u.z) place the point; false: no contribution (no ray). Else s's shadow ray and, when
-  // it is unoccluded, `weight` (the emitted irradiance over the pick probability).
+  // One direct-pass sample: u.x picks the light (among *front, or among all when front is null:
+  // pick(), with `learned`), (u.y, u.z) place the point; false: no contribution (no ray). Else
+  // s's shadow ray and, when it is unoccluded, `weight` (the emitted irradiance over the pick
+  // probability).
   bool direct_sample(const RayScene& rays, const FrontLights* front, glm::vec3 p, glm::vec3 n,
-                     glm::vec3 ng, glm::vec3 u, ShadowSample& s, glm::vec3& weight) const;
+                     glm::vec3 ng, glm::vec3 u, ShadowSample& s, glm::vec3& weight,
+                     const LightCache::Table* learned = nullptr) const;
   // The direct pass's samples first .. first + count - 1 of `samples` at p, stratified in the
   // pick: sample k's pick is (k + rng) / samples, then two numbers of rng place its point; each
   // as direct_sample, with lit[k] its result (of s[k] only the shadow ray is set). With front
   // lights, 4 samples at a time in SIMD lanes: the same operations, so the same bits.
   void direct_samples(const RayScene& rays, const FrontLights* front, glm::vec3 p, glm::vec3 n,
                       glm::vec3 ng, Rng& rng, int first, int count, int samples, ShadowSample* s,
-                      glm::vec3* weight, bool* lit) const;
+                      glm::vec3* weight, bool* lit,
+                      const LightCache::Table* learned = nullptr) const;
   glm::vec3 triangle_emitted(const ShadowSample& s) const;
   // One punctual light before its shadow ray; false: no contribution (no ray).
   static bool punctual_sample(const RayScene& rays, const WorldLight& l, glm::vec3 p, glm::vec3 n,
@@ -131,7 +137,8 @@ class LightSampler {
                     const std::uint32_t* li, const float* ux, const float* uy, const float* pdf,
                     int lanes, ShadowSample* s, glm::vec3* weight, bool* lit) const;
   bool draw_direct(const RayScene& rays, const FrontLights* front, glm::vec3 p, glm::vec3 n,
-                   glm::vec3 ng, glm::vec3 u, ShadowSample& s, glm::vec3& weight) const;
+                   glm::vec3 ng, glm::vec3 u, ShadowSample& s, glm::vec3& weight,
+                   const LightCache::Table* learned) const;
 
   const World* world_;
   std::vector<EmissiveTriangle> triangles_;

@@ -105,6 +105,18 @@ class EmbreeBackend final : public TraceBackend {
   ShadowRays shadow_rays() const { return shadow_rays_; }
   // Of the last direct pass's shadow rays toward area lights, those traced in packets.
   std::uint64_t direct_packet_rays() const { return direct_packet_rays_; }
+  // Which lights light each region, learned from the direct passes so far (used past
+  // LightSampler::kMaxFront emissive triangles, where the light hierarchy picks): the next
+  // direct pass picks with it (LightCache::pick). Invalid until a pass has used the hierarchy.
+  const LightCache& light_cache() const { return cache_; }
+  // Whether the direct pass learns and uses it (default on; off: the hierarchy alone).
+  void set_learn_lights(bool on) {
+    learn_lights_ = on;
+    cache_ = LightCache();
+  }
+  // Sets it (bench/engine runs two backends from one state, to compare their outputs).
+  void set_light_cache(const LightCache& cache) { cache_ = cache; }
+  void scene_changed() override { cache_ = LightCache(); }
   PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) override;
   PassResult gather_probes(const PassInput& in, const RadianceField& prev,
                            std::vector<glm::vec3>& out) override;
@@ -121,8 +133,13 @@ class EmbreeBackend final : public TraceBackend {
   // pick (LightSampler::direct_samples), their shadow rays traced 8 to a packet
   // (RayScene::occluded8) or one by one (shadow_rays()); the shadow rays it traced are added to
   // *traced, and to *packed too when they went in packets.
+  // With the light hierarchy, the texel's samples are picked with its region's learned table
+  // (light_cache()) and those that came back unoccluded are added to *learned.
   glm::vec3 area_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced,
-                        std::uint64_t* packed) const;
+                        std::uint64_t* packed, LightCache::Record* learned) const;
+  // The light cache for this pass: made for the scene's lights where the hierarchy picks
+  // (anew when their number changed), else left invalid.
+  void prepare_light_cache(const PassInput& in);
   // Whether the lights of `front` belong to at most kPacketLights emissive objects (counted as
   // changes of object along the list: an object listed apart twice counts twice).
   bool few_lights(const LightSampler::FrontLights& front) const;
@@ -132,6 +149,8 @@ class EmbreeBackend final : public TraceBackend {
   ShadowRays shadow_rays_ = ShadowRays::Auto;
   std::vector<std::int32_t> light_object_;  // per emissive triangle, its object (direct())
   std::uint64_t direct_packet_rays_ = 0;
+  bool learn_lights_ = true;
+  LightCache cache_;
 };
 
 }  // namespace irradcast

@@ -1,0 +1,141 @@
+#include "irradcast/common/light_cache.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "irradcast/common/world.h"
+
+namespace irradcast {
+namespace {
+
+constexpr int kAxisBits = 20;  // per grid coordinate in a region's key
+constexpr std::uint64_t kAxisMax = (std::uint64_t{1} << kAxisBits) - 1;
+constexpr float kMaxSample = 1099511627776.0f;  // 2^40: one sample's largest fixed-point weight
+// Record::add looks this far back for an entry of the same region and light (a thread's texels
+// come in runs of one radiance cell, so few regions and lights at a time).
+constexpr std::size_t kCoalesce = 64;
+// Each learn() keeps 1 - 2^-kForget of the old sums (7/8: a light no longer seen fades out
+// over tens of passes).
+constexpr int kForget = 3;
+
+std::uint64_t saturating_add(std::uint64_t a, std::uint64_t b) {
+  return a > ~b ? ~std::uint64_t{0} : a + b;
+}
+
+// The direction of the normal's largest component: 0..5 (+x, -x, +y, -y, +z, -z).
+std::uint64_t direction_of(glm::vec3 n) {
+  const glm::vec3 a = glm::abs(n);
+  const int axis = a.x >= a.y && a.x >= a.z ? 0 : (a.y >= a.z ? 1 : 2);
+  return static_cast<std::uint64_t>(2 * axis + (n[axis] < 0.0f ? 1 : 0));
+}
+
+}  // namespace
+
+float LightCache::Table::pmf(std::uint32_t index) const {
+  for (int k = 0; k < count; ++k)
+    if (light[k] == index) return (cdf[k] - (k > 0 ? cdf[k - 1] : 0.0f)) / total;
+  return 0.0f;
+}
+
+void LightCache::Record::add(std::uint64_t region, std::uint32_t light, float luminance) {
+  if (!(luminance > 0.0f)) return;
+  const auto q = static_cast<std::uint64_t>(std::min(luminance * scale_, kMaxSample));
+  if (q == 0) return;
+  const std::size_t n = entries_.size();
+  for (std::size_t k = n; k > 0 && n - k < kCoalesce; --k) {
+    Entry& e = entries_[k - 1];
+    if (e.region == region && e.light == light) {
+      e.sum = saturating_add(e.sum, q);
+      return;
+    }
+  }
+  entries_.push_back({region, light, q});
+}
+
+LightCache::LightCache(const Bounds& bounds, std::size_t lights, float unit)
+    : origin_(bounds.lo),
+      inv_cell_(static_cast<float>(kRegionsAcross) / std::max(bounds.max_extent(), 1e-20f)),
+      lights_(lights),
+      unit_(unit > 0.0f && std::isfinite(unit) ? unit : 1.0f) {}
+
+std::uint64_t LightCache::region(glm::vec3 p, glm::vec3 n) const {
+  const glm::vec3 g = (p - origin_) * inv_cell_;
+  auto axis = [](float v) {
+    return static_cast<std::uint64_t>(std::clamp(v, 0.0f, static_cast<float>(kAxisMax)));
+  };
+  return (((axis(g.x) << kAxisBits | axis(g.y)) << kAxisBits | axis(g.z)) << 3) | direction_of(n);
+}
+
+const LightCache::Table* LightCache::find(std::uint64_t region) const {
+  const auto it = tables_.find(region);
+  return it == tables_.end() ? nullptr : &it->second;
+}
+
+void LightCache::clear() {
+  sums_.clear();
+  tables_.clear();
+}
+
+void LightCache::learn(std::vector<Record*> records) {
+  // The old sums mostly kept (kForget), then the new ones added: integer sums, so the order of
+  // records and entries does not change them.
+  for (auto it = sums_.begin(); it != sums_.end();) {
+    auto& sums = it->second;
+    for (auto& s : sums) s.second -= s.second >> kForget;
+    std::erase_if(sums, [](const auto& s) { return s.second == 0; });
+    it = sums.empty() ? sums_.erase(it) : std::next(it);
+  }
+  for (Record* r : records)
+    for (const Record::Entry& e : r->entries_) {
+      if (e.light >= lights_) continue;
+      auto& sums = sums_[e.region];
+      const auto at = std::lower_bound(sums.begin(), sums.end(), e.light,
+                                       [](const auto& s, std::uint32_t l) { return s.first < l; });
+      if (at != sums.end() && at->first == e.light)
+        at->second = saturating_add(at->second, e.sum);
+      else
+        sums.insert(at, {e.light, e.sum});
+    }
+  // Each region's table: its kMaxLights heaviest lights (ties by index), weights as floats.
+  tables_.clear();
+  tables_.reserve(sums_.size());
+  std::vector<std::pair<std::uint32_t, std::uint64_t>> order;
+  for (const auto& [region, sums] : sums_) {
+    order = sums;
+    const std::size_t keep = std::min<std::size_t>(order.size(), kMaxLights);
+    std::partial_sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(keep), order.end(),
+                      [](const auto& a, const auto& b) {
+                        return a.second != b.second ? a.second > b.second : a.first < b.first;
+                      });
+    Table t;
+    float total = 0.0f;
+    for (std::size_t k = 0; k < keep; ++k) {
+      total += static_cast<float>(order[k].second);
+      t.light[t.count] = order[k].first;
+      t.cdf[t.count++] = total;
+    }
+    t.total = total;
+    if (t.count > 0 && total > 0.0f) tables_.emplace(region, t);
+  }
+}
+
+bool LightCache::pick(const LightTree& tree, const Table* table, glm::vec3 p, glm::vec3 n, float u,
+                      std::uint32_t& index, float& pmf) {
+  if (table == nullptr) return tree.sample(p, n, u, index, pmf);
+  constexpr float a = kTreeShare;
+  if (u < a) {
+    float pt;
+    if (!tree.sample(p, n, std::min(u / a, 0x1.fffffep-1f), index, pt)) return false;
+    pmf = a * pt + (1.0f - a) * table->pmf(index);
+    return true;
+  }
+  const float v = std::min((u - a) / (1.0f - a), 0x1.fffffep-1f) * table->total;
+  int k = 0;
+  while (k + 1 < table->count && table->cdf[k] <= v) ++k;
+  index = table->light[k];
+  const float share = (table->cdf[k] - (k > 0 ? table->cdf[k - 1] : 0.0f)) / table->total;
+  pmf = a * tree.pmf(p, n, index) + (1.0f - a) * share;
+  return pmf > 0.0f;
+}
+
+}  // namespace irradcast
