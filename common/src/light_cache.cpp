@@ -60,8 +60,8 @@ LightCache::LightCache(const Bounds& bounds, std::size_t lights, float unit)
 
 std::uint64_t LightCache::region(glm::vec3 p, glm::vec3 n) const {
   const glm::vec3 g = (p - origin_) * inv_cell_;
-  auto axis = [](float v) {
-    return static_cast<std::uint64_t>(std::clamp(v, 0.0f, static_cast<float>(kAxisMax)));
+  auto axis = [](float v) {  // NaN and below 0 to 0
+    return v > 0.0f ? static_cast<std::uint64_t>(std::min(v, static_cast<float>(kAxisMax))) : 0;
   };
   return (((axis(g.x) << kAxisBits | axis(g.y)) << kAxisBits | axis(g.z)) << 3) | direction_of(n);
 }

@@ -99,7 +99,8 @@ class LightSampler {
   // over them. The same expectation as picking among all, no sample drawn in vain, and lower
   // variance. For scenes with at most kMaxFront emissive triangles (a per-texel list; with more
   // front_lights returns false and the pass picks with pick(), by the light hierarchy).
-  // shaders/direct.comp mirrors the list; with more lights it still picks by power alone.
+  // shaders/direct.comp mirrors the list; with more lights it picks by the hierarchy
+  // (lights.glsl's tree_pick), without the learned tables (LightCache).
   static constexpr int kMaxFront = 64;
   struct FrontLights {
     int count = 0;
