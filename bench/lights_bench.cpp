@@ -8,10 +8,12 @@
 // same machine state. Reports per scene and way: time per sample, the share of shadow rays that
 // end occluded, its mean over power's (all unbiased: near 1) and the speed-up at equal error
 // over power (time x variance), per texel and over the scene, as a table and JSON
-// (docs/bench/engine.md, "Many lights").
+// (docs/bench/engine.md, "Many lights"). With --oracle, also the floor of the occluded share:
+// each texel's own pick in proportion to what each light brings it.
 //   irradcast-bench-lights --scenes rooms:6,rooms:6:trim,rooms:12:trim --out out/lights
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -44,10 +46,18 @@ struct Estimator {
   double mean_sum = 0.0;
 };
 
+// What a sample traced: its light, and the luminance of the light's emitted irradiance (0
+// when its shadow ray was occluded); light -1 when it traced no ray.
+struct Traced {
+  std::int64_t light = -1;
+  float luminance = 0.0f;
+};
+
 // One sample of the direct irradiance at p with the light picked by `way` (0 unless its
-// shadow ray came back unoccluded, and then the light in *light).
+// shadow ray came back unoccluded); what it traced to *traced.
 glm::vec3 sample(const LightSampler& l, const RayScene& rays, const LightCache& cache, glm::vec3 p,
-                 glm::vec3 n, Way way, glm::vec3 u, Estimator& e, std::size_t* light = nullptr) {
+                 glm::vec3 n, std::uint32_t object, Way way, glm::vec3 u, Estimator& e,
+                 Traced* traced = nullptr) {
   std::size_t i;
   float pdf;
   bool ok = true;
@@ -56,31 +66,34 @@ glm::vec3 sample(const LightSampler& l, const RayScene& rays, const LightCache& 
     pdf = l.pick_pdf()[i];
   } else {
     const LightCache::Table* table =
-        way == kLearned && cache.valid() ? cache.find(cache.region(p, n)) : nullptr;
+        way == kLearned && cache.valid() ? cache.find(cache.region(p, n, object)) : nullptr;
     ok = l.pick(p, n, u.x, i, pdf, table);
   }
   LightSampler::ShadowSample s;
   if (!ok || !l.triangle_sample(rays, i, p, n, n, glm::vec2(u.y, u.z), s)) return glm::vec3(0.0f);
+  bool blocked = false;
   if (s.shadow.tmax > 0.0f) {
-    const bool blocked = rays.occluded(s.shadow);
+    blocked = rays.occluded(s.shadow);
     ++e.rays;
     e.occluded += blocked;
-    if (blocked) return glm::vec3(0.0f);
+    if (traced) traced->light = static_cast<std::int64_t>(i);
   }
-  if (light) *light = i;
-  return l.triangle_emitted(s) / pdf;
+  if (blocked) return glm::vec3(0.0f);
+  const glm::vec3 emitted = l.triangle_emitted(s);
+  if (traced) traced->luminance = luminance(emitted);
+  return emitted / pdf;
 }
 
 // One texel's `samples` estimates (stratified in the pick); its mean and the variance of that.
 void run_texel(const LightSampler& l, const RayScene& rays, const LightCache& cache, glm::vec3 p,
-               glm::vec3 n, Way way, int samples, Rng& rng, Estimator& e, double& mean,
-               double& var) {
+               glm::vec3 n, std::uint32_t object, Way way, int samples, Rng& rng, Estimator& e,
+               double& mean, double& var) {
   const auto start = Clock::now();
   double sum = 0.0, sq = 0.0;
   for (int k = 0; k < samples; ++k) {
     const float u = (static_cast<float>(k) + rng.next_float()) / static_cast<float>(samples);
     const glm::vec2 pos = rng.next_2d();
-    const glm::vec3 c = sample(l, rays, cache, p, n, way, glm::vec3(u, pos), e);
+    const glm::vec3 c = sample(l, rays, cache, p, n, object, way, glm::vec3(u, pos), e);
     const double v = static_cast<double>(c.x) + c.y + c.z;
     sum += v;
     sq += v * v;
@@ -91,8 +104,46 @@ void run_texel(const LightSampler& l, const RayScene& rays, const LightCache& ca
   var = std::max(sq / samples - mean * mean, 0.0) / samples;  // of the mean
 }
 
+// The oracle: the texel's own light choice, in proportion to what each light brings it (each
+// light's irradiance at p from 4 x 4 stratified points with their shadow rays), then `samples`
+// samples picked that way; returns how many of their shadow rays ended occluded, -1 when no
+// light brings p anything (where every ray of any pick ends occluded: the caller counts the
+// hierarchy's). No picking of a light can waste fewer rays, so this is the floor of the occluded
+// share for a light pick followed by a uniform point on the light, at a fixed number of samples
+// per texel (only a choice of the point, or fewer samples where no light reaches, could go
+// lower).
+double oracle_occluded(const LightSampler& l, const RayScene& rays, glm::vec3 p, glm::vec3 n,
+                       int samples, Rng& rng, std::uint64_t& traced) {
+  const std::size_t lights = l.emissive_triangles().size();
+  std::vector<double> cdf(lights);
+  double total = 0.0;
+  for (std::size_t i = 0; i < lights; ++i) {
+    for (int q = 0; q < 16; ++q) {
+      const glm::vec2 u((static_cast<float>(q % 4) + 0.5f) / 4.0f,
+                        (static_cast<float>(q / 4) + 0.5f) / 4.0f);
+      total += luminance(l.triangle_irradiance(rays, i, p, n, n, u)) / 16.0;
+    }
+    cdf[i] = total;
+  }
+  if (!(total > 0.0)) return -1.0;
+  std::uint64_t rays_traced = 0, occluded = 0;
+  for (int k = 0; k < samples; ++k) {
+    const double u = (static_cast<double>(k) + rng.next_float()) / samples * total;
+    const std::size_t i = std::min<std::size_t>(
+        static_cast<std::size_t>(std::upper_bound(cdf.begin(), cdf.end(), u) - cdf.begin()),
+        lights - 1);
+    LightSampler::ShadowSample sm;
+    if (!l.triangle_sample(rays, i, p, n, n, rng.next_2d(), sm) || !(sm.shadow.tmax > 0.0f))
+      continue;
+    ++rays_traced;
+    occluded += rays.occluded(sm.shadow);
+  }
+  traced += rays_traced;
+  return static_cast<double>(occluded);
+}
+
 // What the engine's direct pass learns in `updates` updates: 8 samples at every texel, picked
-// with what was learned so far (EmbreeBackend::area_direct's records).
+// with what was learned so far, each traced ray recorded (EmbreeBackend::area_direct's records).
 LightCache learn(const PreparedScene& s, int updates) {
   const LightSampler& l = s.lights();
   if (l.tree().empty()) return LightCache();
@@ -105,25 +156,27 @@ LightCache learn(const PreparedScene& s, int updates) {
   constexpr int kSamples = 8;
   for (int update = 0; update < updates; ++update) {
     LightCache::Record record(cache.unit());
-    for (const TexelGBuffer& g : s.gbuffers())
+    for (std::uint32_t o = 0; o < s.gbuffers().size(); ++o) {
+      const TexelGBuffer& g = s.gbuffers()[o];
       for (std::size_t i = 0; i < g.size(); ++i) {
         if (!g.valid(i)) continue;
-        const std::uint64_t region = cache.region(g.position[i], g.normal[i]);
+        const std::uint64_t region = cache.region(g.position[i], g.normal[i], o);
         for (int k = 0; k < kSamples; ++k) {
           const glm::vec3 u((static_cast<float>(k) + rng.next_float()) / kSamples, rng.next_2d());
-          std::size_t light = 0;
-          const glm::vec3 c =
-              sample(l, s.rays(), cache, g.position[i], g.normal[i], kLearned, u, ignored, &light);
-          record.add(region, static_cast<std::uint32_t>(light), luminance(c));
+          Traced t;
+          sample(l, s.rays(), cache, g.position[i], g.normal[i], o, kLearned, u, ignored, &t);
+          if (t.light >= 0) record.add(region, static_cast<std::uint32_t>(t.light), t.luminance);
         }
       }
+    }
     cache.learn({&record});
   }
   return cache;
 }
 
 // One scene: the three estimators on every step-th texel, a row printed; its JSON.
-nlohmann::json measure_scene(const std::string& spec, int samples, int step, int updates) {
+nlohmann::json measure_scene(const std::string& spec, int samples, int step, int updates,
+                             bool oracle) {
   Scene scene = load_scene(spec);
   PreparedSceneOptions o;
   o.name = spec;
@@ -136,13 +189,17 @@ nlohmann::json measure_scene(const std::string& spec, int samples, int step, int
   Rng rng(1);
   std::size_t k = 0, texels = 0;
   double truth_sq = 0.0;
-  for (const TexelGBuffer& g : s.gbuffers())
+  std::uint64_t oracle_rays = 0, oracle_occluded_rays = 0;
+  std::size_t dark_texels = 0;
+  for (std::uint32_t o = 0; o < s.gbuffers().size(); ++o) {
+    const TexelGBuffer& g = s.gbuffers()[o];
     for (std::size_t i = 0; i < g.size(); ++i) {
       if (!g.valid(i) || k++ % static_cast<std::size_t>(step) != 0) continue;
       double m[kWays], v[kWays], truth = 0.0;
+      const std::uint64_t tree_rays_before = est[kTree].rays;
       for (int w = 0; w < kWays; ++w) {
-        run_texel(l, s.rays(), cache, g.position[i], g.normal[i], static_cast<Way>(w), samples, rng,
-                  est[w], m[w], v[w]);
+        run_texel(l, s.rays(), cache, g.position[i], g.normal[i], o, static_cast<Way>(w), samples,
+                  rng, est[w], m[w], v[w]);
         truth += m[w] / static_cast<double>(kWays);
       }
       // The variance of each texel's mean relative to its squared mean (the estimators' means
@@ -154,7 +211,19 @@ nlohmann::json measure_scene(const std::string& spec, int samples, int step, int
       }
       truth_sq += truth * truth;
       ++texels;
+      if (oracle) {
+        const double blocked =
+            oracle_occluded(l, s.rays(), g.position[i], g.normal[i], samples, rng, oracle_rays);
+        if (blocked >= 0.0) {
+          oracle_occluded_rays += static_cast<std::uint64_t>(blocked);
+        } else {  // no light reaches the texel: any pick's rays end occluded (the hierarchy's)
+          oracle_rays += est[kTree].rays - tree_rays_before;
+          oracle_occluded_rays += est[kTree].rays - tree_rays_before;
+          ++dark_texels;
+        }
+      }
     }
+  }
   auto ns = [](const Estimator& e) { return 1e9 * e.seconds / static_cast<double>(e.samples); };
   auto occl = [](const Estimator& e) {
     return e.rays ? static_cast<double>(e.occluded) / static_cast<double>(e.rays) : 0.0;
@@ -191,6 +260,14 @@ nlohmann::json measure_scene(const std::string& spec, int samples, int step, int
                         {"speedup_at_equal_error", speedup},
                         {"scene_speedup_at_equal_error", scene_speedup}};
   }
+  if (oracle) {
+    const double share =
+        oracle_rays ? static_cast<double>(oracle_occluded_rays) / static_cast<double>(oracle_rays)
+                    : 0.0;
+    std::printf(" %5.1f%% %5.1f%% |", 100.0 * share,
+                100.0 * static_cast<double>(dark_texels) / static_cast<double>(texels));
+    row["oracle"] = {{"occluded", share}, {"dark_texels", dark_texels}};
+  }
   std::printf("\n");
   std::fflush(stdout);
   return row;
@@ -202,6 +279,7 @@ int main(int argc, char** argv) {
   CLI::App app{"irradcast-bench-lights: area lights picked by the light hierarchy vs by power"};
   std::string scenes = "rooms:6,rooms:6:trim,rooms:12:trim", out = "out/lights";
   int samples = 64, step = 40, updates = 4;
+  bool oracle = false;
   app.add_option("--scenes", scenes, "scene specs, comma separated");
   app.add_option("--samples", samples, "samples per texel per estimator")
       ->check(CLI::Range(1, 1 << 16));
@@ -209,6 +287,9 @@ int main(int argc, char** argv) {
   app.add_option("--learn-updates", updates,
                  "direct passes the learned way learns from before it is measured")
       ->check(CLI::Range(1, 64));
+  app.add_flag("--oracle", oracle,
+               "also the occluded share of the oracle's picks (each light in proportion to what it "
+               "brings the texel, from 16 shadow rays per light and texel: slow with many lights)");
   app.add_option("--out", out, "directory for bench_lights.json");
   CLI11_PARSE(app, argc, argv);
   Progress::set_enabled(false);
@@ -222,14 +303,16 @@ int main(int argc, char** argv) {
     const std::string spec = scenes.substr(from, comma - from);
     from = comma + 1;
     if (spec.empty()) continue;
-    report.push_back(measure_scene(spec, samples, step, updates));
+    report.push_back(measure_scene(spec, samples, step, updates, oracle));
   }
   std::printf(
       "ns per sample and occluded share of shadow rays per way; means: its mean over power's "
       "(all unbiased: near 1); texel / scene: the speed-up at equal error over power (time x "
       "variance), per texel (relative variances averaged) and over the scene (variances summed "
       "over squared means summed, as a lightmap's RMSE weighs them). learned: the hierarchy "
-      "mixed with the tables learned in --learn-updates direct passes over every texel.\n");
+      "mixed with the tables learned in --learn-updates direct passes over every texel. oracle: "
+      "each light in proportion to what it brings the texel (the floor of a light pick's "
+      "occluded share).\n");
   std::filesystem::create_directories(out);
   std::ofstream(out + "/bench_lights.json") << report.dump(2) << "\n";
   std::printf("wrote %s/bench_lights.json\n", out.c_str());

@@ -34,6 +34,7 @@ class EmbreeForwarder : public TraceBackend {
  public:
   EmbreeForwarder(const RayScene& rays, const LightSampler& lights) : inner(rays, lights) {}
   std::string name() const override { return "embree (watched)"; }
+  void scene_changed() override { inner.scene_changed(); }
   PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) override {
     return inner.direct(in, out);
   }

@@ -102,7 +102,7 @@ Capture capture_direct(const RayScene& rays, const LightSampler& lights, const L
     const bool culled = lights.front_lights(p, nrm, front);
     if (culled && front.count == 0) return;
     const LightCache::Table* table =
-        !culled && cache.valid() ? cache.find(cache.region(p, nrm)) : nullptr;
+        !culled && cache.valid() ? cache.find(cache.region(p, nrm, in.texels.object[i])) : nullptr;
     Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
     int packet_rays = 0, packet_batch = -1;  // the current packet's rays and sample batch
     for (int k = 0; k < n; ++k) {
@@ -456,6 +456,9 @@ class BenchBackend final : public TraceBackend {
   std::vector<PassMeasure> results;
 
   std::string name() const override { return "embree (benchmarked)"; }
+  void scene_changed() override {
+    for (EmbreeBackend* b : {&inner_, &packets_, &single_}) b->scene_changed();
+  }
 
   PassResult direct(const PassInput& in, std::vector<glm::vec3>& out) override {
     if (!measuring) return inner_.direct(in, out);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "irradcast/common/sampling.h"
 #include "irradcast/common/world.h"
 
 namespace irradcast {
@@ -38,18 +39,19 @@ float LightCache::Table::pmf(std::uint32_t index) const {
 }
 
 void LightCache::Record::add(std::uint64_t region, std::uint32_t light, float luminance) {
-  if (!(luminance > 0.0f)) return;
-  const auto q = static_cast<std::uint64_t>(std::min(luminance * scale_, kMaxSample));
-  if (q == 0) return;
+  const auto q = luminance > 0.0f
+                     ? static_cast<std::uint64_t>(std::min(luminance * scale_, kMaxSample))
+                     : std::uint64_t{0};  // occluded, and NaN
   const std::size_t n = entries_.size();
   for (std::size_t k = n; k > 0 && n - k < kCoalesce; --k) {
     Entry& e = entries_[k - 1];
     if (e.region == region && e.light == light) {
       e.sum = saturating_add(e.sum, q);
+      ++e.count;
       return;
     }
   }
-  entries_.push_back({region, light, q});
+  entries_.push_back({region, light, q, 1});
 }
 
 LightCache::LightCache(const Bounds& bounds, std::size_t lights, float unit)
@@ -58,12 +60,14 @@ LightCache::LightCache(const Bounds& bounds, std::size_t lights, float unit)
       lights_(lights),
       unit_(unit > 0.0f && std::isfinite(unit) ? unit : 1.0f) {}
 
-std::uint64_t LightCache::region(glm::vec3 p, glm::vec3 n) const {
+std::uint64_t LightCache::region(glm::vec3 p, glm::vec3 n, std::uint32_t object) const {
   const glm::vec3 g = (p - origin_) * inv_cell_;
   auto axis = [](float v) {  // NaN and below 0 to 0
     return v > 0.0f ? static_cast<std::uint64_t>(std::min(v, static_cast<float>(kAxisMax))) : 0;
   };
-  return (((axis(g.x) << kAxisBits | axis(g.y)) << kAxisBits | axis(g.z)) << 3) | direction_of(n);
+  const std::uint64_t cube =
+      (((axis(g.x) << kAxisBits | axis(g.y)) << kAxisBits | axis(g.z)) << 3) | direction_of(n);
+  return mix64(cube) ^ (std::uint64_t{object} * 0x9E3779B97F4A7C15ull);
 }
 
 const LightCache::Table* LightCache::find(std::uint64_t region) const {
@@ -77,12 +81,15 @@ void LightCache::clear() {
 }
 
 void LightCache::learn(std::vector<Record*> records) {
-  // The old sums mostly kept (kForget), then the new ones added: integer sums, so the order of
-  // records and entries does not change them.
+  // The old sums and counts mostly kept (kForget), then the new ones added: integers, so the
+  // order of records and entries does not change them.
   for (auto it = sums_.begin(); it != sums_.end();) {
     auto& sums = it->second;
-    for (auto& s : sums) s.second -= s.second >> kForget;
-    std::erase_if(sums, [](const auto& s) { return s.second == 0; });
+    for (Sum& s : sums) {
+      s.sum -= s.sum >> kForget;
+      s.count -= s.count >> kForget;
+    }
+    std::erase_if(sums, [](const Sum& s) { return s.count == 0; });
     it = sums.empty() ? sums_.erase(it) : std::next(it);
   }
   for (Record* r : records)
@@ -90,28 +97,33 @@ void LightCache::learn(std::vector<Record*> records) {
       if (e.light >= lights_) continue;
       auto& sums = sums_[e.region];
       const auto at = std::lower_bound(sums.begin(), sums.end(), e.light,
-                                       [](const auto& s, std::uint32_t l) { return s.first < l; });
-      if (at != sums.end() && at->first == e.light)
-        at->second = saturating_add(at->second, e.sum);
-      else
-        sums.insert(at, {e.light, e.sum});
+                                       [](const Sum& s, std::uint32_t l) { return s.light < l; });
+      if (at != sums.end() && at->light == e.light) {
+        at->sum = saturating_add(at->sum, e.sum);
+        at->count = saturating_add(at->count, e.count);
+      } else {
+        sums.insert(at, {e.light, e.sum, e.count});
+      }
     }
-  // Each region's table: its kMaxLights heaviest lights (ties by index), weights as floats.
+  // Each region's table: its kMaxLights lights of the largest mean (ties by index).
   tables_.clear();
   tables_.reserve(sums_.size());
-  std::vector<std::pair<std::uint32_t, std::uint64_t>> order;
+  std::vector<std::pair<double, std::uint32_t>> order;
   for (const auto& [region, sums] : sums_) {
-    order = sums;
+    order.clear();
+    for (const Sum& s : sums)
+      if (s.sum > 0)
+        order.push_back({static_cast<double>(s.sum) / static_cast<double>(s.count), s.light});
     const std::size_t keep = std::min<std::size_t>(order.size(), kMaxLights);
     std::partial_sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(keep), order.end(),
                       [](const auto& a, const auto& b) {
-                        return a.second != b.second ? a.second > b.second : a.first < b.first;
+                        return a.first != b.first ? a.first > b.first : a.second < b.second;
                       });
     Table t;
     float total = 0.0f;
     for (std::size_t k = 0; k < keep; ++k) {
-      total += static_cast<float>(order[k].second);
-      t.light[t.count] = order[k].first;
+      total += static_cast<float>(order[k].first);
+      t.light[t.count] = order[k].second;
       t.cdf[t.count++] = total;
     }
     t.total = total;

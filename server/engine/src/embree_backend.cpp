@@ -217,7 +217,7 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::
                        (shadow_rays_ == ShadowRays::Auto && culled && few_lights(front));
   // Past kMaxFront lights: the hierarchy mixed with what the texel's region has learned.
   const bool learn = !culled && learned != nullptr;
-  const std::uint64_t region = learn ? cache_.region(p, nrm) : 0;
+  const std::uint64_t region = learn ? cache_.region(p, nrm, in.texels.object[i]) : 0;
   const LightCache::Table* table = learn ? cache_.find(region) : nullptr;
   Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
   constexpr int kBatch = 16;
@@ -246,14 +246,15 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::
     else
       for (int k = 0; k < count; ++k) blocked[k] = rays_->occluded(shadow[k]);
     for (int k = 0; k < count; ++k) lit[which[k]] = !blocked[k];
+    if (learn)  // what each ray brought, not divided by the pick's probability
+      for (int k = 0; k < count; ++k) {
+        const LightSampler::ShadowSample& t = sample[which[k]];
+        learned->add(region, static_cast<std::uint32_t>(t.triangle),
+                     blocked[k] ? 0.0f : luminance(lights_->triangle_emitted(t)));
+      }
     rays += static_cast<std::uint64_t>(count);
     for (int s = 0; s < m; ++s)
-      if (lit[s]) {
-        sum += weight[s];
-        if (learn)
-          learned->add(region, static_cast<std::uint32_t>(sample[s].triangle),
-                       luminance(weight[s]));
-      }
+      if (lit[s]) sum += weight[s];
   }
   *traced += rays;
   if (packets) *packed += rays;

@@ -1,18 +1,21 @@
 // Which area lights light each region of the scene, learned from the direct pass's own shadow
 // rays, and a light pick that uses it: a one-sample mixture of the light hierarchy (light_tree.h)
 // and the region's learned table. The hierarchy picks by power, distance and orientation and
-// cannot see walls; the table holds the lights whose samples came back unoccluded from that
-// region, weighted by what they brought. Mixing keeps the estimate unbiased (every light the
-// hierarchy can pick keeps a probability above zero, and the pick's probability is the mixture's
-// exactly) while most shadow rays go to lights that are seen.
+// cannot see walls; the table weighs each light by what one of its samples brought the region on
+// average, shadowed (the mean of its emitted irradiance over the shadow rays traced toward it,
+// zero for an occluded one): an estimate of the light's irradiance there, its visibility
+// included, that does not depend on how often the light was picked. Mixing keeps the estimate
+// unbiased (every light the hierarchy can pick keeps a probability above zero, and the pick's
+// probability is the mixture's exactly) while most shadow rays go to lights that are seen.
 //
-// A region is a cube of the grid over the scene's bounds and the one of six axis directions
-// nearest the surface normal (so the two faces of a wall learn apart). Learning sums each
-// light's sampled irradiance (the estimate's weight, its luminance) per region in fixed point,
-// so the sums and the tables do not depend on the order in which threads add them: the same
-// seed gives the same lightmaps on any number of cores. Each learn() lets the old sums fade by an
-// eighth before adding the new ones, so a region follows a scene that changes (a door closed);
-// an edit starts the cache anew (EmbreeBackend::scene_changed).
+// A region is a cube of the grid over the scene's bounds, the one of six axis directions
+// nearest the surface normal (so the two faces of a wall learn apart) and the surface's object
+// (so the floors on either side of a wall do). Learning sums, per region and light, the samples'
+// luminance in fixed point and counts them, so the sums and the tables do not depend on the order
+// in which threads add them: the same seed gives the same lightmaps on any number of cores. Each
+// learn() lets the old sums and counts fade by an eighth before adding the new ones, so a region
+// follows a scene that changes (a door closed); an edit starts the cache anew
+// (EmbreeBackend::scene_changed).
 #pragma once
 
 #include <cstdint>
@@ -37,7 +40,7 @@ class LightCache {
   // The mixture's share of picks by the hierarchy, where a region has a table (measured:
   // docs/bench/engine.md, "Many lights").
   static constexpr float kTreeShare = 0.25f;
-  // The fixed point's one: a weight of `unit` (the constructor's) sums as this.
+  // The fixed point's one: a luminance of `unit` (the constructor's) sums as this.
   static constexpr float kFixedOne = 1048576.0f;
 
   // One region's table: its lights in decreasing weight, and their cumulative weights.
@@ -50,11 +53,13 @@ class LightCache {
     float pmf(std::uint32_t index) const;
   };
 
-  // One thread's samples of a pass: per region and light, the summed weight.
+  // One thread's samples of a pass: per region and light, the summed luminance and the count.
   class Record {
    public:
     explicit Record(float unit = 1.0f) : scale_(kFixedOne / unit) {}
-    // A sample of `light` from `region` that brought `luminance` (its weight's luminance).
+    // A shadow ray traced from `region` toward `light`: `luminance`, the luminance of what it
+    // brought (the light's emitted irradiance, not divided by the pick's probability; 0 when
+    // it was occluded).
     void add(std::uint64_t region, std::uint32_t light, float luminance);
     bool empty() const { return entries_.empty(); }
 
@@ -64,6 +69,7 @@ class LightCache {
       std::uint64_t region;
       std::uint32_t light;
       std::uint64_t sum;
+      std::uint64_t count;
     };
     std::vector<Entry> entries_;
     float scale_;
@@ -77,8 +83,11 @@ class LightCache {
   bool valid() const { return lights_ > 0; }
   std::size_t lights() const { return lights_; }
   float unit() const { return unit_; }
-  // The region of the point p with unit normal n.
-  std::uint64_t region(glm::vec3 p, glm::vec3 n) const;
+  // The region of the point p with unit normal n on `object`: its grid cube, its normal's
+  // direction and its object (so the floors of two rooms learn apart where a wall runs through
+  // a cube). A 64-bit hash of the three: two regions that collide share a table, which costs
+  // efficiency, not correctness (a pick's probability is that of the table it used).
+  std::uint64_t region(glm::vec3 p, glm::vec3 n, std::uint32_t object = 0) const;
   // Its table; null where nothing has been learned.
   const Table* find(std::uint64_t region) const;
   std::size_t regions() const { return tables_.size(); }
@@ -98,8 +107,12 @@ class LightCache {
   float inv_cell_ = 1.0f;
   std::size_t lights_ = 0;
   float unit_ = 1.0f;
-  // Per region: each light's summed weight (fixed point), sorted by light.
-  std::unordered_map<std::uint64_t, std::vector<std::pair<std::uint32_t, std::uint64_t>>> sums_;
+  // Per region: each light's summed luminance (fixed point) and count of samples, by light.
+  struct Sum {
+    std::uint32_t light;
+    std::uint64_t sum, count;
+  };
+  std::unordered_map<std::uint64_t, std::vector<Sum>> sums_;
   std::unordered_map<std::uint64_t, Table> tables_;
 };
 

@@ -134,7 +134,7 @@ class EmbreeBackend final : public TraceBackend {
   // (RayScene::occluded8) or one by one (shadow_rays()); the shadow rays it traced are added to
   // *traced, and to *packed too when they went in packets.
   // With the light hierarchy, the texel's samples are picked with its region's learned table
-  // (light_cache()) and those that came back unoccluded are added to *learned.
+  // (light_cache()), and what each of its shadow rays brought is added to *learned.
   glm::vec3 area_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced,
                         std::uint64_t* packed, LightCache::Record* learned) const;
   // The light cache for this pass: made for the scene's lights where the hierarchy picks
