@@ -66,6 +66,8 @@ struct Capture {
     bool area;
   };
   std::vector<LightSample> samples;
+  // Direct pass: per texel, its area-light samples (fewer in a dark region, LightCache).
+  std::vector<int> area_samples;
   // Gather / scatter: the output entry each ray belongs to (probe texel / surface texel).
   std::vector<std::uint32_t> owner;
   // The packets the engine traces (first ray and count). Direct pass: the area lights' shadow
@@ -86,8 +88,8 @@ Capture capture_direct(const RayScene& rays, const LightSampler& lights, const L
                        const PassInput& in) {
   Capture c;
   c.kind = Kind::Occlusion;
-  const int n = in.params.direct_samples;
   const bool area = !lights.emissive_triangles().empty();
+  c.area_samples.assign(in.texels.size(), in.params.direct_samples);
   for_each_texel_in_order(in, [&](std::uint32_t i) {
     const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
                     ng = in.texels.geo_normal[i];
@@ -101,8 +103,12 @@ Capture capture_direct(const RayScene& rays, const LightSampler& lights, const L
     LightSampler::FrontLights front;
     const bool culled = lights.front_lights(p, nrm, front);
     if (culled && front.count == 0) return;
-    const LightCache::Table* table =
-        !culled && cache.valid() ? cache.find(cache.region(p, nrm, in.texels.object[i])) : nullptr;
+    const bool learned = !culled && cache.valid();
+    const std::uint64_t region = learned ? cache.region(p, nrm, in.texels.object[i]) : 0;
+    const LightCache::Table* table = learned ? cache.find(region) : nullptr;
+    const int n =
+        learned ? cache.samples_in(region, in.params.direct_samples) : in.params.direct_samples;
+    c.area_samples[i] = n;
     Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
     int packet_rays = 0, packet_batch = -1;  // the current packet's rays and sample batch
     for (int k = 0; k < n; ++k) {
@@ -362,7 +368,6 @@ void shade_direct(const RayScene& rays, const LightSampler& lights, const PassIn
   tbb::parallel_for(std::size_t(0), c.rays.size(),
                     [&](std::size_t i) { blocked[i] = rays.occluded(to_ray(c.rays[i])); });
   est.assign(in.texels.size(), glm::vec3(0.0f));
-  const float n = static_cast<float>(in.params.direct_samples);
   const bool area = !lights.emissive_triangles().empty();
   for (std::size_t s = 0; s < c.samples.size();) {
     const std::uint32_t t = c.samples[s].texel;
@@ -372,7 +377,7 @@ void shade_direct(const RayScene& rays, const LightSampler& lights, const PassIn
       if (ls.ray >= 0 && blocked[ls.ray]) continue;
       (ls.area ? sum : e) += ls.weight;
     }
-    if (area) e += sum / n;
+    if (area) e += sum / static_cast<float>(c.area_samples[t]);
     est[t] = e;
   }
 }
@@ -464,10 +469,12 @@ class BenchBackend final : public TraceBackend {
     if (!measuring) return inner_.direct(in, out);
     // The learned light cache as the pass about to run sees it (each run learns from its
     // samples): the captured rays and the forced ways use that state.
-    Capture c = capture_direct(*rays_, *lights_, inner_.light_cache(), in);
-    LightCache before;
+    // Every repetition starts from the state before the first (else each would learn from the
+    // same update's random numbers and the returned output would be tuned to them).
+    const LightCache before = inner_.light_cache();
+    Capture c = capture_direct(*rays_, *lights_, before, in);
     auto run = [&] {
-      before = inner_.light_cache();
+      inner_.set_light_cache(before);
       return inner_.direct(in, out);
     };
     auto shade = [&](std::vector<glm::vec3>& est) { shade_direct(*rays_, *lights_, in, c, est); };

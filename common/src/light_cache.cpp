@@ -11,13 +11,20 @@ namespace {
 
 constexpr int kAxisBits = 20;  // per grid coordinate in a region's key
 constexpr std::uint64_t kAxisMax = (std::uint64_t{1} << kAxisBits) - 1;
-constexpr float kMaxSample = 1099511627776.0f;  // 2^40: one sample's largest fixed-point weight
+constexpr float kMaxSample = 4503599627370496.0f;  // 2^52: one sample's largest fixed point
 // Record::add looks this far back for an entry of the same region and light (a thread's texels
 // come in runs of one radiance cell, so few regions and lights at a time).
 constexpr std::size_t kCoalesce = 64;
 // Each learn() keeps 1 - 2^-kForget of the old sums (7/8: a light no longer seen fades out
 // over tens of passes).
 constexpr int kForget = 3;
+
+// x less its 2^-kForget part, rounded up, so that every count reaches 0 (and its entry goes)
+// once nothing adds to it.
+std::uint64_t fade(std::uint64_t x) {
+  constexpr std::uint64_t kMask = (std::uint64_t{1} << kForget) - 1;
+  return x - (x >> kForget) - ((x & kMask) != 0 ? 1 : 0);
+}
 
 std::uint64_t saturating_add(std::uint64_t a, std::uint64_t b) {
   return a > ~b ? ~std::uint64_t{0} : a + b;
@@ -39,9 +46,9 @@ float LightCache::Table::pmf(std::uint32_t index) const {
 }
 
 void LightCache::Record::add(std::uint64_t region, std::uint32_t light, float luminance) {
-  const auto q = luminance > 0.0f
-                     ? static_cast<std::uint64_t>(std::min(luminance * scale_, kMaxSample))
-                     : std::uint64_t{0};  // occluded, and NaN
+  const float x = luminance * scale_;  // rounded; occluded (0) and NaN to 0
+  const auto q =
+      x > 0.0f ? static_cast<std::uint64_t>(std::min(x, kMaxSample) + 0.5f) : std::uint64_t{0};
   const std::size_t n = entries_.size();
   for (std::size_t k = n; k > 0 && n - k < kCoalesce; --k) {
     Entry& e = entries_[k - 1];
@@ -78,6 +85,7 @@ const LightCache::Table* LightCache::find(std::uint64_t region) const {
 void LightCache::clear() {
   sums_.clear();
   tables_.clear();
+  dark_.clear();
 }
 
 void LightCache::learn(std::vector<Record*> records) {
@@ -86,8 +94,8 @@ void LightCache::learn(std::vector<Record*> records) {
   for (auto it = sums_.begin(); it != sums_.end();) {
     auto& sums = it->second;
     for (Sum& s : sums) {
-      s.sum -= s.sum >> kForget;
-      s.count -= s.count >> kForget;
+      s.sum = fade(s.sum);
+      s.count = fade(s.count);
     }
     std::erase_if(sums, [](const Sum& s) { return s.count == 0; });
     it = sums.empty() ? sums_.erase(it) : std::next(it);
@@ -105,15 +113,24 @@ void LightCache::learn(std::vector<Record*> records) {
         sums.insert(at, {e.light, e.sum, e.count});
       }
     }
-  // Each region's table: its kMaxLights lights of the largest mean (ties by index).
+  // Each region's table: its kMaxLights lights of the largest mean (ties by index); a region
+  // with enough rays and nothing seen is dark.
   tables_.clear();
   tables_.reserve(sums_.size());
+  dark_.clear();
   std::vector<std::pair<double, std::uint32_t>> order;
   for (const auto& [region, sums] : sums_) {
     order.clear();
-    for (const Sum& s : sums)
+    std::uint64_t rays = 0;
+    for (const Sum& s : sums) {
+      rays = saturating_add(rays, s.count);
       if (s.sum > 0)
         order.push_back({static_cast<double>(s.sum) / static_cast<double>(s.count), s.light});
+    }
+    if (order.empty()) {
+      if (rays >= kDarkRays) dark_.insert(region);
+      continue;
+    }
     const std::size_t keep = std::min<std::size_t>(order.size(), kMaxLights);
     std::partial_sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(keep), order.end(),
                       [](const auto& a, const auto& b) {
@@ -126,7 +143,10 @@ void LightCache::learn(std::vector<Record*> records) {
       t.light[t.count] = order[k].second;
       t.cdf[t.count++] = total;
     }
-    t.total = total;
+    double rest = 0.0;
+    for (std::size_t k = keep; k < order.size(); ++k) rest += order[k].first;
+    t.rest = static_cast<float>(rest);
+    t.total = total + t.rest;
     if (t.count > 0 && total > 0.0f) tables_.emplace(region, t);
   }
 }
@@ -135,18 +155,22 @@ bool LightCache::pick(const LightTree& tree, const Table* table, glm::vec3 p, gl
                       std::uint32_t& index, float& pmf) {
   if (table == nullptr) return tree.sample(p, n, u, index, pmf);
   constexpr float a = kTreeShare;
-  if (u < a) {
+  // The hierarchy's share of all picks: its own and the table's rest.
+  const float by_tree = a + (1.0f - a) * table->rest_share();
+  const float v = u < a ? 0.0f : std::min((u - a) / (1.0f - a), 0x1.fffffep-1f) * table->total;
+  const float kept = table->cdf[table->count - 1];
+  if (u < a || v >= kept) {
+    // The hierarchy: u stretched over its part, or over the table's rest.
+    const float w = u < a ? u / a : (v - kept) / table->rest;
     float pt;
-    if (!tree.sample(p, n, std::min(u / a, 0x1.fffffep-1f), index, pt)) return false;
-    pmf = a * pt + (1.0f - a) * table->pmf(index);
+    if (!tree.sample(p, n, std::min(w, 0x1.fffffep-1f), index, pt)) return false;
+    pmf = by_tree * pt + (1.0f - a) * table->pmf(index);
     return true;
   }
-  const float v = std::min((u - a) / (1.0f - a), 0x1.fffffep-1f) * table->total;
   int k = 0;
   while (k + 1 < table->count && table->cdf[k] <= v) ++k;
   index = table->light[k];
-  const float share = (table->cdf[k] - (k > 0 ? table->cdf[k - 1] : 0.0f)) / table->total;
-  pmf = a * tree.pmf(p, n, index) + (1.0f - a) * share;
+  pmf = by_tree * tree.pmf(p, n, index) + (1.0f - a) * table->pmf(index);
   return pmf > 0.0f;
 }
 

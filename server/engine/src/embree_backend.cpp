@@ -207,7 +207,6 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::
   // direct_samples samples of the lights in front of the texel (LightSampler::front_lights),
   // stratified in the pick; every sample drawn first (4 at a time in SIMD lanes), then the shadow
   // rays of those that can contribute traced (8 to a packet), then summed in order.
-  const int n = in.params.direct_samples;
   const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
                   ng = in.texels.geo_normal[i];
   LightSampler::FrontLights front;
@@ -219,6 +218,9 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::
   const bool learn = !culled && learned != nullptr;
   const std::uint64_t region = learn ? cache_.region(p, nrm, in.texels.object[i]) : 0;
   const LightCache::Table* table = learn ? cache_.find(region) : nullptr;
+  // Fewer samples where the region has seen no light (LightCache::samples_in).
+  const int n =
+      learn ? cache_.samples_in(region, in.params.direct_samples) : in.params.direct_samples;
   Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
   constexpr int kBatch = 16;
   Uninitialized<LightSampler::ShadowSample, kBatch> sample;

@@ -15,11 +15,14 @@
 // in which threads add them: the same seed gives the same lightmaps on any number of cores. Each
 // learn() lets the old sums and counts fade by an eighth before adding the new ones, so a region
 // follows a scene that changes (a door closed); an edit starts the cache anew
-// (EmbreeBackend::scene_changed).
+// (EmbreeBackend::scene_changed). A region from which many rays and no light came back is dark:
+// the direct pass spends fewer samples there (samples_in).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <unordered_map>
+#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -40,23 +43,33 @@ class LightCache {
   // The mixture's share of picks by the hierarchy, where a region has a table (measured:
   // docs/bench/engine.md, "Many lights").
   static constexpr float kTreeShare = 0.25f;
-  // The fixed point's one: a luminance of `unit` (the constructor's) sums as this.
-  static constexpr float kFixedOne = 1048576.0f;
+  // A region is dark once this many of its shadow rays (faded as the sums are) brought nothing:
+  // the direct pass then takes an eighth of its samples there (dark_samples).
+  static constexpr std::uint64_t kDarkRays = 64;
+  // The fixed point's one: a luminance of `unit` (the constructor's) sums as this (2^32: a light
+  // 10^6 times dimmer than the brightest, seen at a thousandth of its radiance, still counts).
+  static constexpr float kFixedOne = 4294967296.0f;
 
-  // One region's table: its lights in decreasing weight, and their cumulative weights.
+  // One region's table: its lights in decreasing weight and their cumulative weights, and the
+  // weight of the lights seen there but left out (`rest`): the table's picks that land on it are
+  // the hierarchy's, so a region seeing more than kMaxLights lights loses none of them.
   struct Table {
     int count = 0;
-    float total = 0.0f;
+    float total = 0.0f;  // the kept lights' weights and rest
+    float rest = 0.0f;
     std::uint32_t light[kMaxLights];
     float cdf[kMaxLights];
-    // The probability that the table picks `index` (0 when it is not in the table).
+    // The probability that the table picks `index` itself (0 when it is not in the table).
     float pmf(std::uint32_t index) const;
+    // The share of the table's picks that go to the hierarchy (rest / total).
+    float rest_share() const { return rest / total; }
   };
 
   // One thread's samples of a pass: per region and light, the summed luminance and the count.
   class Record {
    public:
-    explicit Record(float unit = 1.0f) : scale_(kFixedOne / unit) {}
+    explicit Record(float unit = 1.0f)
+        : scale_(kFixedOne / (unit > 0.0f && unit < 3.4e38f ? unit : 1.0f)) {}
     // A shadow ray traced from `region` toward `light`: `luminance`, the luminance of what it
     // brought (the light's emitted irradiance, not divided by the pick's probability; 0 when
     // it was occluded).
@@ -91,14 +104,24 @@ class LightCache {
   // Its table; null where nothing has been learned.
   const Table* find(std::uint64_t region) const;
   std::size_t regions() const { return tables_.size(); }
+  // Whether no light has been seen from the region in kDarkRays rays (none since they faded).
+  bool dark(std::uint64_t region) const { return dark_.contains(region); }
+  // The samples to take in a region: `samples`, or in a dark one an eighth of them (at least
+  // one): every texel still samples every light the hierarchy can pick, so its estimate stays
+  // unbiased, and where light does come back the region stops being dark at the next learn().
+  int samples_in(std::uint64_t region, int samples) const {
+    return dark(region) ? std::max(1, samples / 8) : samples;
+  }
 
   // Adds the records' sums to the regions' (after fading those), and rebuilds the tables.
   void learn(std::vector<Record*> records);
   void clear();
 
   // A light for p (unit normal n), u uniform in [0, 1): by the hierarchy alone without a table;
-  // with one, by the hierarchy for u below kTreeShare, else by the table. `pmf`: the probability
-  // of picking `index` either way. false: no light picked (none can light p).
+  // with one, by the hierarchy for u below kTreeShare, else by the table (whose `rest` defers to
+  // the hierarchy). `pmf`: the probability of picking `index` by all those ways together,
+  // (kTreeShare + (1 - kTreeShare) rest_share) p_hierarchy + (1 - kTreeShare) p_table. false: no
+  // light picked (none can light p).
   static bool pick(const LightTree& tree, const Table* table, glm::vec3 p, glm::vec3 n, float u,
                    std::uint32_t& index, float& pmf);
 
@@ -114,6 +137,7 @@ class LightCache {
   };
   std::unordered_map<std::uint64_t, std::vector<Sum>> sums_;
   std::unordered_map<std::uint64_t, Table> tables_;
+  std::unordered_set<std::uint64_t> dark_;
 };
 
 }  // namespace irradcast
