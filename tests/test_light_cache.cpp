@@ -158,11 +158,12 @@ TEST(LightCache, TheMixturePicksEachLightAsOftenAsItsProbability) {
     std::vector<int> hits(t.size(), 0);
     int failed = 0;
     constexpr int kPicks = 200000;
+    LightTree::At at(tree, p, n);  // one point's walks, shared by all its picks
     for (int k = 0; k < kPicks; ++k) {
       std::uint32_t i;
       float pmf;
       const float u = (static_cast<float>(k) + rng.next_float()) / kPicks;
-      if (!LightCache::pick(tree, table, p, n, u, i, pmf)) {
+      if (!LightCache::pick(at, table, u, i, pmf)) {
         ++failed;
         // Only the hierarchy's picks can fail: its own, and the table's rest.
         const double kept = a + (1.0 - a) * (1.0 - table->rest_share());

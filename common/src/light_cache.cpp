@@ -151,9 +151,9 @@ void LightCache::learn(std::vector<Record*> records) {
   }
 }
 
-bool LightCache::pick(const LightTree& tree, const Table* table, glm::vec3 p, glm::vec3 n, float u,
-                      std::uint32_t& index, float& pmf) {
-  if (table == nullptr) return tree.sample(p, n, u, index, pmf);
+bool LightCache::pick(LightTree::At& tree, const Table* table, float u, std::uint32_t& index,
+                      float& pmf) {
+  if (table == nullptr) return tree.sample(u, index, pmf);
   constexpr float a = kTreeShare;
   // The hierarchy's share of all picks: its own and the table's rest.
   const float by_tree = a + (1.0f - a) * table->rest_share();
@@ -163,14 +163,14 @@ bool LightCache::pick(const LightTree& tree, const Table* table, glm::vec3 p, gl
     // The hierarchy: u stretched over its part, or over the table's rest.
     const float w = u < a ? u / a : (v - kept) / table->rest;
     float pt;
-    if (!tree.sample(p, n, std::min(w, 0x1.fffffep-1f), index, pt)) return false;
+    if (!tree.sample(std::min(w, 0x1.fffffep-1f), index, pt)) return false;
     pmf = by_tree * pt + (1.0f - a) * table->pmf(index);
     return true;
   }
   int k = 0;
   while (k + 1 < table->count && table->cdf[k] <= v) ++k;
   index = table->light[k];
-  pmf = by_tree * tree.pmf(p, n, index) + (1.0f - a) * table->pmf(index);
+  pmf = by_tree * tree.pmf(index) + (1.0f - a) * table->pmf(index);
   return pmf > 0.0f;
 }
 

@@ -101,10 +101,26 @@ constexpr int kTrailBits = 64;
 
 }  // namespace
 
+LightTree::Cone LightTree::cone(const Node& node) {
+  Cone c;
+  c.centre = 0.5f * (node.lo + node.hi);
+  c.radius = 0.5f * glm::length(node.hi - node.lo);
+  c.w = node.w;
+  c.phi = node.phi;
+  c.cos_o = node.cos_o;
+  c.sin_o = safe_sqrt(1.0f - node.cos_o * node.cos_o);
+  c.two_sided = node.two_sided;
+  return c;
+}
+
 float LightTree::importance(const Node& node, glm::vec3 p, glm::vec3 n) {
+  return importance(cone(node), p, n);
+}
+
+float LightTree::importance(const Cone& node, glm::vec3 p, glm::vec3 n) {
   if (!(node.phi > 0.0f)) return 0.0f;
-  const glm::vec3 pc = 0.5f * (node.lo + node.hi);
-  const float radius = 0.5f * glm::length(node.hi - node.lo);
+  const glm::vec3 pc = node.centre;
+  const float radius = node.radius;
   const float dist2 = glm::dot(p - pc, p - pc);
   const float d2 = std::max(dist2, radius);
   // Inside the bounds' sphere every direction is possible: power over distance only.
@@ -117,7 +133,7 @@ float LightTree::importance(const Node& node, glm::vec3 p, glm::vec3 n) {
   float cos_w = glm::dot(node.w, wi);
   if (node.two_sided) cos_w = std::fabs(cos_w);
   const float sin_w = safe_sqrt(1.0f - cos_w * cos_w);
-  const float sin_o = safe_sqrt(1.0f - node.cos_o * node.cos_o);
+  const float sin_o = node.sin_o;
   const float cos_x = cos_sub_clamped(sin_w, cos_w, sin_o, node.cos_o);
   const float sin_x = sin_sub_clamped(sin_w, cos_w, sin_o, node.cos_o);
   const float cos_p = cos_sub_clamped(sin_x, cos_x, sin_b, cos_b);
@@ -172,6 +188,8 @@ LightTree::LightTree(const std::vector<EmissiveTriangle>& triangles,
     stack.push_back({s.node + 1, s.trail, s.depth + 1});
     stack.push_back({nd.index, s.trail | (std::uint64_t{1} << s.depth), s.depth + 1});
   }
+  cones_.reserve(nodes_.size());
+  for (const Node& nd : nodes_) cones_.push_back(cone(nd));
 }
 
 std::uint32_t LightTree::build(std::vector<std::uint32_t>& lights, std::size_t begin,
@@ -243,13 +261,19 @@ std::uint32_t LightTree::build(std::vector<std::uint32_t>& lights, std::size_t b
   return at;
 }
 
-bool LightTree::sample(glm::vec3 p, glm::vec3 n, float u, std::uint32_t& index, float& pmf) const {
-  if (nodes_.empty()) return false;
+namespace {
+
+// The walks, with the node importances from `imp(node index)`: LightTree's at one point, or an
+// At's remembered ones (the same values, so the same picks and probabilities).
+template <class Importance>
+bool sample_walk(const std::vector<Node>& nodes, Importance&& imp, float u, std::uint32_t& index,
+                 float& pmf) {
+  if (nodes.empty()) return false;
   std::uint32_t at = 0;
   float prob = 1.0f;
-  while (!nodes_[at].leaf) {
-    const std::uint32_t child[2] = {at + 1, nodes_[at].index};
-    const float c0 = importance(nodes_[child[0]], p, n), c1 = importance(nodes_[child[1]], p, n);
+  while (!nodes[at].leaf) {
+    const std::uint32_t child[2] = {at + 1, nodes[at].index};
+    const float c0 = imp(child[0]), c1 = imp(child[1]);
     const float sum = c0 + c1;
     if (!(sum > 0.0f)) return false;
     const float p0 = c0 / sum;
@@ -264,21 +288,23 @@ bool LightTree::sample(glm::vec3 p, glm::vec3 n, float u, std::uint32_t& index, 
       at = child[1];
     }
   }
-  if (at == 0 && !(importance(nodes_[0], p, n) > 0.0f)) return false;
+  if (at == 0 && !(imp(0) > 0.0f)) return false;
   if (!(prob > 0.0f)) return false;
-  index = nodes_[at].index;
+  index = nodes[at].index;
   pmf = prob;
   return true;
 }
 
-float LightTree::pmf(glm::vec3 p, glm::vec3 n, std::uint32_t index) const {
-  if (nodes_.empty() || index >= trail_.size() || trail_[index] == ~std::uint64_t{0}) return 0.0f;
+template <class Importance>
+float pmf_walk(const std::vector<Node>& nodes, const std::vector<std::uint64_t>& trails,
+               Importance&& imp, std::uint32_t index) {
+  if (nodes.empty() || index >= trails.size() || trails[index] == ~std::uint64_t{0}) return 0.0f;
   std::uint32_t at = 0;
-  std::uint64_t trail = trail_[index];
+  std::uint64_t trail = trails[index];
   float prob = 1.0f;
-  while (!nodes_[at].leaf) {
-    const std::uint32_t child[2] = {at + 1, nodes_[at].index};
-    const float c0 = importance(nodes_[child[0]], p, n), c1 = importance(nodes_[child[1]], p, n);
+  while (!nodes[at].leaf) {
+    const std::uint32_t child[2] = {at + 1, nodes[at].index};
+    const float c0 = imp(child[0]), c1 = imp(child[1]);
     const float sum = c0 + c1;
     if (!(sum > 0.0f)) return 0.0f;
     const int second = static_cast<int>(trail & 1u);
@@ -286,8 +312,43 @@ float LightTree::pmf(glm::vec3 p, glm::vec3 n, std::uint32_t index) const {
     at = child[second];
     trail >>= 1;
   }
-  if (at == 0) return importance(nodes_[0], p, n) > 0.0f ? 1.0f : 0.0f;
+  if (at == 0) return imp(0) > 0.0f ? 1.0f : 0.0f;
   return prob;
+}
+
+}  // namespace
+
+bool LightTree::sample(glm::vec3 p, glm::vec3 n, float u, std::uint32_t& index, float& pmf) const {
+  return sample_walk(
+      nodes_, [&](std::uint32_t k) { return importance(cones_[k], p, n); }, u, index, pmf);
+}
+
+float LightTree::pmf(glm::vec3 p, glm::vec3 n, std::uint32_t index) const {
+  return pmf_walk(
+      nodes_, trail_, [&](std::uint32_t k) { return importance(cones_[k], p, n); }, index);
+}
+
+LightTree::At::At(const LightTree& tree, glm::vec3 p, glm::vec3 n) : tree_(&tree), p_(p), n_(n) {
+  std::fill(std::begin(key_), std::end(key_), ~std::uint32_t{0});
+}
+
+float LightTree::At::importance(std::uint32_t node) {
+  const std::uint32_t slot = node % kSlots;
+  if (key_[slot] != node) {
+    key_[slot] = node;
+    value_[slot] = LightTree::importance(tree_->cones_[node], p_, n_);
+  }
+  return value_[slot];
+}
+
+bool LightTree::At::sample(float u, std::uint32_t& index, float& pmf) {
+  return sample_walk(
+      tree_->nodes_, [&](std::uint32_t k) { return importance(k); }, u, index, pmf);
+}
+
+float LightTree::At::pmf(std::uint32_t index) {
+  return pmf_walk(
+      tree_->nodes_, tree_->trail_, [&](std::uint32_t k) { return importance(k); }, index);
 }
 
 }  // namespace irradcast

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <optional>
 
 #include "irradcast/common/sampling.h"
 
@@ -269,7 +270,8 @@ bool LightSampler::pick(glm::vec3 p, glm::vec3 n, float u, std::size_t& index, f
   if (triangles_.empty()) return false;
   if (!tree_.empty()) {
     std::uint32_t i;
-    if (!LightCache::pick(tree_, learned, p, n, u, i, pdf)) return false;
+    LightTree::At at(tree_, p, n);
+    if (!LightCache::pick(at, learned, u, i, pdf)) return false;
     index = i;
     return true;
   }
@@ -307,9 +309,10 @@ bool LightSampler::front_lights(glm::vec3 p, glm::vec3 n, FrontLights& f) const 
   return true;
 }
 
-inline bool LightSampler::draw_direct(const RayScene& rays, const FrontLights* front, glm::vec3 p,
-                                      glm::vec3 n, glm::vec3 ng, glm::vec3 u, ShadowSample& s,
-                                      glm::vec3& weight, const LightCache::Table* learned) const {
+inline bool LightSampler::draw_direct(const RayScene& rays, const FrontLights* front,
+                                      LightTree::At* at, glm::vec3 p, glm::vec3 n, glm::vec3 ng,
+                                      glm::vec3 u, ShadowSample& s, glm::vec3& weight,
+                                      const LightCache::Table* learned) const {
   std::size_t li;
   float pdf;
   if (front) {
@@ -319,7 +322,13 @@ inline bool LightSampler::draw_direct(const RayScene& rays, const FrontLights* f
     pdf = pick_pdf_[li] / front->total;
     if (!point_sample(rays, li, p, n, ng, glm::vec2(u.y, u.z), s)) return false;
   } else {
-    if (!pick(p, n, u.x, li, pdf, learned)) return false;
+    if (at) {
+      std::uint32_t i;
+      if (!LightCache::pick(*at, learned, u.x, i, pdf)) return false;
+      li = i;
+    } else if (!pick(p, n, u.x, li, pdf, learned)) {
+      return false;
+    }
     if (!triangle_sample(rays, li, p, n, ng, glm::vec2(u.y, u.z), s)) return false;
   }
   weight = triangle_emitted(s) / pdf;
@@ -329,7 +338,7 @@ inline bool LightSampler::draw_direct(const RayScene& rays, const FrontLights* f
 bool LightSampler::direct_sample(const RayScene& rays, const FrontLights* front, glm::vec3 p,
                                  glm::vec3 n, glm::vec3 ng, glm::vec3 u, ShadowSample& s,
                                  glm::vec3& weight, const LightCache::Table* learned) const {
-  return draw_direct(rays, front, p, n, ng, u, s, weight, learned);
+  return draw_direct(rays, front, nullptr, p, n, ng, u, s, weight, learned);
 }
 
 void LightSampler::direct_samples(const RayScene& rays, const FrontLights* front, glm::vec3 p,
@@ -337,11 +346,15 @@ void LightSampler::direct_samples(const RayScene& rays, const FrontLights* front
                                   int samples, ShadowSample* s, glm::vec3* weight, bool* lit,
                                   const LightCache::Table* learned) const {
   if (!front || front->count == 0) {  // one sample at a time (none lights p: all false)
+    // The hierarchy's walks at p, shared by its samples.
+    std::optional<LightTree::At> at;
+    if (!front && !tree_.empty()) at.emplace(tree_, p, n);
     for (int k = 0; k < count; ++k) {
       const float pick =
           (static_cast<float>(first + k) + rng.next_float()) / static_cast<float>(samples);
       const glm::vec2 pos = rng.next_2d();
-      lit[k] = draw_direct(rays, front, p, n, ng, glm::vec3(pick, pos), s[k], weight[k], learned);
+      lit[k] = draw_direct(rays, front, at ? &*at : nullptr, p, n, ng, glm::vec3(pick, pos), s[k],
+                           weight[k], learned);
     }
     return;
   }

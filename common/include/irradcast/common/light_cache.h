@@ -117,13 +117,14 @@ class LightCache {
   void learn(std::vector<Record*> records);
   void clear();
 
-  // A light for p (unit normal n), u uniform in [0, 1): by the hierarchy alone without a table;
+  // A light for the hierarchy's point (`tree`: p, unit normal n), u uniform in [0, 1): by the
+  // hierarchy alone without a table;
   // with one, by the hierarchy for u below kTreeShare, else by the table (whose `rest` defers to
   // the hierarchy). `pmf`: the probability of picking `index` by all those ways together,
   // (kTreeShare + (1 - kTreeShare) rest_share) p_hierarchy + (1 - kTreeShare) p_table. false: no
   // light picked (none can light p).
-  static bool pick(const LightTree& tree, const Table* table, glm::vec3 p, glm::vec3 n, float u,
-                   std::uint32_t& index, float& pmf);
+  static bool pick(LightTree::At& tree, const Table* table, float u, std::uint32_t& index,
+                   float& pmf);
 
  private:
   glm::vec3 origin_{0.0f};

@@ -44,13 +44,45 @@ class LightTree {
   bool sample(glm::vec3 p, glm::vec3 n, float u, std::uint32_t& index, float& pmf) const;
   // The probability that sample() picks triangle `index` at (p, n).
   float pmf(glm::vec3 p, glm::vec3 n, std::uint32_t index) const;
+
+  // The hierarchy at one point: sample() and pmf() as the tree's, bit for bit, remembering the
+  // importance of the nodes it has walked (a small table by node index), so that the samples of
+  // one texel evaluate the levels their walks share once. Lives on the stack, per point.
+  class At {
+   public:
+    At(const LightTree& tree, glm::vec3 p, glm::vec3 n);
+    bool sample(float u, std::uint32_t& index, float& pmf);
+    float pmf(std::uint32_t index);
+
+   private:
+    float importance(std::uint32_t node);
+    static constexpr std::uint32_t kSlots = 128;
+    const LightTree* tree_;
+    glm::vec3 p_, n_;
+    std::uint32_t key_[kSlots];
+    float value_[kSlots];
+  };
   // A node's importance at (p, n): zero only where none of its lights can light p.
   static float importance(const Node& node, glm::vec3 p, glm::vec3 n);
 
  private:
+  // A node as importance() reads it, its bounds' centre and radius and the sine of its cone's
+  // angle computed once (the same values it would compute from the node each time).
+  struct Cone {
+    glm::vec3 centre{0.0f};
+    float radius = 0.0f;
+    glm::vec3 w{0.0f, 0.0f, 1.0f};
+    float phi = 0.0f;
+    float cos_o = 1.0f, sin_o = 0.0f;
+    bool two_sided = false;
+  };
+  static Cone cone(const Node& node);
+  static float importance(const Cone& node, glm::vec3 p, glm::vec3 n);
+
   std::uint32_t build(std::vector<std::uint32_t>& lights, std::size_t begin, std::size_t end,
                       int depth, const std::vector<Node>& leaves);
   std::vector<Node> nodes_;
+  std::vector<Cone> cones_;           // per node
   int max_depth_ = 0;                 // the deepest level split by cost
   std::vector<std::uint64_t> trail_;  // per triangle: its path from the root (bit d: second
                                       // child at depth d); ~0 for a triangle left out

@@ -137,8 +137,9 @@ class LightSampler {
   void sample_lanes(const RayScene& rays, glm::vec3 p, glm::vec3 n, glm::vec3 ng,
                     const std::uint32_t* li, const float* ux, const float* uy, const float* pdf,
                     int lanes, ShadowSample* s, glm::vec3* weight, bool* lit) const;
-  bool draw_direct(const RayScene& rays, const FrontLights* front, glm::vec3 p, glm::vec3 n,
-                   glm::vec3 ng, glm::vec3 u, ShadowSample& s, glm::vec3& weight,
+  // One sample: from `front`, else picked at `at` (the hierarchy at p) where given, else by pick().
+  bool draw_direct(const RayScene& rays, const FrontLights* front, LightTree::At* at, glm::vec3 p,
+                   glm::vec3 n, glm::vec3 ng, glm::vec3 u, ShadowSample& s, glm::vec3& weight,
                    const LightCache::Table* learned) const;
 
   const World* world_;
