@@ -142,6 +142,7 @@ void CellsMethod::weigh(const SurfaceTexels& texels, Probes& probes) const {
     glm::ivec3 base = glm::ivec3(glm::floor(f));
     glm::vec3 frac = f - glm::vec3(base);
     ProbeWeights w;
+    w.base = (base.z * grid.dims.y + base.y) * grid.dims.x + base.x;
     float sum = 0.0f;
     for (int c = 0; c < 8; ++c) {
       glm::ivec3 o(c & 1, (c >> 1) & 1, (c >> 2) & 1);
@@ -164,14 +165,12 @@ void CellsMethod::weigh(const SurfaceTexels& texels, Probes& probes) const {
         if (rays_->occluded(r)) continue;
       }
       weight = std::max(weight, 1e-4f);
-      w.probe[w.count] = index;
-      w.weight[w.count] = weight;
-      ++w.count;
+      w.add(c, weight);
       sum += weight;
     }
     // No visible usable neighbour (the outside of a building, a gap behind furniture): the
     // texel reads no probe; its scatter rays go on to their hit instead.
-    for (int k = 0; k < w.count; ++k) w.weight[k] /= sum;
+    for (int k = 0; k < w.count(); ++k) w.weight[k] /= sum;
     probes.weights[t] = w;
   });
 }

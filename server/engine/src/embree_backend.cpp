@@ -68,7 +68,7 @@ glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d) {
 
 float scatter_range(const PassInput& in, std::uint32_t i) {
   const bool probes =
-      !in.params.unbiased() && !in.probe_weights.empty() && in.probe_weights[i].count > 0;
+      !in.params.unbiased() && !in.probe_weights.empty() && in.probe_weights[i].count() > 0;
   return probes ? in.params.tracing_range.resolve(in.world.bounds.max_extent()) : 3.4e38f;
 }
 
@@ -91,9 +91,10 @@ glm::vec3 ScatterMiss::operator()(std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng
   const glm::vec3 q = fixed_ ? p + extent_ * d : p + exit * d;
   const ProbeWeights& w = in_->probe_weights[i];
   const int k = pick_probe(w, pick.next_float());
-  const glm::vec3 to = q - in_->probes.position[w.probe[k]];
+  const std::uint32_t probe = w.probe(k, in_->probes.dims);
+  const glm::vec3 to = q - in_->probes.position[probe];
   const float len = glm::length(to);
-  return len > 0.0f ? sample_probe(*radiance_, w.probe[k], in_->probes.resolution, to / len)
+  return len > 0.0f ? sample_probe(*radiance_, probe, in_->probes.resolution, to / len)
                     : glm::vec3(0.0f);
 }
 
@@ -111,11 +112,11 @@ glm::vec3 probe_direction(std::size_t t, int res, glm::vec2 jitter) {
 
 int pick_probe(const ProbeWeights& w, float u) {
   float acc = 0.0f;
-  for (int k = 0; k + 1 < w.count; ++k) {
+  for (int k = 0; k + 1 < w.count(); ++k) {
     acc += w.weight[k];
     if (u < acc) return k;
   }
-  return w.count - 1;
+  return w.count() - 1;
 }
 
 }  // namespace embree_sampling

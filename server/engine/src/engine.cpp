@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <utility>
 
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
@@ -140,15 +141,26 @@ void Engine::build_dispatch() {
 }
 
 std::vector<Lightmap> Engine::to_lightmaps(const std::vector<glm::vec3>& values) const {
-  std::vector<Lightmap> maps(world_->objects.size());
-  for (std::size_t o = 0; o < maps.size(); ++o)
-    maps[o] = Lightmap((*gbuffers_)[o].width, (*gbuffers_)[o].height);
-  for (std::size_t i = 0; i < texels_.size(); ++i)
+  std::vector<Lightmap> maps;
+  to_lightmaps(values, maps);
+  return maps;
+}
+
+void Engine::to_lightmaps(const std::vector<glm::vec3>& values, std::vector<Lightmap>& maps) const {
+  maps.resize(world_->objects.size());
+  for (std::size_t o = 0; o < maps.size(); ++o) {
+    Lightmap& m = maps[o];
+    m.width = (*gbuffers_)[o].width;
+    m.height = (*gbuffers_)[o].height;
+    m.texels.assign(static_cast<std::size_t>(m.width) * m.height, glm::vec3(0.0f));
+  }
+  // Every texel has its own place in its object's map.
+  tbb::parallel_for(std::size_t(0), texels_.size(), [&](std::size_t i) {
     maps[texels_.object[i]].texels[texels_.texel[i]] = values[i];
+  });
   tbb::parallel_for(std::size_t(0), maps.size(), [&](std::size_t o) {
     dilate(maps[o].texels, maps[o].width, maps[o].height, (*gbuffers_)[o].kind);
   });
-  return maps;
 }
 
 UpdateStats Engine::update() {
@@ -179,7 +191,7 @@ UpdateStats Engine::update() {
     // first full update, whose bounces all read new direct light.
     for (std::uint32_t i : texels) ++samples_[i];
   } else {
-    bounces(in, est, stats);
+    bounces(in, std::move(est), stats);
   }
   ++updates_;
   stats.total_seconds = std::chrono::duration<double>(Clock::now() - start).count();
@@ -207,10 +219,10 @@ void Engine::next_batch(std::vector<std::uint32_t>& texels, std::vector<std::uin
   ++generation_;
 }
 
-void Engine::bounces(PassInput& in, const std::vector<glm::vec3>& direct, UpdateStats& stats) {
+void Engine::bounces(PassInput& in, std::vector<glm::vec3> total, UpdateStats& stats) {
   const int k = params_.indirect_bounces;
   const std::vector<std::uint32_t>& texels = in.unit_texels;
-  std::vector<glm::vec3> est, total = direct;
+  std::vector<glm::vec3> est;
   stats.prepare = method_->prepare(in);
   std::vector<Lightmap> prev = to_lightmaps(mean_[0]);
   for (int b = 1; b <= k; ++b) {
@@ -220,12 +232,16 @@ void Engine::bounces(PassInput& in, const std::vector<glm::vec3>& direct, Update
     stats.probes.push_back(r.probes);
     stats.scatter.push_back(r.scatter);
     accumulate(mean_[b], est, bounce_samples_, texels);
-    for (std::uint32_t i : texels) total[i] += est[i];
-    if (b < k) prev = to_lightmaps(mean_[b]);
+    tbb::parallel_for(std::size_t(0), texels.size(), [&](std::size_t j) {
+      const std::uint32_t i = texels[j];
+      total[i] += est[i];
+    });
+    if (b < k) to_lightmaps(mean_[b], prev);  // in place: one set of maps at a time
   }
   // Welford statistics of each texel's total per-update estimate (full updates only), for the
   // convergence estimate.
-  for (std::uint32_t i : texels) {
+  tbb::parallel_for(std::size_t(0), texels.size(), [&](std::size_t j) {
+    const std::uint32_t i = texels[j];
     const double n = static_cast<double>(bounce_samples_[i]) + 1.0;
     double x = luminance(total[i]);
     if (bounce_samples_[i] == 0) total_mean_[i] = total_m2_[i] = 0.0;
@@ -234,7 +250,7 @@ void Engine::bounces(PassInput& in, const std::vector<glm::vec3>& direct, Update
     total_m2_[i] += d * (x - total_mean_[i]);
     ++samples_[i];
     ++bounce_samples_[i];
-  }
+  });
 }
 
 std::uint32_t Engine::min_samples() const {
@@ -244,8 +260,9 @@ std::uint32_t Engine::min_samples() const {
 
 std::vector<glm::vec3> Engine::shown() const {
   std::vector<glm::vec3> sum(texels_.size(), glm::vec3(0.0f));
-  for (const auto& m : mean_)
-    for (std::size_t i = 0; i < sum.size(); ++i) sum[i] += m[i];
+  tbb::parallel_for(std::size_t(0), sum.size(), [&](std::size_t i) {
+    for (const auto& m : mean_) sum[i] += m[i];
+  });
   if (before_.size() != sum.size() || params_.edit_blend <= 0.0f) return sum;
   // Hysteresis after an edit: weight exp(-k / tau) on the value from before the edit after k
   // new samples, none once that is below 1 % (so a caught-up texel is never stale).
@@ -281,10 +298,10 @@ std::vector<Lightmap> Engine::published_lightmaps(DenoiseStats* stats) const {
 std::vector<float> Engine::texel_standard_error() const {
   // Texels with fewer than 2 samples since a restart have no noise estimate: 0.
   std::vector<float> se(texels_.size());
-  for (std::size_t i = 0; i < se.size(); ++i) {
+  tbb::parallel_for(std::size_t(0), se.size(), [&](std::size_t i) {
     const double n = bounce_samples_[i];
     se[i] = n < 2 ? 0.0f : static_cast<float>(std::sqrt(total_m2_[i] / (n - 1) / n));
-  }
+  });
   return se;
 }
 
@@ -430,7 +447,8 @@ std::vector<std::uint8_t> Engine::priorities(const SceneChange& change,
   // the rest; within each, texels a viewer's camera sees first.
   const float cell = probes_.grid.cell;
   const float margin = std::max(
-      cell, !params_.uses_probes() ? cell : params_.tracing_range.resolve(world_->bounds.max_extent()));
+      cell,
+      !params_.uses_probes() ? cell : params_.tracing_range.resolve(world_->bounds.max_extent()));
   const std::size_t n = texels_.size();
   std::vector<std::uint8_t> tier(n, 0);
   tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {

@@ -45,9 +45,10 @@ glm::vec2 prefetch_radiance(const RadianceField& f, const Hit& h) {
 // the last (the same sums, in the same order).
 int pick_probe_flat(const ProbeWeights& w, float u) {
   float acc = 0.0f;
-  int k = w.count - 1;
+  const int count = w.count();
+  int k = count - 1;
   bool found = false;
-  for (int j = 0; j + 1 < w.count; ++j) {
+  for (int j = 0; j + 1 < count; ++j) {
     acc += w.weight[j];
     const bool here = !found && u < acc;
     k = here ? j : k;
@@ -101,7 +102,7 @@ void ScatterTexel::shade_misses(std::uint32_t i, Texel& t, Batch& b) const {
   std::uint32_t probe[kBatch];
   for (int j = 0; j < k; ++j) {
     const int s = idx[j];
-    probe[j] = w.probe[which[j]];
+    probe[j] = w.probe(which[j], in_->probes.dims);
     const glm::vec3 d(r.dx[s], r.dy[s], r.dz[s]);
     const glm::vec3 q = miss.fixed_ ? p + miss.extent_ * d : p + b.exit[s] * d;
     const glm::vec3 to = q - position[probe[j]];
@@ -176,8 +177,9 @@ void ScatterTexel::begin(std::uint32_t i, Texel& t) const {
   const ProbeWeights& w = in.probe_weights[i];
   float acc = 0.0f;
   t.sums_rise = true;
+  const int count = w.count();
   for (int q = 0; q < 7; ++q) {
-    const bool used = q + 1 < w.count;
+    const bool used = q + 1 < count;
     const float next = used ? acc + w.weight[q] : acc;
     t.sums_rise = t.sums_rise && next >= acc;
     acc = next;

@@ -235,11 +235,11 @@ void VulkanBackend::Impl::prepare(const PassInput& in) {
       const ProbeWeights& pw = in.probe_weights[i];
       std::uint32_t* o = w + 20 * i;
       for (int k = 0; k < 8; ++k) {
-        const bool used = k < pw.count;
-        o[k] = used ? pw.probe[k] : 0u;
+        const bool used = k < pw.count();
+        o[k] = used ? pw.probe(k, in.probes.dims) : 0u;
         o[8 + k] = used ? bits(pw.weight[k]) : 0u;
       }
-      o[16] = pw.count;
+      o[16] = static_cast<std::uint32_t>(pw.count());
       o[17] = o[18] = o[19] = 0;
     }
   });

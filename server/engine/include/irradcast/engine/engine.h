@@ -99,6 +99,7 @@ class Engine {
   void build_texels(const std::vector<TexelGBuffer>& gbuffers);
   void build_dispatch();
   std::vector<Lightmap> to_lightmaps(const std::vector<glm::vec3>& values) const;
+  void to_lightmaps(const std::vector<glm::vec3>& values, std::vector<Lightmap>& maps) const;
   // Per texel: the standard error of its total's mean (luminance; 0 below two samples).
   std::vector<float> texel_standard_error() const;
   // Per texel: the total it shows (the blend of the new estimate and its value before an edit).
@@ -106,7 +107,8 @@ class Engine {
   // update()'s steps: the next batch of texels waiting since an edit (grouped into units), and
   // after the direct pass of a full update the bounces and the texels' statistics.
   void next_batch(std::vector<std::uint32_t>& texels, std::vector<std::uint32_t>& offsets);
-  void bounces(PassInput& in, const std::vector<glm::vec3>& direct, UpdateStats& stats);
+  // `total`: the direct pass's estimates, to which each bounce's are added.
+  void bounces(PassInput& in, std::vector<glm::vec3> total, UpdateStats& stats);
   // scene_changed()'s steps: what every texel had before; its old values carried over to the
   // rebuilt texels (returns each texel's index before, -1 if it was not valid); the priority tier
   // of each texel; the restart of the statistics and the queue of texels waiting.
