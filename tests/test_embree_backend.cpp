@@ -6,6 +6,7 @@
 // single-ray kernels answer a ray apart (about one shadow ray in millions): a texel by a sample.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <memory>
 #include <span>
@@ -34,11 +35,14 @@ class RecordingDirect final : public test::EmbreeForwarder {
     const PassResult r = inner.direct(in, out);
     outputs.push_back(out);
     rays += r.rays;
+    area_rays += inner.direct_area_rays();
     packet_rays += inner.direct_packet_rays();
+    occluded_rays += inner.direct_occluded_rays();
     return r;
   }
   std::vector<std::vector<glm::vec3>> outputs;
-  std::uint64_t rays = 0, packet_rays = 0;  // over the direct passes
+  // Over the direct passes: all rays, those toward area lights, in packets, ended occluded.
+  std::uint64_t rays = 0, area_rays = 0, packet_rays = 0, occluded_rays = 0;
 };
 
 struct Case {
@@ -99,6 +103,20 @@ TEST_P(ShadowRaysTest, AutoIsTheWayItTakesBitForBitAndTheWaysAgree) {
     texels += a.size();
   }
   EXPECT_GT(lit, texels / 4) << "most texels see a light: the shadow rays were traced";
+  // The occluded rays as counted: the same in both ways but for the few rays they answer apart,
+  // some and not all (these scenes have walls and boxes between texels and lights), and all the
+  // rays go to area lights (no sky, no punctual light).
+  for (const RecordingDirect* b : backends) {
+    EXPECT_EQ(b->area_rays, b->rays);
+    EXPECT_GT(b->occluded_rays, b->rays / 100);
+    EXPECT_LT(b->occluded_rays, b->rays);
+  }
+  EXPECT_EQ(automatic.occluded_rays, takes == ShadowRays::Single    ? single.occluded_rays
+                                     : takes == ShadowRays::Packets ? packets.occluded_rays
+                                                                    : automatic.occluded_rays);
+  EXPECT_LE(std::max(packets.occluded_rays, single.occluded_rays) -
+                std::min(packets.occluded_rays, single.occluded_rays),
+            packets.rays / 10000 + 1);
   // Packets and single rays agree on all but a few rays: at most one texel in 10,000 apart.
   EXPECT_LE(apart * 10000, texels) << apart << " of " << texels << " texels";
 }

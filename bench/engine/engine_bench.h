@@ -56,7 +56,10 @@ struct ScalingOptions {
   float density = 16.0f;                  // texels per metre
   int sweep_size = 2;                     // M of rooms:M for the density sweep
   std::string sweep_text = "8,16,24,32";  // its densities
-  int updates = 5;                        // rounds; the fastest is kept
+  // Many-light buildings at `density` (N:lit, N:trim; rooms:N:lit, rooms:N:trim), a series of
+  // their own.
+  std::string many_text = "";
+  int updates = 5;  // rounds; the fastest is kept
 };
 
 // Runs both series, prints their table and fits, adds their JSON to `result` and writes the

@@ -254,6 +254,9 @@ int main(int argc, char** argv) {
   app.add_option("--sweep-size", o.scaling.sweep_size, "M of rooms:M for the density sweep");
   app.add_option("--sweep-densities", o.scaling.sweep_text,
                  "texels per metre for the density sweep, comma separated (empty: none)");
+  app.add_option("--many-lights", o.scaling.many_text,
+                 "many-light buildings for the scaling benchmark, as N:lit or N:trim (rooms:N:lit, "
+                 "rooms:N:trim), comma separated (empty: none)");
   app.add_option("--updates", o.scaling.updates,
                  "timed updates (rounds) per configuration; fastest kept");
   app.add_option("--reps", o.mo.min_reps, "minimum repetitions per pass");

@@ -1,13 +1,20 @@
 // irradcast-bench-engine, part 2: full updates (1 direct + K indirect bounces, default
 // parameters) on rooms:N for growing N at a constant number of texels per metre, and on one
 // rooms:M at growing density, all measured in interleaved rounds (fastest kept); a least-squares
-// line through update time against texel count gives the cost per texel and R^2. Prints a table,
-// adds the series to the JSON and writes bench_update_vs_texels.png.
+// line through update time against texel count gives the cost per texel and R^2; optionally a
+// third series of many-light buildings (rooms:N:lit, rooms:N:trim). Per point also the set-up
+// time (scene, atlas, G-buffers, BVH, engine), the resident bytes it added per texel, rays per
+// second and the share of the direct pass's shadow rays that ended occluded. Prints a table,
+// adds the series to the JSON and writes bench_update_vs_texels.png and
+// bench_cost_per_texel.png.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <memory>
+#include <stdexcept>
+#include <string>
 
 #include "bench_util.h"
 #include "engine_bench.h"
@@ -20,54 +27,78 @@ namespace irradcast::bench {
 namespace {
 
 struct ScalePoint {
+  std::string scene;  // rooms:N, rooms:N:lit, rooms:N:trim
   int n = 0;
   float density = 0;  // texels per metre
   float texels_per_scene = 0;
   std::size_t texels = 0, atlas_texels = 0, triangles = 0;
   std::uint64_t rays = 0;
   double setup_s = 0, update_s = 0, direct_s = 0, probes_s = 0, scatter_s = 0;
+  double resident_bytes = 0;  // what building the case and its first update added
+  double occluded = 0;        // share of the direct pass's area-light shadow rays
   std::vector<double> updates_s;
 };
+
+// The process's resident set, in bytes (Linux; 0 elsewhere).
+double resident_bytes() {
+  std::ifstream statm("/proc/self/statm");
+  double pages = 0, resident = 0;
+  if (!(statm >> pages >> resident)) return 0.0;
+  return resident * 4096.0;
+}
 
 // Builds rooms:N for every size, then runs rounds of one update per size (interleaved, so that
 // a burst of other load on the machine spreads over all sizes instead of skewing one).
 struct CaseSpec {
   int n = 1;
   float density = 16.0f;  // texels per metre
+  std::string variant;    // "", "lit" or "trim"
+  bool operator==(const CaseSpec&) const = default;
 };
+
+std::string scene_name(const CaseSpec& c) {
+  return "rooms:" + std::to_string(c.n) + (c.variant.empty() ? "" : ":" + c.variant);
+}
 
 std::vector<ScalePoint> bench_updates(const std::vector<CaseSpec>& specs, int updates) {
   struct Case {
     std::unique_ptr<PreparedScene> setup;
     std::unique_ptr<Engine> engine;
-    std::vector<double> direct, probes, scatter;
+    const EmbreeBackend* backend = nullptr;
+    std::vector<double> direct, probes, scatter, occluded;
   };
   std::vector<ScalePoint> pts(specs.size());
   std::vector<Case> cases(specs.size());
   for (std::size_t k = 0; k < specs.size(); ++k) {
-    std::fprintf(stderr, "scaling: building rooms:%d at %.0f texels/m ...\n", specs[k].n,
-                 specs[k].density);
+    std::fprintf(stderr, "scaling: building %s at %.0f texels/m ...\n",
+                 scene_name(specs[k]).c_str(), specs[k].density);
     ScalePoint& pt = pts[k];
     Case& c = cases[k];
+    pt.scene = scene_name(specs[k]);
     pt.n = specs[k].n;
+    const double resident_before = resident_bytes();
     pt.density = specs[k].density;
     auto t0 = Clock::now();
     RoomsOptions ro;
     ro.n = specs[k].n;
+    ro.every_room_lit = specs[k].variant == "lit";
+    ro.trim = specs[k].variant == "trim";
     Scene scene = make_rooms(ro);
     float extent = World::build(scene).bounds.max_extent();
     pt.texels_per_scene = pt.density * extent;
     c.setup =
         std::make_unique<PreparedScene>(prepare(std::move(scene), density(pt.texels_per_scene)));
     const PreparedScene& s = *c.setup;
+    auto backend = std::make_unique<EmbreeBackend>(s.rays(), s.lights());
+    c.backend = backend.get();
     c.engine = std::make_unique<Engine>(s.world(), s.atlas(), s.gbuffers(), s.rays(),
-                                        std::make_unique<EmbreeBackend>(s.rays(), s.lights()),
-                                        EngineParams{});
+                                        std::move(backend), EngineParams{});
     pt.setup_s = seconds_since(t0);
     pt.texels = c.engine->texel_count();
     pt.atlas_texels = s.atlas().texel_count();
     for (const auto& o : s.world().objects) pt.triangles += o.triangles().size();
     c.engine->update();  // warm-up
+    pt.resident_bytes = resident_bytes() - resident_before;
   }
   for (int u = 0; u < updates; ++u) {
     std::fprintf(stderr, "scaling: round %d of %d ...\n", u + 1, updates);
@@ -77,6 +108,9 @@ std::vector<ScalePoint> bench_updates(const std::vector<CaseSpec>& specs, int up
       UpdateStats st = c.engine->update();
       pt.updates_s.push_back(st.total_seconds);
       c.direct.push_back(st.direct.seconds);
+      const auto area = static_cast<double>(c.backend->direct_area_rays());
+      c.occluded.push_back(area > 0 ? static_cast<double>(c.backend->direct_occluded_rays()) / area
+                                    : 0.0);
       double p = 0, sc = 0;
       for (const auto& x : st.probes) p += x.seconds;
       for (const auto& x : st.scatter) sc += x.seconds;
@@ -94,6 +128,7 @@ std::vector<ScalePoint> bench_updates(const std::vector<CaseSpec>& specs, int up
     pts[k].direct_s = cases[k].direct[best];
     pts[k].probes_s = cases[k].probes[best];
     pts[k].scatter_s = cases[k].scatter[best];
+    pts[k].occluded = cases[k].occluded[best];
   }
   return pts;
 }
@@ -135,15 +170,16 @@ struct Sweep {
 // Measures rooms:N at the fixed density and rooms:M at the sweep densities, the configuration in
 // both series (rooms:M at the fixed density) once; the points in the order of the two series.
 std::vector<ScalePoint> measure_series(const ScalingOptions& o, const std::vector<int>& sizes,
-                                       const std::vector<int>& densities) {
+                                       const std::vector<int>& densities,
+                                       const std::vector<CaseSpec>& many) {
   std::vector<CaseSpec> specs;
-  for (int n : sizes) specs.push_back({n, o.density});
-  for (int d : densities) specs.push_back({o.sweep_size, static_cast<float>(d)});
+  for (int n : sizes) specs.push_back({n, o.density, ""});
+  for (int d : densities) specs.push_back({o.sweep_size, static_cast<float>(d), ""});
+  specs.insert(specs.end(), many.begin(), many.end());
   std::vector<CaseSpec> unique;
   std::vector<std::size_t> slot;
   for (const CaseSpec& c : specs) {
-    auto it = std::find_if(unique.begin(), unique.end(),
-                           [&](const CaseSpec& u) { return u.n == c.n && u.density == c.density; });
+    auto it = std::find(unique.begin(), unique.end(), c);
     slot.push_back(static_cast<std::size_t>(it - unique.begin()));
     if (it == unique.end()) unique.push_back(c);
   }
@@ -169,12 +205,13 @@ void report_sweep(Sweep& sw, json& result) {
   for (const auto& p : sw.pts) {
     double other = p.update_s - p.direct_s - p.probes_s - p.scatter_s;
     std::printf(
-        "rooms:%-3d %6.0f %10zu %11zu %10zu %11llu %10.1f %10.1f %10.1f %10.1f %10.1f "
-        "%9.3f\n",
-        p.n, p.density, p.texels, p.atlas_texels, p.triangles,
+        "%-13s %5.0f %9zu %9zu %9zu %10llu %9.1f %9.1f %9.1f %9.1f %8.1f %8.3f %7.1f %7.1f "
+        "%6.1f %6.1f\n",
+        p.scene.c_str(), p.density, p.texels, p.atlas_texels, p.triangles,
         static_cast<unsigned long long>(p.rays), p.update_s * 1e3, p.direct_s * 1e3,
-        p.probes_s * 1e3, p.scatter_s * 1e3, other * 1e3, p.update_s / p.texels * 1e6);
-    rows.push_back({{"scene", "rooms:" + std::to_string(p.n)},
+        p.probes_s * 1e3, p.scatter_s * 1e3, other * 1e3, p.update_s / p.texels * 1e6,
+        p.resident_bytes / p.texels, p.rays / p.update_s * 1e-6, 100 * p.occluded, p.setup_s);
+    rows.push_back({{"scene", p.scene},
                     {"texels_per_metre", p.density},
                     {"texels_per_scene", p.texels_per_scene},
                     {"texels", p.texels},
@@ -189,7 +226,11 @@ void report_sweep(Sweep& sw, json& result) {
                     {"probes_s", p.probes_s},
                     {"scatter_s", p.scatter_s},
                     {"other_s", other},
-                    {"us_per_texel", p.update_s / p.texels * 1e6}});
+                    {"us_per_texel", p.update_s / p.texels * 1e6},
+                    {"resident_bytes", p.resident_bytes},
+                    {"resident_bytes_per_texel", p.resident_bytes / p.texels},
+                    {"rays_per_s", p.rays / p.update_s},
+                    {"direct_occluded_share", p.occluded}});
   }
   std::printf(
       "  %s: update = %.2f ms + %.4f us x texels, R^2 = %.5f; per-texel cost %.3f .. "
@@ -209,7 +250,8 @@ void report_sweep(Sweep& sw, json& result) {
 
 // The measured points of series k and its fitted line.
 void add_sweep_series(plot::XYPlot& xy, const Sweep& sw, std::size_t k) {
-  const plot::Color colors[2][2] = {{plot::kBlue, plot::kBlue}, {plot::kGreen, plot::kGreen}};
+  const plot::Color colors[3][2] = {
+      {plot::kBlue, plot::kBlue}, {plot::kGreen, plot::kGreen}, {plot::kRed, plot::kRed}};
   plot::Series meas, line;
   meas.label = sw.title;
   meas.color = colors[k][0];
@@ -224,7 +266,7 @@ void add_sweep_series(plot::XYPlot& xy, const Sweep& sw, std::size_t k) {
   for (const auto& p : sw.pts) {
     meas.x.push_back(p.texels * 1e-3);
     meas.y.push_back(p.update_s * 1e3);
-    meas.labels.push_back(k == 0 ? "rooms:" + std::to_string(p.n) : fmt("%.0f/m", p.density));
+    meas.labels.push_back(k == 1 ? fmt("%.0f/m", p.density) : p.scene);
     sxmax = std::max(sxmax, static_cast<double>(p.texels));
   }
   // The line from where it crosses zero time (or zero texels) to the largest point.
@@ -254,6 +296,60 @@ void plot_sweeps(const std::vector<Sweep>& sweeps, int used_threads, int updates
   std::printf("wrote %s\n", png.c_str());
 }
 
+// Cost per texel and update, and resident bytes per texel, against texels: flat when the method
+// keeps its promise for large scenes.
+void plot_per_texel(const std::vector<Sweep>& sweeps, int used_threads, int updates,
+                    const std::string& out_dir) {
+  const plot::Color colors[] = {plot::kBlue, plot::kGreen, plot::kRed};
+  for (int which = 0; which < 2; ++which) {
+    plot::XYPlot xy;
+    xy.title = which == 0 ? "Update time per texel" : "Resident bytes per texel";
+    xy.note = std::to_string(used_threads) + " threads, default engine params, fastest of " +
+              std::to_string(updates) +
+              (which == 0 ? " updates" : " updates; resident set added by building a scene");
+    xy.x_label = "valid texels (thousands)";
+    xy.y_label = which == 0 ? "us per texel and update" : "bytes per texel";
+    xy.x_log = true;
+    xy.legend = plot::XYPlot::Legend::BottomRight;
+    for (std::size_t k = 0; k < sweeps.size(); ++k) {
+      if (sweeps[k].pts.empty()) continue;
+      plot::Series s;
+      s.label = sweeps[k].title;
+      s.color = colors[k % 3];
+      s.lines = k != 2;
+      for (const ScalePoint& p : sweeps[k].pts) {
+        s.x.push_back(static_cast<double>(p.texels) / 1e3);
+        s.y.push_back(which == 0 ? p.update_s / p.texels * 1e6 : p.resident_bytes / p.texels);
+        s.labels.push_back(k == 1 ? fmt("%.0f/m", p.density) : p.scene);
+      }
+      xy.series.push_back(s);
+    }
+    const std::string png = (fs::path(out_dir) / (which == 0 ? "bench_cost_per_texel.png"
+                                                             : "bench_bytes_per_texel.png"))
+                                .string();
+    plot::write_xy_plot(png, xy);
+    std::printf("wrote %s\n", png.c_str());
+  }
+}
+
+// "N:lit,N:trim" -> the many-light cases at `density`.
+std::vector<CaseSpec> parse_many(const std::string& text, float density) {
+  std::vector<CaseSpec> out;
+  std::size_t at = 0;
+  while (at < text.size()) {
+    std::size_t end = text.find(',', at);
+    if (end == std::string::npos) end = text.size();
+    const std::string item = text.substr(at, end - at);
+    const std::size_t colon = item.find(':');
+    const std::string variant = colon == std::string::npos ? "" : item.substr(colon + 1);
+    if (variant != "lit" && variant != "trim")
+      throw std::runtime_error("--many-lights: '" + item + "' is not N:lit or N:trim");
+    out.push_back({std::stoi(item.substr(0, colon)), density, variant});
+    at = end + 1;
+  }
+  return out;
+}
+
 }  // namespace
 
 // Update time against texel count: rooms:N at a fixed density (the building grows), and rooms:M
@@ -262,24 +358,31 @@ void run_scaling(const ScalingOptions& o, int used_threads, const std::string& o
                  json& result) {
   const std::vector<int> sizes = parse_ints(o.sizes_text);
   const std::vector<int> densities = parse_ints(o.sweep_text);
-  const std::vector<ScalePoint> all = measure_series(o, sizes, densities);
-  std::vector<Sweep> sweeps(2);
+  const std::vector<CaseSpec> many = parse_many(o.many_text, o.density);
+  const std::vector<ScalePoint> all = measure_series(o, sizes, densities, many);
+  std::vector<Sweep> sweeps(3);
   sweeps[0].key = "scaling";
   sweeps[0].title = "rooms:N at " + fmt("%.0f", o.density) + " texels/m";
   sweeps[0].pts.assign(all.begin(), all.begin() + static_cast<long>(sizes.size()));
   sweeps[1].key = "density_sweep";
   sweeps[1].title = "rooms:" + std::to_string(o.sweep_size) + " at " + o.sweep_text + " texels/m";
-  sweeps[1].pts.assign(all.begin() + static_cast<long>(sizes.size()), all.end());
+  const auto sweep_end = static_cast<long>(sizes.size() + densities.size());
+  sweeps[1].pts.assign(all.begin() + static_cast<long>(sizes.size()), all.begin() + sweep_end);
+  sweeps[2].key = "many_lights";
+  sweeps[2].title = "many lights at " + fmt("%.0f", o.density) + " texels/m";
+  sweeps[2].pts.assign(all.begin() + sweep_end, all.end());
   std::printf(
       "\nFull update (1 direct + %d bounces, default params) vs texels, fastest of %d "
       "interleaved rounds\n",
       EngineParams{}.indirect_bounces, o.updates);
-  std::printf("%-9s %6s %10s %11s %10s %11s %10s %10s %10s %10s %10s %9s\n", "scene", "tex/m",
-              "texels", "atlas tex", "triangles", "rays", "update ms", "direct ms", "probes ms",
-              "scatter ms", "other ms", "us/texel");
+  std::printf("%-13s %5s %9s %9s %9s %10s %9s %9s %9s %9s %8s %8s %7s %7s %6s %6s\n", "scene",
+              "tex/m", "texels", "atlas tex", "triangles", "rays", "update ms", "direct ms",
+              "probes ms", "scatter ms", "other ms", "us/texel", "B/texel", "Mrays/s", "occl%",
+              "load s");
   for (Sweep& sw : sweeps)
     if (!sw.pts.empty()) report_sweep(sw, result);
   plot_sweeps(sweeps, used_threads, o.updates, out_dir);
+  plot_per_texel(sweeps, used_threads, o.updates, out_dir);
 }
 
 }  // namespace irradcast::bench

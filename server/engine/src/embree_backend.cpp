@@ -203,8 +203,8 @@ bool EmbreeBackend::few_lights(const LightSampler::FrontLights& front) const {
   return true;
 }
 
-glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced,
-                                     std::uint64_t* packed, LightCache::Record* learned) const {
+glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, AreaRays& counts,
+                                     LightCache::Record* learned) const {
   // direct_samples samples of the lights in front of the texel (LightSampler::front_lights),
   // stratified in the pick; every sample drawn first (4 at a time in SIMD lanes), then the shadow
   // rays of those that can contribute traced (8 to a packet), then summed in order.
@@ -248,7 +248,10 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::
         rays_->occluded8(&shadow[k], std::min(8, count - k), blocked + k);
     else
       for (int k = 0; k < count; ++k) blocked[k] = rays_->occluded(shadow[k]);
-    for (int k = 0; k < count; ++k) lit[which[k]] = !blocked[k];
+    for (int k = 0; k < count; ++k) {
+      lit[which[k]] = !blocked[k];
+      counts.occluded += blocked[k] ? 1u : 0u;
+    }
     if (learn)  // what each ray brought, not divided by the pick's probability
       for (int k = 0; k < count; ++k) {
         const LightSampler::ShadowSample& t = sample[which[k]];
@@ -259,8 +262,8 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, std::
     for (int s = 0; s < m; ++s)
       if (lit[s]) sum += weight[s];
   }
-  *traced += rays;
-  if (packets) *packed += rays;
+  counts.traced += rays;
+  if (packets) counts.packed += rays;
   return sum / static_cast<float>(n);
 }
 
@@ -304,9 +307,10 @@ PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& ou
   const bool learn = cache_.valid();
   tbb::enumerable_thread_specific<LightCache::Record> records(
       [&] { return LightCache::Record(cache_.unit()); });
-  std::atomic<std::uint64_t> rays{0}, packed{0};
+  std::atomic<std::uint64_t> rays{0}, area_rays{0}, packed{0}, occluded{0};
   for_each_texel_run(in, [&](const std::uint32_t* run, std::size_t size) {
-    std::uint64_t traced = 0, in_packets = 0;
+    std::uint64_t traced = 0;
+    AreaRays area_counts;
     LightCache::Record* learned = learn ? &records.local() : nullptr;
     for (std::size_t k = 0; k < size; ++k) {
       const std::uint32_t i = run[k];
@@ -315,14 +319,16 @@ PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& ou
       glm::vec3 e =
           punctual > 0 ? lights_->punctual_irradiance(*rays_, p, nrm, ng) : glm::vec3(0.0f);
       traced += punctual;
-      if (area) e += area_direct(in, i, &traced, &in_packets, learned);
+      if (area) e += area_direct(in, i, area_counts, learned);
       if (sky) e += sky_direct(in, i, &traced);
       out[i] = e;
     }
-    rays += traced;
-    packed += in_packets;
+    rays += traced + area_counts.traced;
+    area_rays += area_counts.traced;
+    packed += area_counts.packed;
+    occluded += area_counts.occluded;
   });
-  direct_packet_rays_ = packed.load();
+  direct_area_rays_ = {area_rays.load(), packed.load(), occluded.load()};
   if (learn) {
     std::vector<LightCache::Record*> learned;
     for (LightCache::Record& r : records) learned.push_back(&r);

@@ -103,8 +103,11 @@ class EmbreeBackend final : public TraceBackend {
   // a triangle's edge), so a forced way can change a rare texel's estimate by one sample.
   void set_shadow_rays(ShadowRays mode) { shadow_rays_ = mode; }
   ShadowRays shadow_rays() const { return shadow_rays_; }
-  // Of the last direct pass's shadow rays toward area lights, those traced in packets.
-  std::uint64_t direct_packet_rays() const { return direct_packet_rays_; }
+  // The last direct pass's shadow rays toward area lights: all of them, those traced in
+  // packets, and those that ended occluded.
+  std::uint64_t direct_area_rays() const { return direct_area_rays_.traced; }
+  std::uint64_t direct_packet_rays() const { return direct_area_rays_.packed; }
+  std::uint64_t direct_occluded_rays() const { return direct_area_rays_.occluded; }
   // Which lights light each region, learned from the direct passes so far (used past
   // LightSampler::kMaxFront emissive triangles, where the light hierarchy picks): the next
   // direct pass picks with it (LightCache::pick). Invalid until a pass has used the hierarchy.
@@ -131,12 +134,15 @@ class EmbreeBackend final : public TraceBackend {
   // Texel i's direct irradiance from the area lights: the mean of direct_samples
   // LightSampler::direct_sample estimates of the lights in front of it, stratified in the light
   // pick (LightSampler::direct_samples), their shadow rays traced 8 to a packet
-  // (RayScene::occluded8) or one by one (shadow_rays()); the shadow rays it traced are added to
-  // *traced, and to *packed too when they went in packets.
+  // (RayScene::occluded8) or one by one (shadow_rays()); the shadow rays it traced are counted
+  // in `rays` (traced; packed too when they went in packets; occluded when they ended so).
   // With the light hierarchy, the texel's samples are picked with its region's learned table
   // (light_cache()), and what each of its shadow rays brought is added to *learned.
-  glm::vec3 area_direct(const PassInput& in, std::uint32_t i, std::uint64_t* traced,
-                        std::uint64_t* packed, LightCache::Record* learned) const;
+  struct AreaRays {
+    std::uint64_t traced = 0, packed = 0, occluded = 0;
+  };
+  glm::vec3 area_direct(const PassInput& in, std::uint32_t i, AreaRays& rays,
+                        LightCache::Record* learned) const;
   // The light cache for this pass: made for the scene's lights where the hierarchy picks
   // (anew when their number changed), else left invalid.
   void prepare_light_cache(const PassInput& in);
@@ -148,7 +154,7 @@ class EmbreeBackend final : public TraceBackend {
   const LightSampler* lights_;
   ShadowRays shadow_rays_ = ShadowRays::Auto;
   std::vector<std::int32_t> light_object_;  // per emissive triangle, its object (direct())
-  std::uint64_t direct_packet_rays_ = 0;
+  AreaRays direct_area_rays_;
   bool learn_lights_ = true;
   LightCache cache_;
 };
