@@ -59,7 +59,8 @@ struct ScalingOptions {
   // Many-light buildings at `density` (N:lit, N:trim; rooms:N:lit, rooms:N:trim), a series of
   // their own.
   std::string many_text = "";
-  int updates = 5;  // rounds; the fastest is kept
+  int updates = 5;      // rounds; the fastest is kept
+  EngineParams params;  // the engine's (--cell-size 2m ...: irradcast-server's options)
 };
 
 // Runs both series, prints their table and fits, adds their JSON to `result` and writes the

@@ -31,10 +31,12 @@
 #include "bench_options.h"
 #include "bench_util.h"
 #include "engine_bench.h"
+#include "engine_options.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/progress.h"
 #include "irradcast/engine/embree_backend.h"
+#include "params_json.h"
 #include "plot.h"
 
 using namespace irradcast;
@@ -49,6 +51,7 @@ struct Options {
   int threads = 0;
   MeasureOptions mo;
   ScalingOptions scaling;
+  tools::EngineOptions engine;  // the scaling benchmark's engine parameters
   bool skip_passes = false, skip_scaling = false;
 };
 
@@ -204,7 +207,8 @@ void run_passes(const Options& o, int used_threads, json& result) {
 }
 
 json params_json(const Options& o) {
-  return {{"engine", "EngineParams defaults"},
+  return {{"engine", "pass benchmark: EngineParams defaults"},
+          {"scaling_engine", tools::params_json(o.scaling.params)},
           {"pass_texels_per_scene", o.texels_per_scene},
           {"scaling_texels_per_metre", o.scaling.density},
           {"density_sweep_scene", "rooms:" + std::to_string(o.scaling.sweep_size)},
@@ -220,6 +224,7 @@ int run(Options o) {
   const int used_threads = tbb_threads();
   if (o.mo.cpu_time && used_threads != 1)
     throw Error("--cpu-time needs --threads 1 (the other threads' CPU time would not count)");
+  o.scaling.params = o.engine.params();  // throws irradcast::Error naming a bad value
   const Stopwatch total;
   json result;
   result["machine"] = machine_json(used_threads);
@@ -254,6 +259,7 @@ int main(int argc, char** argv) {
   app.add_option("--sweep-size", o.scaling.sweep_size, "M of rooms:M for the density sweep");
   app.add_option("--sweep-densities", o.scaling.sweep_text,
                  "texels per metre for the density sweep, comma separated (empty: none)");
+  o.engine.add_params_to(app);  // the scaling benchmark's engine, as irradcast-server's
   app.add_option("--many-lights", o.scaling.many_text,
                  "many-light buildings for the scaling benchmark, as N:lit or N:trim (rooms:N:lit, "
                  "rooms:N:trim), comma separated (empty: none)");

@@ -60,7 +60,8 @@ std::string scene_name(const CaseSpec& c) {
   return "rooms:" + std::to_string(c.n) + (c.variant.empty() ? "" : ":" + c.variant);
 }
 
-std::vector<ScalePoint> bench_updates(const std::vector<CaseSpec>& specs, int updates) {
+std::vector<ScalePoint> bench_updates(const std::vector<CaseSpec>& specs, int updates,
+                                      const EngineParams& params) {
   struct Case {
     std::unique_ptr<PreparedScene> setup;
     std::unique_ptr<Engine> engine;
@@ -92,7 +93,7 @@ std::vector<ScalePoint> bench_updates(const std::vector<CaseSpec>& specs, int up
     auto backend = std::make_unique<EmbreeBackend>(s.rays(), s.lights());
     c.backend = backend.get();
     c.engine = std::make_unique<Engine>(s.world(), s.atlas(), s.gbuffers(), s.rays(),
-                                        std::move(backend), EngineParams{});
+                                        std::move(backend), params);
     pt.setup_s = seconds_since(t0);
     pt.texels = c.engine->texel_count();
     pt.atlas_texels = s.atlas().texel_count();
@@ -183,7 +184,7 @@ std::vector<ScalePoint> measure_series(const ScalingOptions& o, const std::vecto
     slot.push_back(static_cast<std::size_t>(it - unique.begin()));
     if (it == unique.end()) unique.push_back(c);
   }
-  const std::vector<ScalePoint> measured = bench_updates(unique, o.updates);
+  const std::vector<ScalePoint> measured = bench_updates(unique, o.updates, o.params);
   std::vector<ScalePoint> all;
   for (std::size_t k : slot) all.push_back(measured[k]);
   return all;
@@ -255,7 +256,7 @@ void add_sweep_series(plot::XYPlot& xy, const Sweep& sw, std::size_t k) {
   plot::Series meas, line;
   meas.label = sw.title;
   meas.color = colors[k][0];
-  meas.labels_above_left = k == 0;
+  meas.labels_above_left = k != 1;
   line.label = fmt("fit: %.0f ms", sw.fit.intercept * 1e3) +
                fmt(" + %.3f us/texel", sw.fit.slope * 1e6) + fmt(", R^2 %.4f", sw.fit.r2);
   line.color = colors[k][1];
@@ -279,12 +280,17 @@ void add_sweep_series(plot::XYPlot& xy, const Sweep& sw, std::size_t k) {
   xy.series.push_back(line);
 }
 
+// "cells 0.25, range 0.3, 1 direct + 2 bounces": what the plots' notes say of the engine.
+std::string engine_text(const EngineParams& p) {
+  return "cells " + param_text(p.cell_size) + ", range " + param_text(p.tracing_range) +
+         ", 1 direct + " + std::to_string(p.indirect_bounces) + " bounces";
+}
+
 void plot_sweeps(const std::vector<Sweep>& sweeps, int used_threads, int updates,
-                 const std::string& out_dir) {
+                 const std::string& engine, const std::string& out_dir) {
   plot::XYPlot xy;
   xy.title = "Full update time vs texel count";
-  xy.note = std::to_string(used_threads) +
-            " threads, default engine params (1 direct + 2 bounces), fastest of " +
+  xy.note = std::to_string(used_threads) + " threads, " + engine + ", fastest of " +
             std::to_string(updates) + " updates; lines: least-squares fits";
   xy.x_label = "valid texels (thousands)";
   xy.y_label = "update time (ms)";
@@ -299,14 +305,14 @@ void plot_sweeps(const std::vector<Sweep>& sweeps, int used_threads, int updates
 // Cost per texel and update, and resident bytes per texel, against texels: flat when the method
 // keeps its promise for large scenes.
 void plot_per_texel(const std::vector<Sweep>& sweeps, int used_threads, int updates,
-                    const std::string& out_dir) {
+                    const std::string& engine, const std::string& out_dir) {
   const plot::Color colors[] = {plot::kBlue, plot::kGreen, plot::kRed};
   for (int which = 0; which < 2; ++which) {
     plot::XYPlot xy;
     xy.title = which == 0 ? "Update time per texel" : "Resident bytes per texel";
-    xy.note = std::to_string(used_threads) + " threads, default engine params, fastest of " +
+    xy.note = std::to_string(used_threads) + " threads, " + engine + ", fastest of " +
               std::to_string(updates) +
-              (which == 0 ? " updates" : " updates; resident set added by building a scene");
+              (which == 0 ? " updates" : " updates; resident set each scene added");
     xy.x_label = "valid texels (thousands)";
     xy.y_label = which == 0 ? "us per texel and update" : "bytes per texel";
     xy.x_log = true;
@@ -317,6 +323,7 @@ void plot_per_texel(const std::vector<Sweep>& sweeps, int used_threads, int upda
       s.label = sweeps[k].title;
       s.color = colors[k % 3];
       s.lines = k != 2;
+      s.labels_above_left = true;  // the largest point sits at the plot's right edge
       for (const ScalePoint& p : sweeps[k].pts) {
         s.x.push_back(static_cast<double>(p.texels) / 1e3);
         s.y.push_back(which == 0 ? p.update_s / p.texels * 1e6 : p.resident_bytes / p.texels);
@@ -371,18 +378,16 @@ void run_scaling(const ScalingOptions& o, int used_threads, const std::string& o
   sweeps[2].key = "many_lights";
   sweeps[2].title = "many lights at " + fmt("%.0f", o.density) + " texels/m";
   sweeps[2].pts.assign(all.begin() + sweep_end, all.end());
-  std::printf(
-      "\nFull update (1 direct + %d bounces, default params) vs texels, fastest of %d "
-      "interleaved rounds\n",
-      EngineParams{}.indirect_bounces, o.updates);
+  std::printf("\nFull update (%s) vs texels, fastest of %d interleaved rounds\n",
+              engine_text(o.params).c_str(), o.updates);
   std::printf("%-13s %5s %9s %9s %9s %10s %9s %9s %9s %9s %8s %8s %7s %7s %6s %6s\n", "scene",
               "tex/m", "texels", "atlas tex", "triangles", "rays", "update ms", "direct ms",
               "probes ms", "scatter ms", "other ms", "us/texel", "B/texel", "Mrays/s", "occl%",
               "load s");
   for (Sweep& sw : sweeps)
     if (!sw.pts.empty()) report_sweep(sw, result);
-  plot_sweeps(sweeps, used_threads, o.updates, out_dir);
-  plot_per_texel(sweeps, used_threads, o.updates, out_dir);
+  plot_sweeps(sweeps, used_threads, o.updates, engine_text(o.params), out_dir);
+  plot_per_texel(sweeps, used_threads, o.updates, engine_text(o.params), out_dir);
 }
 
 }  // namespace irradcast::bench

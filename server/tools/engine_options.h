@@ -35,6 +35,12 @@ struct EngineOptions {
     });
   }
 
+  // Binds the engine parameters' options alone (no atlas or backend options: a bench that has its
+  // own) to this object, which must outlive `app`'s parse.
+  void add_params_to(CLI::App& app) {
+    for_each_param(values, [&](const ParamSpec& s, auto& v) { add_param(app, s, v); });
+  }
+
   // Binds the options to this object, which must outlive `app`'s parse.
   void add_to(CLI::App& app) {
     for_each_param(values, [&](const ParamSpec& s, auto& v) {
