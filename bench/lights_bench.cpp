@@ -55,22 +55,26 @@ struct Traced {
 
 // One sample of the direct irradiance at p with the light picked by `way` (0 unless its
 // shadow ray came back unoccluded); what it traced to *traced.
-glm::vec3 sample(const LightSampler& l, const RayScene& rays, const LightCache& cache, glm::vec3 p,
-                 glm::vec3 n, std::uint32_t object, Way way, glm::vec3 u, Estimator& e,
+// The hierarchy and learned ways pick as the engine's direct pass does (LightSampler::
+// direct_sample): among `front`, the lights in front of p, where the scene has at most kMaxFront
+// (by power; learned: mixed with the region's table), else by the hierarchy (learned: mixed).
+glm::vec3 sample(const LightSampler& l, const RayScene& rays, const LightCache& cache,
+                 const LightSampler::FrontLights* front, glm::vec3 p, glm::vec3 n,
+                 std::uint32_t object, Way way, glm::vec3 u, Estimator& e,
                  Traced* traced = nullptr) {
-  std::size_t i;
-  float pdf;
-  bool ok = true;
+  LightSampler::ShadowSample s;
+  glm::vec3 weight(0.0f);
   if (way == kPower) {
-    i = l.pick_triangle(u.x);
-    pdf = l.pick_pdf()[i];
+    const std::size_t i = l.pick_triangle(u.x);
+    if (!l.triangle_sample(rays, i, p, n, n, glm::vec2(u.y, u.z), s)) return glm::vec3(0.0f);
+    weight = l.triangle_emitted(s) / l.pick_pdf()[i];
   } else {
     const LightCache::Table* table =
         way == kLearned && cache.valid() ? cache.find(cache.region(p, n, object)) : nullptr;
-    ok = l.pick(p, n, u.x, i, pdf, table);
+    if (front && table && table->lit_share > LightCache::kFrontLitShare) table = nullptr;
+    if (!l.direct_sample(rays, front, p, n, n, u, s, weight, table)) return glm::vec3(0.0f);
   }
-  LightSampler::ShadowSample s;
-  if (!ok || !l.triangle_sample(rays, i, p, n, n, glm::vec2(u.y, u.z), s)) return glm::vec3(0.0f);
+  const std::size_t i = s.triangle;
   bool blocked = false;
   if (s.shadow.tmax > 0.0f) {
     blocked = rays.occluded(s.shadow);
@@ -79,9 +83,8 @@ glm::vec3 sample(const LightSampler& l, const RayScene& rays, const LightCache& 
     if (traced) traced->light = static_cast<std::int64_t>(i);
   }
   if (blocked) return glm::vec3(0.0f);
-  const glm::vec3 emitted = l.triangle_emitted(s);
-  if (traced) traced->luminance = luminance(emitted);
-  return emitted / pdf;
+  if (traced) traced->luminance = luminance(l.triangle_emitted(s));
+  return weight;
 }
 
 // One texel's `samples` estimates (stratified in the pick; learned: an eighth of them where the
@@ -92,11 +95,14 @@ void run_texel(const LightSampler& l, const RayScene& rays, const LightCache& ca
   const auto start = Clock::now();
   if (way == kLearned && cache.valid())
     samples = cache.samples_in(cache.region(p, n, object), samples);
+  LightSampler::FrontLights front;
+  const bool culled = l.front_lights(p, n, front);
   double sum = 0.0, sq = 0.0;
   for (int k = 0; k < samples; ++k) {
     const float u = (static_cast<float>(k) + rng.next_float()) / static_cast<float>(samples);
     const glm::vec2 pos = rng.next_2d();
-    const glm::vec3 c = sample(l, rays, cache, p, n, object, way, glm::vec3(u, pos), e);
+    const glm::vec3 c =
+        sample(l, rays, cache, culled ? &front : nullptr, p, n, object, way, glm::vec3(u, pos), e);
     const double v = static_cast<double>(c.x) + c.y + c.z;
     sum += v;
     sq += v * v;
@@ -149,7 +155,7 @@ double oracle_occluded(const LightSampler& l, const RayScene& rays, glm::vec3 p,
 // with what was learned so far, each traced ray recorded (EmbreeBackend::area_direct's records).
 LightCache learn(const PreparedScene& s, int updates) {
   const LightSampler& l = s.lights();
-  if (l.tree().empty()) return LightCache();
+  if (l.emissive_triangles().size() < LightCache::kLearnFrom) return LightCache();
   float unit = 0.0f;
   for (const EmissiveTriangle& t : l.emissive_triangles())
     if (t.uniform_emission) unit = std::max(unit, luminance(t.emission));
@@ -165,11 +171,14 @@ LightCache learn(const PreparedScene& s, int updates) {
         if (!g.valid(i)) continue;
         const std::uint64_t region = cache.region(g.position[i], g.normal[i], o);
         const int count = cache.samples_in(region, kSamples);
+        LightSampler::FrontLights front;
+        const bool culled = l.front_lights(g.position[i], g.normal[i], front);
         for (int k = 0; k < count; ++k) {
           const glm::vec3 u((static_cast<float>(k) + rng.next_float()) / static_cast<float>(count),
                             rng.next_2d());
           Traced t;
-          sample(l, s.rays(), cache, g.position[i], g.normal[i], o, kLearned, u, ignored, &t);
+          sample(l, s.rays(), cache, culled ? &front : nullptr, g.position[i], g.normal[i], o,
+                 kLearned, u, ignored, &t);
           if (t.light >= 0) record.add(region, static_cast<std::uint32_t>(t.light), t.luminance);
         }
       }

@@ -17,6 +17,7 @@
 #include "irradcast/common/light_cache.h"
 #include "irradcast/common/lights.h"
 #include "irradcast/common/sampling.h"
+#include "scene_builders.h"
 
 using namespace irradcast;
 
@@ -180,6 +181,59 @@ TEST(LightCache, TheMixturePicksEachLightAsOftenAsItsProbability) {
       const double mean = expected[i] * kPicks;
       EXPECT_NEAR(hits[i], mean, 5.0 * std::sqrt(mean) + 2.0) << "light " << i;
     }
+  }
+}
+
+// The engine's direct sample among the lights in front of a texel, mixed with a table
+// (LightCache::mix with the front list by power): the same mean as the front list alone. Inside
+// the furnace's closed box (12 emissive triangles, every one visible from every point) with
+// tables that favour some lights, leave some out and name one behind the point.
+TEST(LightCache, TheFrontListsMixtureKeepsTheMean) {
+  const test::EngineSetup s(test::closed_box(glm::vec3(0.5f), glm::vec3(1.0f)), 8.0f);
+  const LightSampler& l = s.lights;
+  ASSERT_EQ(l.emissive_triangles().size(), 12u);
+  const Bounds b = s.world.bounds;
+  const struct {
+    glm::vec3 p, n;
+  } points[] = {{{0.1f, -1.0f, 0.3f}, {0, 1, 0}},
+                {{-0.7f, 0.2f, 1.0f}, {0, 0, -1}},
+                {{0.95f, 0.9f, -0.2f}, {-1, 0, 0}}};
+  for (const auto& pt : points) {
+    LightSampler::FrontLights front;
+    ASSERT_TRUE(l.front_lights(pt.p, pt.n, front));
+    LightCache cache(b, 12, 1.0f);
+    LightCache::Record r(cache.unit());
+    for (std::uint32_t k = 0; k < 12; k += 2) r.add(cache.region(pt.p, pt.n), k, 1.0f + 3.0f * k);
+    cache.learn({&r});
+    const LightCache::Table* table = cache.find(cache.region(pt.p, pt.n));
+    ASSERT_NE(table, nullptr);
+    double mean[2] = {0.0, 0.0};
+    constexpr int kSamples = 400000;
+    for (int way = 0; way < 2; ++way) {
+      Rng rng(9);
+      for (int k = 0; k < kSamples; ++k) {
+        const glm::vec3 u((static_cast<float>(k) + rng.next_float()) / kSamples, rng.next_2d());
+        LightSampler::ShadowSample smp;
+        glm::vec3 w(0.0f);
+        if (l.direct_sample(s.rays, &front, pt.p, pt.n, pt.n, u, smp, w, way ? table : nullptr))
+          mean[way] += (w.x + w.y + w.z) / kSamples;
+      }
+    }
+    // The pass's own way: 8 stratified samples a call (LightSampler::direct_samples).
+    double batched = 0.0;
+    Rng rng(5);
+    constexpr int kCalls = kSamples / 8;
+    for (int c = 0; c < kCalls; ++c) {
+      LightSampler::ShadowSample smp[8];
+      glm::vec3 w[8];
+      bool lit[8];
+      l.direct_samples(s.rays, &front, pt.p, pt.n, pt.n, rng, 0, 8, 8, smp, w, lit, table);
+      for (int k = 0; k < 8; ++k)
+        if (lit[k]) batched += (w[k].x + w[k].y + w[k].z) / kSamples;
+    }
+    EXPECT_NEAR(batched / mean[0], 1.0, 0.01) << "point " << pt.p.x << "," << pt.p.y;
+    EXPECT_GT(mean[0], 1.0);
+    EXPECT_NEAR(mean[1] / mean[0], 1.0, 0.01) << "point " << pt.p.x << "," << pt.p.y;
   }
 }
 

@@ -55,10 +55,11 @@ void LightCache::Record::add(std::uint64_t region, std::uint32_t light, float lu
     if (e.region == region && e.light == light) {
       e.sum = saturating_add(e.sum, q);
       ++e.count;
+      e.lit += q > 0 ? 1u : 0u;
       return;
     }
   }
-  entries_.push_back({region, light, q, 1});
+  entries_.push_back({region, light, q, 1, q > 0 ? 1u : 0u});
 }
 
 LightCache::LightCache(const Bounds& bounds, std::size_t lights, float unit)
@@ -96,6 +97,7 @@ void LightCache::learn(std::vector<Record*> records) {
     for (Sum& s : sums) {
       s.sum = fade(s.sum);
       s.count = fade(s.count);
+      s.lit = std::min(fade(s.lit), s.count);
     }
     std::erase_if(sums, [](const Sum& s) { return s.count == 0; });
     it = sums.empty() ? sums_.erase(it) : std::next(it);
@@ -109,8 +111,9 @@ void LightCache::learn(std::vector<Record*> records) {
       if (at != sums.end() && at->light == e.light) {
         at->sum = saturating_add(at->sum, e.sum);
         at->count = saturating_add(at->count, e.count);
+        at->lit = saturating_add(at->lit, e.lit);
       } else {
-        sums.insert(at, {e.light, e.sum, e.count});
+        sums.insert(at, {e.light, e.sum, e.count, e.lit});
       }
     }
   // Each region's table: its kMaxLights lights of the largest mean (ties by index); a region
@@ -121,9 +124,10 @@ void LightCache::learn(std::vector<Record*> records) {
   std::vector<std::pair<double, std::uint32_t>> order;
   for (const auto& [region, sums] : sums_) {
     order.clear();
-    std::uint64_t rays = 0;
+    std::uint64_t rays = 0, lit = 0;
     for (const Sum& s : sums) {
       rays = saturating_add(rays, s.count);
+      lit = saturating_add(lit, s.lit);
       if (s.sum > 0)
         order.push_back({static_cast<double>(s.sum) / static_cast<double>(s.count), s.light});
     }
@@ -147,31 +151,9 @@ void LightCache::learn(std::vector<Record*> records) {
     for (std::size_t k = keep; k < order.size(); ++k) rest += order[k].first;
     t.rest = static_cast<float>(rest);
     t.total = total + t.rest;
+    t.lit_share = rays > 0 ? static_cast<float>(static_cast<double>(lit) / rays) : 1.0f;
     if (t.count > 0 && total > 0.0f) tables_.emplace(region, t);
   }
-}
-
-bool LightCache::pick(LightTree::At& tree, const Table* table, float u, std::uint32_t& index,
-                      float& pmf) {
-  if (table == nullptr) return tree.sample(u, index, pmf);
-  constexpr float a = kTreeShare;
-  // The hierarchy's share of all picks: its own and the table's rest.
-  const float by_tree = a + (1.0f - a) * table->rest_share();
-  const float v = u < a ? 0.0f : std::min((u - a) / (1.0f - a), 0x1.fffffep-1f) * table->total;
-  const float kept = table->cdf[table->count - 1];
-  if (u < a || v >= kept) {
-    // The hierarchy: u stretched over its part, or over the table's rest.
-    const float w = u < a ? u / a : (v - kept) / table->rest;
-    float pt;
-    if (!tree.sample(std::min(w, 0x1.fffffep-1f), index, pt)) return false;
-    pmf = by_tree * pt + (1.0f - a) * table->pmf(index);
-    return true;
-  }
-  int k = 0;
-  while (k + 1 < table->count && table->cdf[k] <= v) ++k;
-  index = table->light[k];
-  pmf = by_tree * tree.pmf(index) + (1.0f - a) * table->pmf(index);
-  return pmf > 0.0f;
 }
 
 }  // namespace irradcast

@@ -309,13 +309,42 @@ bool LightSampler::front_lights(glm::vec3 p, glm::vec3 n, FrontLights& f) const 
   return true;
 }
 
+namespace {
+
+// The lights in front of p as LightCache::mix's defensive sampler: by power among them.
+struct FrontPick {
+  const LightSampler::FrontLights& front;
+  const std::vector<float>& power_pdf;
+  bool sample(float u, std::uint32_t& index, float& pmf) const {
+    index = front.index[pick_index(front.cdf, front.count, u * front.total)];
+    pmf = power_pdf[index] / front.total;
+    return true;
+  }
+  float pmf(std::uint32_t index) const {
+    for (int k = 0; k < front.count; ++k)
+      if (front.index[k] == index) return power_pdf[index] / front.total;
+    return 0.0f;  // not in front: it adds nothing at p
+  }
+};
+
+}  // namespace
+
 inline bool LightSampler::draw_direct(const RayScene& rays, const FrontLights* front,
                                       LightTree::At* at, glm::vec3 p, glm::vec3 n, glm::vec3 ng,
                                       glm::vec3 u, ShadowSample& s, glm::vec3& weight,
                                       const LightCache::Table* learned) const {
   std::size_t li;
   float pdf;
-  if (front) {
+  if (front && learned) {
+    // The lights in front by power, mixed with the region's table (whose lights may not all be in
+    // front of this texel: those add nothing, and triangle_sample says so).
+    if (front->count == 0) return false;
+    FrontPick by_power{*front, pick_pdf_};
+    std::uint32_t i;
+    if (!LightCache::mix(by_power, learned, u.x, i, pdf)) return false;
+    li = i;
+    if (!triangle_sample(rays, li, p, n, ng, glm::vec2(u.y, u.z), s)) return false;
+  } else if (front) {
     if (front->count == 0) return false;
     const int k = pick_index(front->cdf, front->count, u.x * front->total);
     li = front->index[k];
@@ -345,7 +374,8 @@ void LightSampler::direct_samples(const RayScene& rays, const FrontLights* front
                                   glm::vec3 n, glm::vec3 ng, Rng& rng, int first, int count,
                                   int samples, ShadowSample* s, glm::vec3* weight, bool* lit,
                                   const LightCache::Table* learned) const {
-  if (!front || front->count == 0) {  // one sample at a time (none lights p: all false)
+  if (!front || front->count == 0 || learned) {  // one sample at a time (none lights p: all
+                                                 // false; a table: the mixture's picks)
     // The hierarchy's walks at p, shared by its samples.
     std::optional<LightTree::At> at;
     if (!front && !tree_.empty()) at.emplace(tree_, p, n);
@@ -459,6 +489,9 @@ void LightSampler::sample_lanes(const RayScene& rays, glm::vec3 p, glm::vec3 n, 
     lit[k] = (mask >> k) & 1;
     s[k].shadow =
         Ray{{out[0][k], out[1][k], out[2][k]}, {out[3][k], out[4][k], out[5][k]}, 0.0f, out[6][k]};
+    s[k].triangle = li[k];  // the whole sample, as point_sample gives it (learning reads it)
+    s[k].b = glm::vec2(b[0][k], b[1][k]);
+    s[k].factor = out[10][k];
     weight[k] = glm::vec3(out[7][k], out[8][k], out[9][k]);
     if (uniform[k] == 0.0f) {  // an emissive texture or cut-outs: World::emission at the point
       const EmissiveTriangle& e = triangles_[li[k]];

@@ -215,10 +215,12 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, AreaR
   if (culled && front.count == 0) return glm::vec3(0.0f);
   const bool packets = shadow_rays_ == ShadowRays::Packets ||
                        (shadow_rays_ == ShadowRays::Auto && culled && few_lights(front));
-  // Past kMaxFront lights: the hierarchy mixed with what the texel's region has learned.
-  const bool learn = !culled && learned != nullptr;
+  // The lights in front (or past kMaxFront lights the hierarchy) mixed with what the texel's
+  // region has learned, where the pass learns (prepare_light_cache).
+  const bool learn = learned != nullptr;
   const std::uint64_t region = learn ? cache_.region(p, nrm, in.texels.object[i]) : 0;
   const LightCache::Table* table = learn ? cache_.find(region) : nullptr;
+  if (culled && table && table->lit_share > LightCache::kFrontLitShare) table = nullptr;
   // Fewer samples where the region has seen no light (LightCache::samples_in).
   const int n =
       learn ? cache_.samples_in(region, in.params.direct_samples) : in.params.direct_samples;
@@ -281,7 +283,7 @@ const char* shadow_rays_name(ShadowRays mode) {
 
 void EmbreeBackend::prepare_light_cache(const PassInput& in) {
   const std::size_t lights = lights_->emissive_triangles().size();
-  if (!learn_lights_ || lights_->tree().empty()) {
+  if (!learn_lights_ || lights < LightCache::kLearnFrom) {
     cache_ = LightCache();
     return;
   }

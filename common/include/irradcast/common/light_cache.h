@@ -43,6 +43,15 @@ class LightCache {
   // The mixture's share of picks by the hierarchy, where a region has a table (measured:
   // docs/bench/engine.md, "Many lights").
   static constexpr float kTreeShare = 0.25f;
+  // The fewest emissive triangles for which the engine's direct pass learns tables: more than
+  // one rooms:N ceiling panel (8 triangles), so that cornell and rooms:1 pick as before.
+  static constexpr std::size_t kLearnFrom = 9;
+  // A texel that picks among the lights in front of it uses its region's table only where at
+  // most this share of the region's rays brought light: where every light is seen (the inside of
+  // a lamp, a furnace), a table only reshuffles the pick by power, and where an emitter touches
+  // the receiver it thins the pick of the nearby light whose rare close samples carry much of
+  // its light, so that a few updates read dark (EngineFurnace, all faces emitting: 7 % low).
+  static constexpr float kFrontLitShare = 0.75f;
   // A region is dark once this many of its shadow rays (faded as the sums are) brought nothing:
   // the direct pass then takes an eighth of its samples there (dark_samples).
   static constexpr std::uint64_t kDarkRays = 64;
@@ -63,6 +72,8 @@ class LightCache {
     float pmf(std::uint32_t index) const;
     // The share of the table's picks that go to the hierarchy (rest / total).
     float rest_share() const { return rest / total; }
+    // The share of the region's rays (toward any light) that brought light.
+    float lit_share = 1.0f;
   };
 
   // One thread's samples of a pass: per region and light, the summed luminance and the count.
@@ -83,6 +94,7 @@ class LightCache {
       std::uint32_t light;
       std::uint64_t sum;
       std::uint64_t count;
+      std::uint64_t lit;  // rays that brought light
     };
     std::vector<Entry> entries_;
     float scale_;
@@ -124,7 +136,35 @@ class LightCache {
   // (kTreeShare + (1 - kTreeShare) rest_share) p_hierarchy + (1 - kTreeShare) p_table. false: no
   // light picked (none can light p).
   static bool pick(LightTree::At& tree, const Table* table, float u, std::uint32_t& index,
-                   float& pmf);
+                   float& pmf) {
+    return mix(tree, table, u, index, pmf);
+  }
+  // pick() with another sampler of every light that can light p in the hierarchy's place (the
+  // engine's per-texel list of the lights in front, LightSampler::FrontLights): `d` has
+  // sample(u, index, pmf) and pmf(index), and must give every light that can light p a
+  // probability above zero.
+  template <class Defensive>
+  static bool mix(Defensive& d, const Table* table, float u, std::uint32_t& index, float& pmf) {
+    if (table == nullptr) return d.sample(u, index, pmf);
+    constexpr float a = kTreeShare;
+    // The sampler's share of all picks: its own and the table's rest.
+    const float by_d = a + (1.0f - a) * table->rest_share();
+    const float v = u < a ? 0.0f : std::min((u - a) / (1.0f - a), 0x1.fffffep-1f) * table->total;
+    const float kept = table->cdf[table->count - 1];
+    if (u < a || v >= kept) {
+      // The sampler: u stretched over its part, or over the table's rest.
+      const float w = u < a ? u / a : (v - kept) / table->rest;
+      float pd;
+      if (!d.sample(std::min(w, 0x1.fffffep-1f), index, pd)) return false;
+      pmf = by_d * pd + (1.0f - a) * table->pmf(index);
+      return true;
+    }
+    int k = 0;
+    while (k + 1 < table->count && table->cdf[k] <= v) ++k;
+    index = table->light[k];
+    pmf = by_d * d.pmf(index) + (1.0f - a) * table->pmf(index);
+    return pmf > 0.0f;
+  }
 
  private:
   glm::vec3 origin_{0.0f};
@@ -134,7 +174,7 @@ class LightCache {
   // Per region: each light's summed luminance (fixed point) and count of samples, by light.
   struct Sum {
     std::uint32_t light;
-    std::uint64_t sum, count;
+    std::uint64_t sum, count, lit;
   };
   std::unordered_map<std::uint64_t, std::vector<Sum>> sums_;
   std::unordered_map<std::uint64_t, Table> tables_;

@@ -108,11 +108,13 @@ class EmbreeBackend final : public TraceBackend {
   std::uint64_t direct_area_rays() const { return direct_area_rays_.traced; }
   std::uint64_t direct_packet_rays() const { return direct_area_rays_.packed; }
   std::uint64_t direct_occluded_rays() const { return direct_area_rays_.occluded; }
-  // Which lights light each region, learned from the direct passes so far (used past
-  // LightSampler::kMaxFront emissive triangles, where the light hierarchy picks): the next
-  // direct pass picks with it (LightCache::pick). Invalid until a pass has used the hierarchy.
+  // Which lights light each region, learned from the direct passes so far (in scenes of 9
+  // emissive triangles or more): the next direct pass picks with it, mixed with the lights in
+  // front of the texel by power (LightCache::mix) or past LightSampler::kMaxFront with the light
+  // hierarchy (LightCache::pick). Invalid until a pass has learned.
   const LightCache& light_cache() const { return cache_; }
-  // Whether the direct pass learns and uses it (default on; off: the hierarchy alone).
+  // Whether the direct pass learns and uses it (default on; off: the front list or the hierarchy
+  // alone).
   void set_learn_lights(bool on) {
     learn_lights_ = on;
     cache_ = LightCache();
@@ -136,15 +138,15 @@ class EmbreeBackend final : public TraceBackend {
   // pick (LightSampler::direct_samples), their shadow rays traced 8 to a packet
   // (RayScene::occluded8) or one by one (shadow_rays()); the shadow rays it traced are counted
   // in `rays` (traced; packed too when they went in packets; occluded when they ended so).
-  // With the light hierarchy, the texel's samples are picked with its region's learned table
+  // Where the pass learns, the texel's samples are picked with its region's learned table
   // (light_cache()), and what each of its shadow rays brought is added to *learned.
   struct AreaRays {
     std::uint64_t traced = 0, packed = 0, occluded = 0;
   };
   glm::vec3 area_direct(const PassInput& in, std::uint32_t i, AreaRays& rays,
                         LightCache::Record* learned) const;
-  // The light cache for this pass: made for the scene's lights where the hierarchy picks
-  // (anew when their number changed), else left invalid.
+  // The light cache for this pass: made for the scene's lights where it learns (9 emissive
+  // triangles or more; anew when their number changed), else left invalid.
   void prepare_light_cache(const PassInput& in);
   // Whether the lights of `front` belong to at most kPacketLights emissive objects (counted as
   // changes of object along the list: an object listed apart twice counts twice).
