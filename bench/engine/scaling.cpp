@@ -8,6 +8,7 @@
 // adds the series to the JSON and writes bench_update_vs_texels.png and
 // bench_cost_per_texel.png.
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -351,7 +352,12 @@ std::vector<CaseSpec> parse_many(const std::string& text, float density) {
     const std::string variant = colon == std::string::npos ? "" : item.substr(colon + 1);
     if (variant != "lit" && variant != "trim")
       throw std::runtime_error("--many-lights: '" + item + "' is not N:lit or N:trim");
-    out.push_back({std::stoi(item.substr(0, colon)), density, variant});
+    int n = 0;
+    const std::string digits = item.substr(0, colon);
+    const auto [end_n, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), n);
+    if (ec != std::errc() || end_n != digits.data() + digits.size() || n < 1)
+      throw std::runtime_error("--many-lights: '" + item + "' does not start with a number N >= 1");
+    out.push_back({n, density, variant});
     at = end + 1;
   }
   return out;

@@ -50,10 +50,11 @@ class LightCache {
   // most this share of the region's rays brought light: where every light is seen (the inside of
   // a lamp, a furnace), a table only reshuffles the pick by power, and where an emitter touches
   // the receiver it thins the pick of the nearby light whose rare close samples carry much of
-  // its light, so that a few updates read dark (EngineFurnace, all faces emitting: 7 % low).
+  // its light, so that a few updates read dark (EngineFurnace, all faces emitting: the direct pass
+  // 6 % low after four updates).
   static constexpr float kFrontLitShare = 0.75f;
   // A region is dark once this many of its shadow rays (faded as the sums are) brought nothing:
-  // the direct pass then takes an eighth of its samples there (dark_samples).
+  // the direct pass then takes an eighth of its samples there (samples_in).
   static constexpr std::uint64_t kDarkRays = 64;
   // The fixed point's one: a luminance of `unit` (the constructor's) sums as this (2^32: a light
   // 10^6 times dimmer than the brightest, seen at a thousandth of its radiance, still counts).
