@@ -70,8 +70,9 @@ glm::vec3 sample(const LightSampler& l, const RayScene& rays, const LightCache& 
     weight = l.triangle_emitted(s) / l.pick_pdf()[i];
   } else {
     const LightCache::Table* table =
-        way == kLearned && cache.valid() ? cache.find(cache.region(p, n, object)) : nullptr;
-    if (front && table && table->lit_share > LightCache::kFrontLitShare) table = nullptr;
+        way == kLearned && cache.valid()
+            ? cache.table_for(cache.region(p, n, object), front != nullptr)
+            : nullptr;
     if (!l.direct_sample(rays, front, p, n, n, u, s, weight, table)) return glm::vec3(0.0f);
   }
   const std::size_t i = s.triangle;

@@ -219,8 +219,7 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, AreaR
   // region has learned, where the pass learns (prepare_light_cache).
   const bool learn = learned != nullptr;
   const std::uint64_t region = learn ? cache_.region(p, nrm, in.texels.object[i]) : 0;
-  const LightCache::Table* table = learn ? cache_.find(region) : nullptr;
-  if (culled && table && table->lit_share > LightCache::kFrontLitShare) table = nullptr;
+  const LightCache::Table* table = learn ? cache_.table_for(region, culled) : nullptr;
   // Fewer samples where the region has seen no light (LightCache::samples_in).
   const int n =
       learn ? cache_.samples_in(region, in.params.direct_samples) : in.params.direct_samples;

@@ -116,6 +116,13 @@ class LightCache {
   std::uint64_t region(glm::vec3 p, glm::vec3 n, std::uint32_t object = 0) const;
   // Its table; null where nothing has been learned.
   const Table* find(std::uint64_t region) const;
+  // The table a texel's pick mixes with: find(region), but none for a texel that picks among the
+  // lights in front of it (`front_list`) where more than kFrontLitShare of the region's rays
+  // brought light.
+  const Table* table_for(std::uint64_t region, bool front_list) const {
+    const Table* t = find(region);
+    return t != nullptr && front_list && t->lit_share > kFrontLitShare ? nullptr : t;
+  }
   std::size_t regions() const { return tables_.size(); }
   // Whether no light has been seen from the region in kDarkRays rays (none since they faded).
   bool dark(std::uint64_t region) const { return dark_.contains(region); }
