@@ -36,8 +36,8 @@
 #include "irradcast/engine/path_tracer.h"
 #include "irradcast/engine/reference_lightmaps.h"
 #include "irradcast/engine/texel_validity.h"
-#include "irradcast/engine/vulkan_backend.h"
 #include "plot.h"
+#include "vulkan_backend.h"
 
 using namespace irradcast;
 using namespace irradcast::bench;

@@ -28,7 +28,6 @@
 #include <thread>
 #include <vector>
 
-#include "../tests/tls_cert.h"
 #include "bench_util.h"
 #include "irradcast/client/load_generator.h"
 #include "irradcast/common/builtin.h"
@@ -37,6 +36,7 @@
 #include "irradcast/common/progress.h"
 #include "irradcast/service/engine_host.h"
 #include "irradcast/service/net_server.h"
+#include "irradcast/wire/loopback_tls.h"
 
 namespace fs = std::filesystem;
 using namespace irradcast;
@@ -66,8 +66,8 @@ struct Sample {
 };
 
 // One configuration ("plain", "no-watch" or "tls") for one window of `users` users.
-Sample run_config(EngineHost& host, const std::string& c, const test::TlsFiles& tls, int users,
-                  double window_s) {
+Sample run_config(EngineHost& host, const std::string& c, const wire::LoopbackTlsFiles& tls,
+                  int users, double window_s) {
   ServerOptions so;
   so.bind = "127.0.0.1";
   so.port = 0;
@@ -148,7 +148,7 @@ int main(int argc, char** argv) {
     const fs::path dir =
         fs::temp_directory_path() / ("irradcast_bench_hostile_" + std::to_string(getpid()));
     fs::create_directories(dir);
-    const test::TlsFiles tls = test::make_tls_files(dir.string());
+    const wire::LoopbackTlsFiles tls = wire::make_loopback_tls_files(dir.string());
 
     EngineHostOptions ho;
     ho.max_updates = 8;

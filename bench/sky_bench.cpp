@@ -16,8 +16,8 @@
 #include "bench_options.h"
 #include "bench_scene.h"
 #include "bench_util.h"
+#include "embree_backend.h"
 #include "irradcast/common/builtin.h"
-#include "irradcast/engine/embree_backend.h"
 #include "irradcast/engine/engine.h"
 
 using namespace irradcast;

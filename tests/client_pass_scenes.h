@@ -65,16 +65,4 @@ inline float footprint_distance(glm::vec3 p) {
   return std::sqrt(dx * dx + dz * dz);
 }
 
-// sqrt(sum (a - b)^2 / sum b^2) over all pixels and channels.
-inline double rms_relative(const ImageRGB& a, const ImageRGB& b) {
-  double num = 0.0, den = 0.0;
-  for (std::size_t i = 0; i < a.pixels.size(); ++i)
-    for (int c = 0; c < 3; ++c) {
-      const double d = a.pixels[i][c] - b.pixels[i][c];
-      num += d * d;
-      den += static_cast<double>(b.pixels[i][c]) * b.pixels[i][c];
-    }
-  return den > 0.0 ? std::sqrt(num / den) : 0.0;
-}
-
 }  // namespace irradcast::test

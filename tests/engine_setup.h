@@ -10,11 +10,11 @@
 #include <utility>
 #include <vector>
 
+#include "embree_backend.h"
 #include "irradcast/common/camera.h"
 #include "irradcast/common/compositor.h"
 #include "irradcast/common/image.h"
 #include "irradcast/common/progress.h"
-#include "irradcast/engine/embree_backend.h"
 #include "irradcast/engine/engine.h"
 #include "irradcast/engine/path_tracer.h"
 #include "irradcast/engine/prepared_scene.h"

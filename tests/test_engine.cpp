@@ -4,6 +4,7 @@
 #include <cmath>
 #include <string>
 
+#include "embree_backend.h"
 #include "engine_setup.h"
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/builtin.h"
@@ -12,7 +13,6 @@
 #include "irradcast/common/error.h"
 #include "irradcast/common/lights.h"
 #include "irradcast/common/progress.h"
-#include "irradcast/engine/embree_backend.h"
 #include "irradcast/engine/engine.h"
 #include "irradcast/engine/gbuffer.h"
 #include "irradcast/engine/path_tracer.h"

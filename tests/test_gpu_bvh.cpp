@@ -4,8 +4,8 @@
 
 #include <cmath>
 
+#include "gpu_bvh.h"
 #include "irradcast/common/builtin.h"
-#include "irradcast/engine/gpu_bvh.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/sampling.h"
 #include "irradcast/common/world.h"

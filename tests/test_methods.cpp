@@ -6,16 +6,16 @@
 #include <string>
 
 #include "engine_setup.h"
+#include "halton.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
 #include "irradcast/common/compositor.h"
 #include "irradcast/common/error.h"
 #include "irradcast/engine/engine.h"
-#include "irradcast/engine/halton.h"
-#include "irradcast/engine/irradiance_cache.h"
 #include "irradcast/engine/path_tracer.h"
-#include "irradcast/engine/vpl_method.h"
+#include "irradiance_cache.h"
 #include "scene_builders.h"
+#include "vpl_method.h"
 
 using namespace irradcast;
 using test::EngineSetup;

@@ -49,7 +49,7 @@ TEST(Reprojection, MatchesFramesFromScratchAlongACameraMove) {
     ClientFrameStats st;
     ImageRGB a = cached.compose(b.world, *b.rays, b.atlas, b.lightmaps, cam, kW, kH, &st);
     ImageRGB r = scratch.compose(b.world, *b.rays, b.atlas, b.lightmaps, cam, kW, kH);
-    const double e = test::rms_relative(a, r);
+    const double e = compare(a, r).rms_relative;
     // The occlusion itself (1 - visibility), against the from-scratch occlusion.
     for (std::size_t i = 0; i < a.pixels.size(); ++i) {
       const double d = cached.visibility()[i] - scratch.visibility()[i];

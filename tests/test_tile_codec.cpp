@@ -10,12 +10,12 @@
 #include <string>
 #include <vector>
 
+#include "embree_backend.h"
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/lights.h"
 #include "irradcast/common/progress.h"
-#include "irradcast/engine/embree_backend.h"
 #include "irradcast/engine/engine.h"
 #include "irradcast/engine/prepared_scene.h"
 #include "irradcast/wire/frame.h"

@@ -16,8 +16,8 @@
 #include "irradcast/engine/backend_select.h"
 #include "irradcast/engine/path_tracer.h"
 #include "irradcast/engine/reference_lightmaps.h"
-#include "irradcast/engine/vulkan_backend.h"
 #include "scene_builders.h"
+#include "vulkan_backend.h"
 
 using namespace irradcast;
 using test::EngineSetup;

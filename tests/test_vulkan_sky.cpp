@@ -14,8 +14,8 @@
 #include "irradcast/common/lights.h"
 #include "irradcast/common/sampling.h"
 #include "irradcast/common/sky.h"
-#include "irradcast/engine/vulkan_backend.h"
 #include "scene_builders.h"
+#include "vulkan_backend.h"
 
 using namespace irradcast;
 using test::EngineSetup;

@@ -19,6 +19,7 @@
 
 #include "bench_options.h"
 #include "bench_util.h"
+#include "embree_backend.h"
 #include "irradcast/client/client_passes.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
@@ -27,7 +28,6 @@
 #include "irradcast/common/error.h"
 #include "irradcast/common/progress.h"
 #include "irradcast/common/shapes.h"
-#include "irradcast/engine/embree_backend.h"
 #include "irradcast/engine/engine.h"
 #include "irradcast/engine/irradiance_volume_builder.h"
 #include "irradcast/engine/prepared_scene.h"

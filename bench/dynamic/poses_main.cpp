@@ -22,7 +22,7 @@
 #include <thread>
 #include <vector>
 
-#include "../fanout_common.h"
+#include "../fanout/fanout_common.h"
 #include "balls_scene.h"
 #include "bench_util.h"
 #include "irradcast/client/load_generator.h"

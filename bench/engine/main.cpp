@@ -30,12 +30,12 @@
 
 #include "bench_options.h"
 #include "bench_util.h"
+#include "embree_backend.h"
 #include "engine_bench.h"
 #include "engine_options.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/progress.h"
-#include "irradcast/engine/embree_backend.h"
 #include "params_json.h"
 #include "plot.h"
 

@@ -17,11 +17,11 @@
 #include <utility>
 
 #include "bench_util.h"
+#include "embree_backend.h"
 #include "engine_bench.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/sampling.h"
-#include "irradcast/engine/embree_backend.h"
 #include "irradcast/engine/engine.h"
 
 namespace irradcast::bench {

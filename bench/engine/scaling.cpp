@@ -18,9 +18,9 @@
 #include <string>
 
 #include "bench_util.h"
+#include "embree_backend.h"
 #include "engine_bench.h"
 #include "irradcast/common/builtin.h"
-#include "irradcast/engine/embree_backend.h"
 #include "irradcast/engine/engine.h"
 #include "plot.h"
 

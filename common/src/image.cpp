@@ -78,7 +78,7 @@ ImageError compare(const ImageRGB& image, const ImageRGB& reference) {
     throw Error("cannot compare images of different sizes (" + std::to_string(image.width) + "x" +
                 std::to_string(image.height) + " vs " + std::to_string(reference.width) + "x" +
                 std::to_string(reference.height) + ")");
-  double se = 0.0, rel = 0.0, sum_x = 0.0, sum_r = 0.0;
+  double se = 0.0, rel = 0.0, sum_x = 0.0, sum_r = 0.0, sum_r2 = 0.0;
   for (std::size_t i = 0; i < image.pixels.size(); ++i) {
     for (int c = 0; c < 3; ++c) {
       double x = image.pixels[i][c], r = reference.pixels[i][c];
@@ -87,10 +87,12 @@ ImageError compare(const ImageRGB& image, const ImageRGB& reference) {
       rel += d2 / (r * r + 0.01);
       sum_x += x;
       sum_r += r;
+      sum_r2 += r * r;
     }
   }
   double n = 3.0 * static_cast<double>(std::max<std::size_t>(1, image.pixels.size()));
-  return {std::sqrt(se / n), rel / n, sum_r > 0.0 ? sum_x / sum_r : 0.0};
+  return {std::sqrt(se / n), rel / n, sum_r > 0.0 ? sum_x / sum_r : 0.0,
+          sum_r2 > 0.0 ? std::sqrt(se / sum_r2) : 0.0};
 }
 
 }  // namespace irradcast

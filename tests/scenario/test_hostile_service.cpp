@@ -26,9 +26,9 @@
 #include "irradcast/service/net_server.h"
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/frame.h"
+#include "irradcast/wire/loopback_tls.h"
 #include "irradcast/wire/transport.h"
 #include "service_fixture.h"
-#include "tls_cert.h"
 
 using namespace irradcast;
 using asio::ip::tcp;
@@ -441,7 +441,7 @@ TEST(HostileService, AcceptPausesWhenOutOfDescriptors) {
 TEST(HostileService, TlsOnTheProtocolPort) {
   const std::string dir = testing::TempDir() + "/hostile_tls";
   std::filesystem::create_directories(dir);
-  const test::TlsFiles files = test::make_tls_files(dir);
+  const wire::LoopbackTlsFiles files = wire::make_loopback_tls_files(dir);
   EngineHost host(make_cornell_box(), "cornell", quick_host());
   ServerOptions o = loopback();
   o.tls_cert = files.cert;

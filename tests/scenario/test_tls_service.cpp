@@ -20,10 +20,10 @@
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/metrics_text.h"
 #include "irradcast/service/net_server.h"
+#include "irradcast/wire/loopback_tls.h"
 #include "irradcast/wire/transport.h"
 #include "process.h"
 #include "service_fixture.h"
-#include "tls_cert.h"
 
 using namespace irradcast;
 using namespace std::chrono_literals;
@@ -66,7 +66,7 @@ TEST(Tls, TheWholeServiceOverTls) {
   const fs::path dir = fs::path(testing::TempDir()) / "irradcast_tls_service";
   fs::remove_all(dir);
   fs::create_directories(dir);
-  const test::TlsFiles files = test::make_tls_files(dir.string());
+  const wire::LoopbackTlsFiles files = wire::make_loopback_tls_files(dir.string());
 
   EngineHost host(make_cornell_box(), "cornell", test::quick_host(4));
   ServerOptions so = test::loopback();
@@ -180,12 +180,14 @@ TEST(Tls, ExpiredCertificatesAreRefusedAndAReloadReachesNewConnectionsOnly) {
   const fs::path dir = fs::path(::testing::TempDir()) / "tls_reload";
   fs::remove_all(dir);
   for (const char* d : {"a", "b", "old", "young"}) fs::create_directories(dir / d);
-  const test::TlsFiles a = test::make_tls_files((dir / "a").string(), 2);
-  const test::TlsFiles b = test::make_tls_files((dir / "b").string(), 9);
-  const test::TlsFiles old = test::make_tls_files((dir / "old").string(), 3, -7200, -60);
-  const test::TlsFiles young = test::make_tls_files((dir / "young").string(), 4, 3600, 7200);
+  const wire::LoopbackTlsFiles a = wire::make_loopback_tls_files((dir / "a").string(), 2);
+  const wire::LoopbackTlsFiles b = wire::make_loopback_tls_files((dir / "b").string(), 9);
+  const wire::LoopbackTlsFiles old =
+      wire::make_loopback_tls_files((dir / "old").string(), 3, -7200, -60);
+  const wire::LoopbackTlsFiles young =
+      wire::make_loopback_tls_files((dir / "young").string(), 4, 3600, 7200);
   EngineHost host(make_cornell_box(), "cornell", test::quick_host(1));
-  auto options = [&](const test::TlsFiles& f) {
+  auto options = [&](const wire::LoopbackTlsFiles& f) {
     ServerOptions o = test::loopback();
     o.tls_cert = f.cert;
     o.tls_key = f.key;
@@ -204,7 +206,8 @@ TEST(Tls, ExpiredCertificatesAreRefusedAndAReloadReachesNewConnectionsOnly) {
     EXPECT_NE(std::string(e.what()).find("not valid before"), std::string::npos) << e.what();
   }
 
-  const test::TlsFiles live{"", (dir / "cert.pem").string(), (dir / "key.pem").string(), ""};
+  const wire::LoopbackTlsFiles live{"", (dir / "cert.pem").string(), (dir / "key.pem").string(),
+                                    ""};
   copy_over(a.cert, live.cert);
   copy_over(a.key, live.key);
   // (Each certificate is checked against its own CA: the two test CAs share a name.)
@@ -243,7 +246,7 @@ TEST(Tls, SighupReloadsTheCertificateOfARunningServer) {
   const fs::path dir = fs::path(::testing::TempDir()) / "tls_sighup";
   fs::remove_all(dir);
   fs::create_directories(dir);
-  const test::TlsFiles f = test::make_tls_files(dir.string(), 5, -3600, 3 * 86400);
+  const wire::LoopbackTlsFiles f = wire::make_loopback_tls_files(dir.string(), 5, -3600, 3 * 86400);
   test::Process server(test::command(IRRADCAST_SERVER_EXE,
                                      "--scene cornell --bind 127.0.0.1 --port 0 --threads 1 "
                                      "--texels-per-scene 32 --max-updates 1 --io-threads 1 "

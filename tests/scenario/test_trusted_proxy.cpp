@@ -21,11 +21,11 @@
 #include "irradcast/service/engine_host.h"
 #include "irradcast/service/net_server.h"
 #include "irradcast/wire/edit_message.h"
+#include "irradcast/wire/loopback_tls.h"
 #include "process.h"
 #include "proxy_header.h"
 #include "service_fixture.h"
 #include "testdata.h"
-#include "tls_cert.h"
 #include "websocket_client.h"
 
 using namespace irradcast;
@@ -286,7 +286,7 @@ TEST(TrustedProxy, ProxyHeaderBeforeTls) {
   const auto dir = std::filesystem::temp_directory_path() / "irradcast_proxy_tls";
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
-  const test::TlsFiles files = test::make_tls_files(dir.string());
+  const wire::LoopbackTlsFiles files = wire::make_loopback_tls_files(dir.string());
   EngineHost host(make_cornell_box(), "cornell", test::quick_host());
   ServerOptions o = behind_proxy(1);
   o.web_proxy_protocol = true;

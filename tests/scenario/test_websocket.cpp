@@ -13,8 +13,8 @@
 #include "irradcast/service/net_server.h"
 #include "irradcast/service/web_origin.h"
 #include "irradcast/web/assets.h"
+#include "irradcast/wire/loopback_tls.h"
 #include "service_fixture.h"
-#include "tls_cert.h"
 #include "websocket_client.h"
 
 using namespace irradcast;
@@ -294,7 +294,7 @@ TEST(WebSocket, TheWebPortUsesTheServersTls) {
       std::filesystem::path(testing::TempDir()) / "irradcast_websocket_tls";
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
-  const test::TlsFiles files = test::make_tls_files(dir.string());
+  const wire::LoopbackTlsFiles files = wire::make_loopback_tls_files(dir.string());
   EngineHost host(make_cornell_box(), "cornell", test::quick_host(1));
   ServerOptions so = web_loopback();
   so.tls_cert = files.cert;

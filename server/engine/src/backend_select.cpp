@@ -2,11 +2,11 @@
 // tracer's ReferenceRenderer, by the same rule.
 #include "irradcast/engine/backend_select.h"
 
+#include "embree_backend.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
-#include "irradcast/engine/embree_backend.h"
-#include "irradcast/engine/vulkan_backend.h"
 #include "reference_renderers.h"
+#include "vulkan_backend.h"
 
 namespace irradcast {
 

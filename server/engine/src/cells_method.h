@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "irradcast/engine/indirect_method.h"
+#include "indirect_method.h"
 #include "irradcast/engine/trace_backend.h"
 
 namespace irradcast {

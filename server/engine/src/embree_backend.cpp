@@ -1,4 +1,4 @@
-#include "irradcast/engine/embree_backend.h"
+#include "embree_backend.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>

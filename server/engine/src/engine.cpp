@@ -8,6 +8,7 @@
 #include <cmath>
 #include <utility>
 
+#include "indirect_method.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/sampling.h"
@@ -83,6 +84,10 @@ Engine::Engine(const World& world, const Atlas& atlas, const std::vector<TexelGB
 }
 
 Engine::~Engine() = default;
+
+std::string Engine::method_summary() const {
+  return method_->summary();
+}
 
 void Engine::build_texels(const std::vector<TexelGBuffer>& gbuffers) {
   texels_ = SurfaceTexels{};

@@ -1,4 +1,4 @@
-#include "irradcast/engine/gpu_bvh.h"
+#include "gpu_bvh.h"
 
 #include <embree3/rtcore.h>
 

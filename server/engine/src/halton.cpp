@@ -1,4 +1,4 @@
-#include "irradcast/engine/halton.h"
+#include "halton.h"
 
 #include <cmath>
 

@@ -1,10 +1,10 @@
 // The factory of the indirect methods (indirect_method.h).
-#include "irradcast/engine/indirect_method.h"
+#include "indirect_method.h"
 
 #include "cells_method.h"
 #include "irradcast/common/error.h"
-#include "irradcast/engine/irradiance_cache.h"
-#include "irradcast/engine/vpl_method.h"
+#include "irradiance_cache.h"
+#include "vpl_method.h"
 
 namespace irradcast {
 

@@ -1,4 +1,4 @@
-#include "irradcast/engine/irradiance_cache.h"
+#include "irradiance_cache.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>

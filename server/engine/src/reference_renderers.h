@@ -8,7 +8,7 @@
 
 #include "irradcast/engine/path_tracer.h"
 #include "irradcast/engine/reference.h"
-#include "irradcast/engine/vulkan_backend.h"
+#include "vulkan_backend.h"
 
 namespace irradcast {
 

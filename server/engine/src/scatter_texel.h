@@ -9,8 +9,8 @@
 
 #include <cstdint>
 
+#include "embree_backend.h"
 #include "irradcast/common/hit_shader.h"
-#include "irradcast/engine/embree_backend.h"
 
 namespace irradcast::embree_sampling {
 

@@ -1,4 +1,4 @@
-#include "irradcast/engine/vpl_method.h"
+#include "vpl_method.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -8,8 +8,8 @@
 #include <chrono>
 #include <cmath>
 
+#include "halton.h"
 #include "irradcast/common/sampling.h"
-#include "irradcast/engine/halton.h"
 
 namespace irradcast {
 namespace {

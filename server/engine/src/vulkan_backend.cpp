@@ -1,7 +1,7 @@
 // The Vulkan backend's TraceBackend side (vulkan_backend.h): construction, the scene change,
 // the device description, and the direct, probe gather and scatter passes, and the probe bounce
 // with the probes' running means resident on the device.
-#include "irradcast/engine/vulkan_backend.h"
+#include "vulkan_backend.h"
 
 #include <string>
 

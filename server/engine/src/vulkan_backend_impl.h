@@ -19,7 +19,7 @@
 #include <utility>
 #include <vector>
 
-#include "irradcast/engine/vulkan_backend.h"
+#include "vulkan_backend.h"
 #include "vulkan_handles.h"
 
 namespace irradcast {

@@ -7,10 +7,10 @@
 #include <cstring>
 #include <vector>
 
+#include "gpu_bvh.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/lights.h"
 #include "irradcast/common/sky.h"
-#include "irradcast/engine/gpu_bvh.h"
 
 namespace irradcast {
 

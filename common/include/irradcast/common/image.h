@@ -34,11 +34,14 @@ void write_png(const std::string& path, int width, int height,
 
 // Error of `image` against `reference` (same size), over all pixels and channels:
 // rmse = sqrt(mean((x - r)^2)); relative MSE = mean((x - r)^2 / (r^2 + 0.01)); mean ratio =
-// mean(x) / mean(r) (0 for a black reference): a bias, where the other two mix bias and noise.
+// mean(x) / mean(r) (0 for a black reference): a bias, where the other two mix bias and noise;
+// RMS relative = sqrt(sum (x - r)^2 / sum r^2) (0 for a black reference): the error's energy
+// against the reference's, which bright pixels dominate.
 struct ImageError {
   double rmse = 0.0;
   double rel_mse = 0.0;
   double mean_ratio = 0.0;
+  double rms_relative = 0.0;
 };
 ImageError compare(const ImageRGB& image, const ImageRGB& reference);
 

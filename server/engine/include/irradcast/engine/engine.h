@@ -13,17 +13,18 @@
 
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/lightmap.h"
+#include "irradcast/common/lights.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/world.h"
 #include "irradcast/engine/engine_params.h"
 #include "irradcast/engine/gbuffer.h"
-#include "irradcast/engine/indirect_method.h"
 #include "irradcast/engine/pass_data.h"
 #include "irradcast/engine/trace_backend.h"
 
 namespace irradcast {
 
-struct DenoiseStats;  // denoise.h
+struct DenoiseStats;   // denoise.h
+class IndirectMethod;  // the engine's own (server/engine/src/indirect_method.h)
 
 // One pass's cost as the backend reported it.
 using PassTiming = PassResult;
@@ -75,7 +76,7 @@ class Engine {
   std::size_t texel_count() const { return texels_.size(); }
   const TraceBackend& backend() const { return *backend_; }
   // The indirect method's state in one line ("" for radiance cells).
-  std::string method_summary() const { return method_->summary(); }
+  std::string method_summary() const;
   const IndirectMethod* method() const { return method_.get(); }
 
   // Total irradiance E = E_direct + sum of the bounces, per object, dilated into the gutters.

@@ -1,5 +1,5 @@
-// What irradcast-bench-fanout's two modes share (bench/fanout_bench.cpp: users of one
-// irradcast-server; bench/fanout_gateways.cpp: users spread over irradcast-gateways fed through
+// What irradcast-bench-fanout's two modes share (bench/fanout/main.cpp: users of one
+// irradcast-server; bench/fanout/gateways.cpp: users spread over irradcast-gateways fed through
 // NATS): the options, child processes on loopback, CPU time of a process's threads by thread
 // name (/proc/PID/task/*/stat), the warm-up of the origin's engine and one run of simulated thin
 // users (irradcast-load's generator, in the bench's process).
@@ -85,10 +85,10 @@ nlohmann::json report_header(const Options& o);
 plot::Series series(const std::string& label, plot::Color color, bool points);
 std::string ms(double v);
 
-// The gateway mode (bench/fanout_gateways.cpp).
+// The gateway mode (bench/fanout/gateways.cpp).
 void run_gateway_bench(const Options& o);
 
-// --fresh (bench/fanout_fresh.cpp): N thin users joining a fresh server at once.
+// --fresh (bench/fanout/fresh.cpp): N thin users joining a fresh server at once.
 struct FreshOptions {
   int users = 128;
   double duration_s = 20.0;

@@ -1,7 +1,6 @@
-// A certificate authority and a server certificate made at test time (OpenSSL, EC P-256), as
-// PEM files in a folder: ca.pem (the CA a client trusts), cert.pem and key.pem (the server's,
-// for 127.0.0.1 and localhost), and other_ca.pem (a CA that signed nothing the server has).
-#pragma once
+// Certificates for TLS on loopback (loopback_tls.h): OpenSSL's key generation, X.509 v3
+// extensions and PEM writing.
+#include "irradcast/wire/loopback_tls.h"
 
 #include <openssl/ec.h>
 #include <openssl/evp.h>
@@ -12,22 +11,21 @@
 #include <cstdio>
 #include <memory>
 #include <stdexcept>
-#include <string>
 
-namespace irradcast::test {
+namespace irradcast::wire {
 
-namespace tls_detail {
+namespace {
 
 using Key = std::unique_ptr<EVP_PKEY, decltype(&EVP_PKEY_free)>;
 using Cert = std::unique_ptr<X509, decltype(&X509_free)>;
 
-inline Key make_key() {
+Key make_key() {
   EVP_PKEY* k = EVP_EC_gen("P-256");
   if (!k) throw std::runtime_error("EVP_EC_gen failed");
   return Key(k, EVP_PKEY_free);
 }
 
-inline void add_ext(X509* cert, X509* issuer, int nid, const char* value) {
+void add_ext(X509* cert, X509* issuer, int nid, const char* value) {
   X509V3_CTX ctx;
   X509V3_set_ctx_nodb(&ctx);
   X509V3_set_ctx(&ctx, issuer, cert, nullptr, nullptr, 0);
@@ -39,8 +37,8 @@ inline void add_ext(X509* cert, X509* issuer, int nid, const char* value) {
 
 // Signed by issuer_key (self-signed when issuer is null).
 // Valid from `from_s` to `until_s` seconds from now.
-inline Cert make_cert(EVP_PKEY* key, const char* cn, X509* issuer, EVP_PKEY* issuer_key, bool ca,
-                      long serial, long from_s = -3600, long until_s = 3600L * 24 * 30) {
+Cert make_cert(EVP_PKEY* key, const char* cn, X509* issuer, EVP_PKEY* issuer_key, bool ca,
+               long serial, long from_s = -3600, long until_s = 3600L * 24 * 30) {
   Cert cert(X509_new(), X509_free);
   X509_set_version(cert.get(), 2);
   ASN1_INTEGER_set(X509_get_serialNumber(cert.get()), serial);
@@ -65,38 +63,30 @@ inline Cert make_cert(EVP_PKEY* key, const char* cn, X509* issuer, EVP_PKEY* iss
   return cert;
 }
 
-inline void write_pem(const std::string& path, X509* cert) {
+void write_pem(const std::string& path, X509* cert) {
   FILE* f = std::fopen(path.c_str(), "w");
   if (!f) throw std::runtime_error("cannot write " + path);
   PEM_write_X509(f, cert);
   std::fclose(f);
 }
 
-inline void write_pem(const std::string& path, EVP_PKEY* key) {
+void write_pem(const std::string& path, EVP_PKEY* key) {
   FILE* f = std::fopen(path.c_str(), "w");
   if (!f) throw std::runtime_error("cannot write " + path);
   PEM_write_PrivateKey(f, key, nullptr, nullptr, 0, nullptr, nullptr);
   std::fclose(f);
 }
 
-}  // namespace tls_detail
+}  // namespace
 
-struct TlsFiles {
-  std::string ca, cert, key, other_ca;
-};
-
-// Writes the files into dir (which must exist): a CA, a server certificate for 127.0.0.1 and
-// localhost with `serial`, valid from `from_s` to `until_s` seconds from now (30 days by default),
-// its key, and another CA.
-inline TlsFiles make_tls_files(const std::string& dir, long serial = 2, long from_s = -3600,
-                               long until_s = 3600L * 24 * 30) {
-  using namespace tls_detail;
+LoopbackTlsFiles make_loopback_tls_files(const std::string& dir, long serial, long from_s,
+                                         long until_s) {
   Key ca_key = make_key(), server_key = make_key(), other_key = make_key();
   Cert ca = make_cert(ca_key.get(), "irradcast test CA", nullptr, nullptr, true, 1);
   Cert server = make_cert(server_key.get(), "localhost", ca.get(), ca_key.get(), false, serial,
                           from_s, until_s);
   Cert other = make_cert(other_key.get(), "irradcast other CA", nullptr, nullptr, true, 3);
-  TlsFiles f{dir + "/ca.pem", dir + "/cert.pem", dir + "/key.pem", dir + "/other_ca.pem"};
+  LoopbackTlsFiles f{dir + "/ca.pem", dir + "/cert.pem", dir + "/key.pem", dir + "/other_ca.pem"};
   write_pem(f.ca, ca.get());
   write_pem(f.cert, server.get());
   write_pem(f.key, server_key.get());
@@ -104,4 +94,4 @@ inline TlsFiles make_tls_files(const std::string& dir, long serial = 2, long fro
   return f;
 }
 
-}  // namespace irradcast::test
+}  // namespace irradcast::wire

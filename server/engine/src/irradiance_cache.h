@@ -22,8 +22,8 @@
 #include <string>
 #include <vector>
 
+#include "indirect_method.h"
 #include "irradcast/common/sampling.h"
-#include "irradcast/engine/indirect_method.h"
 
 namespace irradcast {
 

@@ -22,7 +22,7 @@
 #include <string>
 #include <vector>
 
-#include "irradcast/engine/indirect_method.h"
+#include "indirect_method.h"
 
 namespace irradcast {
 

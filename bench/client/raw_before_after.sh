@@ -4,7 +4,7 @@
 # then with AFTER's (which writes docs/images/client_bench_raw_720p.json and .png), then a table of
 # both runs' plain / raw ratios and frame hashes. Each run interleaves its scenes and configurations
 # repeat by repeat and keeps the fastest of 3.
-#   bench/client_raw_before_after.sh BEFORE/irradcast-bench-client AFTER/irradcast-bench-client
+#   bench/client/raw_before_after.sh BEFORE/irradcast-bench-client AFTER/irradcast-bench-client
 set -eu
 before=$1 after=$2
 tmp=$(mktemp -d)

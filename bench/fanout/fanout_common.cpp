@@ -1,4 +1,4 @@
-// irradcast-bench-fanout's shared pieces (bench/fanout_common.h).
+// irradcast-bench-fanout's shared pieces (bench/fanout/fanout_common.h).
 #include "fanout_common.h"
 
 #include <fcntl.h>

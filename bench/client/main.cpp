@@ -6,7 +6,7 @@
 //   ssao        SSAO on every pixel every frame (--ssao)
 //   ssao+reproject SSAO through the reverse-reprojection cache (--ssao --reproject)
 //   raw         the same primary rays through raw Embree rtcIntersect16, no shading
-//               (client_raw_rays.h): plain / raw is the compositor's overhead
+//               (raw_rays.h): plain / raw is the compositor's overhead
 // Several scenes (--scene a,b,c) are measured interleaved too, repeat by repeat. Prints per
 // scene and configuration the frame times (trace, SSAO, reprojection, resolve), the ratios, the
 // fraction of pixels whose SSAO was reused, and the RMS relative difference between the
@@ -32,31 +32,30 @@
 
 #include "bench_scene.h"
 #include "bench_util.h"
-#include "client_pass_scenes.h"
-#include "client_raw_rays.h"
+#include "embree_backend.h"
 #include "irradcast/client/camera_path.h"
 #include "irradcast/client/client_passes.h"
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/camera.h"
 #include "irradcast/common/compositor.h"
 #include "irradcast/common/error.h"
+#include "irradcast/common/image.h"
 #include "irradcast/common/lights.h"
 #include "irradcast/common/progress.h"
 #include "irradcast/common/ray_scene.h"
 #include "irradcast/common/tonemap.h"
 #include "irradcast/common/world.h"
-#include "irradcast/engine/embree_backend.h"
 #include "irradcast/engine/engine.h"
 #include "irradcast/engine/engine_params.h"
 #include "irradcast/engine/gbuffer.h"
 #include "irradcast/engine/texel_validity.h"
 #include "plot.h"
+#include "raw_rays.h"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 using namespace irradcast;
 using irradcast::bench::upper_median;
-using irradcast::test::rms_relative;
 
 namespace {
 
@@ -199,7 +198,7 @@ Runs measure(const Options& o, std::deque<ClientScene>& scenes, const std::vecto
               hash_image(images[c], runs[0][s][static_cast<std::size_t>(c)].image_hash);
         if (r == 0 && !images[kSsao].pixels.empty() && !images[kReproject].pixels.empty())
           cs.rms_per_frame[static_cast<std::size_t>(f)] =
-              rms_relative(images[kReproject], images[kSsao]);
+              compare(images[kReproject], images[kSsao]).rms_relative;
       }
     }
   return runs;

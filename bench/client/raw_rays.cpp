@@ -1,4 +1,4 @@
-#include "client_raw_rays.h"
+#include "raw_rays.h"
 
 #include <embree3/rtcore.h>
 #include <tbb/blocked_range2d.h>
