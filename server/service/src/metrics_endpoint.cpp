@@ -16,6 +16,7 @@
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/wire/transport.h"
+#include "listener.h"
 #include "run_io.h"
 
 namespace irradcast {
@@ -29,11 +30,6 @@ namespace {
 // closing with unread request bytes does not reset the connection before the client read the
 // response).
 constexpr std::chrono::milliseconds kLinger{1000};
-// After an accept failed for want of descriptors or memory, the next try waits this long (the
-// failed connection stays in the kernel's queue, so trying again at once would spin).
-constexpr std::chrono::milliseconds kAcceptRetry{50};
-// At most one log line per this interval about failing accepts.
-constexpr std::chrono::seconds kAcceptWarnEvery{10};
 
 class Connection;
 
@@ -162,8 +158,7 @@ struct MetricsEndpoint::Impl {
       : body(std::move(b)),
         options(std::move(o)),
         io(1),
-        acceptor(io),
-        accept_retry(io),
+        listener(io, {"metrics", "--metrics-bind", options.listen_backlog, false, {}}),
         max_open(options.max_connections) {
     if (options.tls_cert.empty() != options.tls_key.empty())
       throw Error("metrics: TLS needs both a certificate and a key");
@@ -175,8 +170,7 @@ struct MetricsEndpoint::Impl {
   MetricsEndpointOptions options;
   std::unique_ptr<wire::ServerTls> tls;  // null: plain HTTP
   asio::io_context io;
-  tcp::acceptor acceptor;
-  asio::steady_timer accept_retry;
+  Listener listener;
   std::optional<asio::executor_work_guard<asio::io_context::executor_type>> work;
   std::thread thread;
   std::uint32_t max_open;  // options.max_connections, lowered by the descriptor limit
@@ -188,14 +182,11 @@ struct MetricsEndpoint::Impl {
   std::array<ConnectionList, kPhases> open;  // by phase, oldest first
   std::shared_ptr<const std::string> cached;
   Clock::time_point cached_at;
-  Clock::time_point last_accept_warning;
-  std::uint64_t accept_errors_unlogged = 0;
 
   std::atomic<std::uint64_t> connections{0}, open_now{0}, dropped{0}, ok{0}, bad{0}, timeouts{0},
       collections{0};
 
-  void accept();
-  void on_accept_error(std::error_code ec);
+  void on_accept(tcp::socket socket);
   // Closes one connection to make room for a new one.
   void drop_one();
   // The body function's text, reused while younger than cache_for. Throws what the body throws.
@@ -395,43 +386,11 @@ class Connection : public std::enable_shared_from_this<Connection> {
 
 }  // namespace
 
-void MetricsEndpoint::Impl::accept() {
-  acceptor.async_accept([this](std::error_code ec, tcp::socket socket) {
-    if (stopping) return;
-    if (ec) {
-      on_accept_error(ec);
-      return;
-    }
-    ++connections;
-    if (open_now.load() >= max_open) drop_one();
-    std::make_shared<Connection>(this, std::move(socket))->start();
-    accept();
-  });
-}
-
-void MetricsEndpoint::Impl::on_accept_error(std::error_code ec) {
-  const auto now = Clock::now();
-  if (now - last_accept_warning >= kAcceptWarnEvery) {
-    std::string line = "accept: " + ec.message();
-    if (accept_errors_unlogged > 0)
-      line += " (" + std::to_string(accept_errors_unlogged) + " more since the last such line)";
-    log::warn("metrics", line);
-    last_accept_warning = now;
-    accept_errors_unlogged = 0;
-  } else {
-    ++accept_errors_unlogged;
-  }
-  const bool out_of_resources = ec == asio::error::no_descriptors ||
-                                ec == std::errc::too_many_files_open_in_system ||
-                                ec == asio::error::no_buffer_space || ec == asio::error::no_memory;
-  if (!out_of_resources) {
-    accept();
-    return;
-  }
-  accept_retry.expires_after(kAcceptRetry);
-  accept_retry.async_wait([this](std::error_code e) {
-    if (!e && !stopping) accept();
-  });
+void MetricsEndpoint::Impl::on_accept(tcp::socket socket) {
+  if (stopping) return;
+  ++connections;
+  if (open_now.load() >= max_open) drop_one();
+  std::make_shared<Connection>(this, std::move(socket))->start();
 }
 
 void MetricsEndpoint::Impl::drop_one() {
@@ -472,17 +431,7 @@ MetricsEndpoint::~MetricsEndpoint() {
 void MetricsEndpoint::start() {
   Impl& im = *impl_;
   if (im.thread.joinable() || im.stopped) throw Error("metrics endpoint: started twice");
-  std::error_code ec;
-  const asio::ip::address address = asio::ip::make_address(im.options.bind, ec);
-  if (ec) throw Error("--metrics-bind: '" + im.options.bind + "' is not an IP address");
-  const tcp::endpoint endpoint(address, im.options.port);
-  im.acceptor.open(endpoint.protocol(), ec);
-  if (!ec) im.acceptor.set_option(tcp::acceptor::reuse_address(true), ec);
-  if (!ec) im.acceptor.bind(endpoint, ec);
-  if (!ec) im.acceptor.listen(im.options.listen_backlog, ec);
-  if (ec)
-    throw Error("metrics: cannot listen on " + im.options.bind + ":" +
-                std::to_string(im.options.port) + ": " + ec.message());
+  im.listener.listen(im.options.bind, im.options.port);
   // The endpoint takes at most a quarter of the process's descriptors: the rest are the game
   // server's.
   rlimit limit{};
@@ -498,7 +447,7 @@ void MetricsEndpoint::start() {
   }
   im.max_open_applied = im.max_open;
   im.work.emplace(asio::make_work_guard(im.io));
-  im.accept();
+  im.listener.start([&im](tcp::socket socket) { im.on_accept(std::move(socket)); });
   im.thread = std::thread([&im] { run_io(im.io, "metrics", "handler"); });
   log::info("metrics", "metrics on " + url());
 }
@@ -509,9 +458,7 @@ void MetricsEndpoint::stop() {
   if (!im.thread.joinable()) return;
   asio::post(im.io, [&im] {
     im.stopping = true;
-    std::error_code ec;
-    im.acceptor.close(ec);
-    im.accept_retry.cancel();
+    im.listener.close();
     // close() erases from the lists: iterate over copies.
     for (const ConnectionList& list : im.open) {
       const ConnectionList copy = list;
@@ -523,9 +470,7 @@ void MetricsEndpoint::stop() {
 }
 
 std::uint16_t MetricsEndpoint::port() const {
-  std::error_code ec;
-  const auto ep = impl_->acceptor.local_endpoint(ec);
-  return ec ? impl_->options.port : ep.port();
+  return impl_->listener.port();
 }
 
 bool MetricsEndpoint::reload_tls() {

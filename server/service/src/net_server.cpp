@@ -1,7 +1,7 @@
-// The network server: the accept loops of the protocol port and the web port (admission by
-// PeerTable, a refusal frame or HTTP reply for the rest),
-// the I/O threads, the engine's listeners that fan out to the sessions (session.h), shutdown and
-// the stats. Each session's protocol is in session_protocol.h.
+// The network server: the protocol port and the web port (their accept loops: listener.h;
+// admission by PeerTable, a refusal frame or HTTP reply for the rest), the I/O threads, the
+// engine's listeners that fan out to the sessions (session.h), shutdown and the stats. Each
+// session's protocol is in session_protocol.h.
 #include "irradcast/service/net_server.h"
 
 #include <asio.hpp>
@@ -25,6 +25,7 @@
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/frame.h"
 #include "irradcast/wire/transport.h"
+#include "listener.h"
 #include "peer_table.h"
 #include "run_io.h"
 #include "session.h"
@@ -44,10 +45,8 @@ struct Server::Impl {
         options(std::move(o)),
         peers(options),
         proxies(options.trusted_proxies),
-        acceptor(io),
-        http_acceptor(io),
-        accept_timer(io),
-        http_accept_timer(io),
+        port_listener(io, listener_options()),
+        web_listener(io, listener_options()),
         session_server{
             SessionContext{host, options, counters, peers, [this] { return stats(); },
                            std::min(options.max_frame,
@@ -63,11 +62,8 @@ struct Server::Impl {
   TrustedProxies proxies;                // --trusted-proxy
   std::unique_ptr<wire::ServerTls> tls;  // null: plain TCP
   asio::io_context io;
-  tcp::acceptor acceptor;
-  tcp::acceptor http_acceptor;      // the web port (ServerOptions::http_port); closed without one
-  asio::steady_timer accept_timer;  // the pause after accept() ran out of descriptors
-  asio::steady_timer http_accept_timer;  // ... on the web port
-  std::chrono::milliseconds accept_backoff{0};
+  Listener port_listener;
+  Listener web_listener;  // the web port (ServerOptions::http_port); not open without one
   std::vector<std::thread> threads;
   std::optional<asio::executor_work_guard<asio::io_context::executor_type>> work;
   std::atomic<bool> stopping{false};
@@ -96,11 +92,12 @@ struct Server::Impl {
   int pose_listener = 0;                                             // on host.poses()
   std::atomic<std::chrono::steady_clock::rep> last_pose_fan_out{0};  // time_since_epoch
 
-  void listen(tcp::acceptor& a, std::uint16_t port);
-  void accept(bool web);
-  void on_accept(std::error_code ec, tcp::socket socket, bool web);
+  Listener::Options listener_options() {
+    return {"server", "--bind", asio::socket_base::max_listen_connections, true,
+            [this] { return std::to_string(client_count()) + " sessions"; }};
+  }
+  void accept(Listener& listener, bool web);
   void admit(tcp::socket socket, bool web);
-  void pause_accepting(const std::error_code& ec, bool web);
   void refuse(tcp::socket& socket, const std::string& message, bool web);
   void on_publish(const std::vector<std::uint32_t>& tiles);
   void fan_out();
@@ -118,15 +115,6 @@ struct Server::Impl {
   }
   ServerStats stats() const;
 };
-
-namespace {
-
-bool out_of_descriptors(const std::error_code& ec) {
-  return ec == asio::error::no_descriptors || ec.value() == ENFILE ||
-         ec == asio::error::no_buffer_space || ec == asio::error::no_memory;
-}
-
-}  // namespace
 
 void check_trusted_proxies(const std::vector<std::string>& cidrs) {
   TrustedProxies{cidrs};
@@ -150,33 +138,16 @@ void Server::Impl::refuse(tcp::socket& socket, const std::string& message, bool 
   socket.close(ignored);
 }
 
-void Server::Impl::accept(bool web) {
-  (web ? http_acceptor : acceptor)
-      .async_accept(asio::make_strand(io), [this, web](std::error_code ec, tcp::socket socket) {
-        on_accept(ec, std::move(socket), web);
-      });
-}
-
-void Server::Impl::on_accept(std::error_code ec, tcp::socket socket, bool web) {
-  if (stopping) return;
-  if (!ec) {
-    if (accept_backoff.count() > 0) {
-      log::warn("server", "accepting connections again");
-      accept_backoff = std::chrono::milliseconds(0);
-    }
-    ++counters.connections;
-    admit(std::move(socket), web);
-  } else if (ec == asio::error::operation_aborted) {
-    return;
-  } else {
-    ++counters.accept_errors;
-    if (out_of_descriptors(ec)) {
-      pause_accepting(ec, web);
-      return;
-    }
-    log::warn("server", "accept: " + ec.message());
-  }
-  accept(web);
+// Connections to a port: counted, then admitted or refused; failed accepts counted (the listener
+// pauses on a lack of descriptors).
+void Server::Impl::accept(Listener& listener, bool web) {
+  listener.start(
+      [this, web](tcp::socket socket) {
+        if (stopping) return;
+        ++counters.connections;
+        admit(std::move(socket), web);
+      },
+      [this] { ++counters.accept_errors; });
 }
 
 // A new connection: a session if the peer table admits it, a refusal otherwise.
@@ -219,23 +190,6 @@ void Server::Impl::admit(tcp::socket socket, bool web) {
       break;
   }
   refuse(socket, peers.refusal(admission), web);
-}
-
-// Out of file descriptors (or kernel memory): the pending connection stays in the backlog.
-// Pause accepting, doubling the pause up to 1 s, and say so once.
-// The two ports share the length of the pause (they run out of the same descriptors), each
-// with its own timer.
-void Server::Impl::pause_accepting(const std::error_code& ec, bool web) {
-  if (accept_backoff.count() == 0)
-    log::warn("server", "accept: " + ec.message() + " (" + std::to_string(client_count()) +
-                            " sessions); pausing accepts until descriptors are free");
-  accept_backoff = std::clamp(accept_backoff * 2, std::chrono::milliseconds(10),
-                              std::chrono::milliseconds(1000));
-  asio::steady_timer& timer = web ? http_accept_timer : accept_timer;
-  timer.expires_after(accept_backoff);
-  timer.async_wait([this, web](std::error_code tec) {
-    if (!tec && !stopping) accept(web);
-  });
 }
 
 void Server::Impl::on_publish(const std::vector<std::uint32_t>& tiles) {
@@ -358,24 +312,10 @@ Server::~Server() {
   stop();
 }
 
-void Server::Impl::listen(tcp::acceptor& a, std::uint16_t port) {
-  std::error_code ec;
-  asio::ip::address address = asio::ip::make_address(options.bind, ec);
-  if (ec) throw Error("--bind: '" + options.bind + "' is not an IP address");
-  tcp::endpoint endpoint(address, port);
-  a.open(endpoint.protocol(), ec);
-  if (!ec) a.set_option(tcp::acceptor::reuse_address(true), ec);
-  if (!ec) a.bind(endpoint, ec);
-  if (!ec) a.listen(asio::socket_base::max_listen_connections, ec);
-  if (ec)
-    throw Error("cannot listen on " + options.bind + ":" + std::to_string(port) + ": " +
-                ec.message());
-}
-
 void Server::start() {
   Impl& im = *impl_;
-  im.listen(im.acceptor, im.options.port);
-  if (im.options.http_port) im.listen(im.http_acceptor, *im.options.http_port);
+  im.port_listener.listen(im.options.bind, im.options.port);
+  if (im.options.http_port) im.web_listener.listen(im.options.bind, *im.options.http_port);
   std::weak_ptr<Impl> weak = impl_;
   im.host.set_listener([weak](const std::vector<std::uint32_t>& tiles) {
     if (auto s = weak.lock()) s->on_publish(tiles);
@@ -388,8 +328,8 @@ void Server::start() {
       if (auto s = weak.lock()) s->on_poses();
     });
   im.work.emplace(asio::make_work_guard(im.io));
-  im.accept(false);
-  if (im.options.http_port) im.accept(true);
+  im.accept(im.port_listener, false);
+  if (im.options.http_port) im.accept(im.web_listener, true);
   if (im.options.presence) {
     im.presence->set_height(im.options.presence_height);
     asio::post(im.io, [&im] { im.presence_tick(); });
@@ -414,11 +354,8 @@ void Server::stop() {
     poses->remove_listener(std::exchange(im.pose_listener, 0));
   if (im.threads.empty()) return;
   asio::post(im.io, [&im] {
-    std::error_code ec;
-    im.acceptor.close(ec);
-    im.http_acceptor.close(ec);
-    im.accept_timer.cancel();
-    im.http_accept_timer.cancel();
+    im.port_listener.close();
+    im.web_listener.close();
     im.presence_timer.cancel();
   });
   {
@@ -438,15 +375,11 @@ void Server::stop() {
 }
 
 std::uint16_t Server::port() const {
-  std::error_code ec;
-  auto ep = impl_->acceptor.local_endpoint(ec);
-  return ec ? impl_->options.port : ep.port();
+  return impl_->port_listener.port();
 }
 
 std::uint16_t Server::http_port() const {
-  std::error_code ec;
-  auto ep = impl_->http_acceptor.local_endpoint(ec);
-  return ec ? 0 : ep.port();
+  return impl_->web_listener.port();  // 0 without a web port
 }
 
 ServerStats Server::stats() const {

@@ -39,13 +39,13 @@ Session::Session(SessionServer& server, tcp::socket socket, std::string peer_key
   if (proxied_ && (web ? o.web_proxy_protocol : o.proxy_protocol))
     proxy_reader_ = std::make_unique<ProxyHeaderReader>();
   protocol_.set_unattributed(proxied_);  // until the proxy names the client
-  if (web) make_websocket();
+  channel_ = web ? make_web_channel() : wire::FrameChannel::plain();
 }
 
 // The web port: HTTP requests are answered from the page's files; each binary message of the
-// WebSocket goes to the protocol as one frame (its length prepended), under the protocol's cap
-// for the frames of this moment (Hello's before Welcome).
-void Session::make_websocket() {
+// WebSocket goes to the protocol as one frame, under the protocol's cap for the frames of this
+// moment (Hello's before Welcome).
+std::unique_ptr<wire::FrameChannel> Session::make_web_channel() {
   wire::WsServerConnection::Handlers h;
   h.ws_path = "/ws";
   h.http = serve_web;
@@ -55,61 +55,39 @@ void Session::make_websocket() {
   h.request = [this](const std::function<std::string(const std::string&)>& header) {
     return screen_request(header);
   };
-  h.binary = [this](std::string payload) {
-    const auto n = static_cast<std::uint32_t>(payload.size());
-    const char length[wire::kFrameHeaderBytes] = {
-        static_cast<char>(n & 0xff), static_cast<char>((n >> 8) & 0xff),
-        static_cast<char>((n >> 16) & 0xff), static_cast<char>((n >> 24) & 0xff)};
-    protocol_.receive(length, sizeof length);
-    protocol_.receive(payload.data(), payload.size());
-  };
-  ws_ = std::make_unique<wire::WsServerConnection>(std::move(h), server_.context.hello_frame_cap);
+  return wire::FrameChannel::websocket(std::move(h), server_.context.hello_frame_cap);
 }
 
-// After bytes went into the WebSocket layer: counts the upgrade and the HTTP requests, and turns
-// a message the layer refused into the protocol's Error for a bad frame.
-void Session::on_websocket_input() {
-  using End = wire::WsServerConnection::End;
+void Session::on_channel_input() {
+  using State = wire::FrameChannel::State;
   ServerCounters& counters = server_.context.counters;
-  if (ws_->is_open() && !ws_counted_) {
-    ws_counted_ = true;
+  const State state = channel_->state();
+  if (!channel_counted_ && channel_->upgraded()) {
+    channel_counted_ = true;
     ++counters.websocket_sessions;
   }
-  switch (ws_->end()) {
-    case End::TooLarge:
-      protocol_.transport_failed(wire::FRAME_TOO_LARGE, ws_->end_message());
-      break;
-    case End::BadMessage:
-      protocol_.transport_failed(wire::BAD_FRAME, ws_->end_message());
-      break;
-    case End::HttpDone:
-    case End::Handshake:
-      if (!ws_counted_) {
-        ws_counted_ = true;
-        ++counters.http_requests;
-      }
-      break;
-    default:
-      break;
+  if (!channel_counted_ && (state == State::HttpAnswered || state == State::Refused)) {
+    channel_counted_ = true;
+    ++counters.http_requests;
   }
+  if (state == State::TooLarge)
+    protocol_.transport_failed(wire::FRAME_TOO_LARGE, channel_->state_message());
+  if (state == State::BadMessage)
+    protocol_.transport_failed(wire::BAD_FRAME, channel_->state_message());
 }
 
-// The web port's writes before the protocol's: the WebSocket layer's own bytes (its handshake or
-// HTTP reply, pongs, close replies), and nothing of the protocol before the upgrade. True: the
-// caller writes nothing else now.
-bool Session::pump_websocket() {
-  using End = wire::WsServerConnection::End;
-  if (ws_->has_output()) {
-    write({SessionWrite::Kind::Control, std::make_shared<const std::string>(ws_->take_output())},
-          true);
+bool Session::pump_channel() {
+  if (channel_->output_size() > 0) {
+    write(
+        {SessionWrite::Kind::Control, std::make_shared<const std::string>(channel_->take_output())},
+        true);
     return true;
   }
-  const End end = ws_->end();
-  if (end == End::HttpDone || end == End::Handshake || end == End::Closed) {
+  if (channel_->finished()) {
     close(CloseReason::Disconnect);  // answered, refused or closed by the peer
     return true;
   }
-  if (end == End::None && !ws_->is_open()) {
+  if (!channel_->carries_frames()) {
     // Still HTTP: a protocol failure (the hello timeout) has no WebSocket to go out on.
     if (protocol_.closing()) close(CloseReason::Disconnect);
     return true;
@@ -117,10 +95,8 @@ bool Session::pump_websocket() {
   return false;
 }
 
-// Reading waits while the protocol says so, and while the WebSocket layer's own replies (pongs)
-// pile up behind a write in flight: a client that pings and does not read is pushed back by TCP.
 bool Session::read_paused() const {
-  return protocol_.paused() || (ws_ && ws_->output_size() > kMaxWebSocketOutput);
+  return protocol_.paused() || channel_->output_size() > kMaxChannelOutput;
 }
 
 void Session::start() {
@@ -216,7 +192,9 @@ void Session::handshake() {
           self->close(CloseReason::Tls);
           return;
         }
-        if (!self->refusal_.empty() && !self->ws_) {  // refused behind a PROXY header
+        // Refused behind a PROXY header: in a frame where frames go (the web port refuses the
+        // HTTP request instead, screen_request).
+        if (!self->refusal_.empty() && self->channel_->carries_frames()) {
           self->protocol_.note(log::Level::Info, "refused: " + self->refusal_);
           self->protocol_.refuse(self->refusal_);
           self->act();
@@ -325,16 +303,9 @@ void Session::on_read(std::error_code ec, std::size_t n) {
     return;
   }
   server_.context.counters.bytes_received += n;
-  if (ws_) {
-    // After our close frame the handshake is over for us: what the peer sends (its close reply)
-    // is not handed to the WebSocket layer, which would answer a second, empty close frame
-    // (the peer would read status 1005 instead of ours).
-    if (ws_close_sent_) return;
-    ws_->receive(buffer_.data(), n);  // complete messages go to the protocol as frames
-    on_websocket_input();
-  } else {
-    protocol_.receive(buffer_.data(), n);
-  }
+  channel_->receive(buffer_.data(), n,
+                    [this](const char* data, std::size_t k) { protocol_.receive(data, k); });
+  on_channel_input();
   drain();
 }
 
@@ -349,7 +320,7 @@ void Session::drain() {
   }
   act();
   if (protocol_.closed() || protocol_.closing()) return;
-  if (!protocol_.account_partial(ws_ ? ws_->partial_message_bytes() : 0)) {
+  if (!protocol_.account_partial(channel_->held_bytes())) {
     act();
     return;
   }
@@ -360,7 +331,7 @@ void Session::act() {
   const SessionEvents ev = protocol_.take_events();
   if (ev.welcomed) {
     hello_timer_.cancel();
-    if (ws_) ws_->set_max_message(server_.context.options.max_frame);
+    channel_->set_max_frame(server_.context.options.max_frame);
   }
   if (ev.closing) {
     // The Error frame is written first; a client that does not read gets a grace period.
@@ -390,17 +361,14 @@ void Session::on_penalty_over(bool banned) {
 // Starts the next write if none is in flight.
 void Session::pump() {
   if (protocol_.closed() || writing_) return;
-  if (ws_ && pump_websocket()) return;
+  if (pump_channel()) return;
   SessionWrite w = protocol_.next_write(Clock::now());
   switch (w.kind) {
     case SessionWrite::Kind::None:
       return;
     case SessionWrite::Kind::Close:
-      if (ws_ && !ws_close_sent_) {  // a close frame first
-        ws_close_sent_ = true;
-        write({SessionWrite::Kind::Control,
-               std::make_shared<const std::string>(wire::WsServerConnection::close_frame(
-                   ws_->close_code(), "irradcast: see the Error message"))},
+      if (std::string bytes = channel_->closing_bytes(); !bytes.empty()) {  // a close frame first
+        write({SessionWrite::Kind::Control, std::make_shared<const std::string>(std::move(bytes))},
               true);
         return;
       }
@@ -420,13 +388,15 @@ void Session::pump() {
   }
 }
 
-// Plain TCP or TLS: the frames the protocol has ready behind the first one (tiles, replies,
-// edits, scene chunks), up to kMaxBatchBytes, go out in the same write: a burst of tiles costs
-// one system call per batch rather than one per tile, on both ends. A Wait (the rate cap) or a
-// Close ends the batch; the protocol hands it out again once the batch is written.
+// The frames the protocol has ready behind the first one (tiles, replies, edits, scene chunks),
+// up to kMaxBatchBytes and as many as the channel takes in one write (the web port: one), go out
+// in the same write: a burst of tiles costs one system call per batch rather than one per tile,
+// on both ends. A Wait (the rate cap) or a Close ends the batch; the protocol hands it out again
+// once the batch is written.
 void Session::gather(std::vector<SessionWrite>& batch) {
   std::size_t bytes = batch.front().frame->size();
-  while (bytes < kMaxBatchBytes && batch.size() < kMaxBatchFrames) {
+  const std::size_t most = std::min(kMaxBatchFrames, channel_->frames_per_write());
+  while (bytes < kMaxBatchBytes && batch.size() < most) {
     SessionWrite w = protocol_.next_write(Clock::now());
     if (!w.frame) break;  // None, Wait or Close
     bytes += w.frame->size();
@@ -434,9 +404,7 @@ void Session::gather(std::vector<SessionWrite>& batch) {
   }
 }
 
-// raw: bytes of the WebSocket layer; otherwise protocol frames, which a WebSocket carries as
-// one binary message each: its payload after the 4-byte length, behind the message's frame
-// header (one frame per write there).
+// raw: the channel's own bytes; otherwise protocol frames, in the channel's buffers.
 void Session::write(SessionWrite w, bool raw) {
   writing_ = true;
   write_progress_at_ = Clock::now();
@@ -454,14 +422,13 @@ void Session::write(SessionWrite w, bool raw) {
   std::vector<SessionWrite> batch;
   batch.push_back(std::move(w));
   std::vector<asio::const_buffer> buffers;
-  if (ws_ && !raw) {
-    const std::string_view payload =
-        std::string_view(*batch.front().frame).substr(wire::kFrameHeaderBytes);
-    ws_header_ = wire::WsServerConnection::binary_frame_header(payload.size());
-    buffers = {asio::buffer(ws_header_), asio::buffer(payload.data(), payload.size())};
+  if (raw) {
+    buffers.push_back(asio::buffer(*batch.front().frame));
   } else {
-    if (!ws_) gather(batch);
-    for (const SessionWrite& b : batch) buffers.push_back(asio::buffer(*b.frame));
+    gather(batch);
+    std::vector<std::string_view> frames;
+    for (const SessionWrite& b : batch) frames.emplace_back(*b.frame);
+    buffers = channel_->frame_buffers(frames);
   }
   asio::async_write(
       stream_, buffers, progress,

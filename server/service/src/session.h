@@ -1,11 +1,11 @@
-// One client connection: the Asio side of a session. It runs the TLS handshake, reads bytes into
-// the session's protocol (session_protocol.h), writes the frames the protocol hands out (those
-// ready at once in one write, up to 64 KiB), and runs the timers it asks for (hello, idle, the tile
-// rate cap, a wrong token's delay, the grace period before closing) and the write-stall watch. A
-// connection to the web port carries the same session over HTTP and a WebSocket (wire/websocket.h):
-// the page's files for a plain request, else one binary message per frame (no length prefix), with
-// the same limits. Every handler runs on the session's strand, so the session needs no locks; the
-// engine thread reaches it only through asio::post.
+// One client connection: the Asio side of a session. It runs the TLS handshake, reads bytes through
+// the connection's frame channel (wire/frame_channel.h: the protocol port's frames as they are, or
+// the web port's HTTP and WebSocket) into the session's protocol (session_protocol.h), writes the
+// frames the protocol hands out (those ready at once in one write, up to 64 KiB, where the channel
+// takes several), and runs the timers it asks for (hello, idle, the tile rate cap, a wrong token's
+// delay, the grace period before closing) and the write-stall watch. Both ports have the same
+// limits and one read path and one write path. Every handler runs on the session's strand, so the
+// session needs no locks; the engine thread reaches it only through asio::post.
 #pragma once
 
 // A standard header before asio: asio's config decides between aligned_alloc and operator new
@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "client_address.h"
+#include "irradcast/wire/frame_channel.h"
 #include "irradcast/wire/transport.h"
 #include "irradcast/wire/websocket.h"
 #include "session_protocol.h"
@@ -85,12 +86,18 @@ class Session : public std::enable_shared_from_this<Session> {
   void act();
   void on_penalty_over(bool banned);
   void pump();
-  // The web port: what the WebSocket layer needs before protocol frames (websocket.cpp).
-  static constexpr std::size_t kMaxWebSocketOutput = 64 << 10;
+  // The web port's channel: HTTP from the page's files, the upgrade screened (origin, proxies).
+  std::unique_ptr<wire::FrameChannel> make_web_channel();
+  // After bytes went into the channel: counts an upgrade or an HTTP request, and turns a message
+  // the channel refused into the protocol's Error.
+  void on_channel_input();
+  // The channel's own bytes, or its end: true when the caller writes nothing else now.
+  bool pump_channel();
+  // Reading waits while the protocol says so, and while the channel's own bytes (pongs) pile up
+  // behind a write in flight: a client that pings and does not read is pushed back by TCP.
+  static constexpr std::size_t kMaxChannelOutput = 64 << 10;
   bool read_paused() const;
-  void make_websocket();
-  void on_websocket_input();
-  bool pump_websocket();
+  // A write of protocol frames, or (raw) of the channel's own bytes.
   void write(SessionWrite w, bool raw = false);
   static constexpr std::size_t kMaxBatchBytes = 64 << 10, kMaxBatchFrames = 64;
   void gather(std::vector<SessionWrite>& batch);
@@ -108,9 +115,8 @@ class Session : public std::enable_shared_from_this<Session> {
   bool proxied_ = false;
   std::unique_ptr<ProxyHeaderReader> proxy_reader_;  // until the PROXY header is read
   std::string refusal_;                              // the client behind the proxy is refused: why
-  std::unique_ptr<wire::WsServerConnection> ws_;     // the web port's connections only
-  std::string ws_header_;                            // the WebSocket frame header of the write
-  bool ws_close_sent_ = false, ws_counted_ = false;
+  std::unique_ptr<wire::FrameChannel> channel_;
+  bool channel_counted_ = false;  // the upgrade or the HTTP request is counted
   bool writing_ = false;
   bool reading_started_ = false, read_pending_ = false;
   bool stall_armed_ = false, rate_waiting_ = false;
