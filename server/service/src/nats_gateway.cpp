@@ -483,36 +483,10 @@ NatsGatewayStats NatsGateway::nats_stats() const {
 
 std::string format_nats_gateway_metrics(const NatsGatewayStats& s) {
   std::string out;
-  auto d = [](std::uint64_t v) { return static_cast<double>(v); };
-  append_metric(out, "irradcast_gateway_nats_connected", "gauge",
-                "1 while the gateway is connected to NATS.", s.connected ? 1.0 : 0.0);
-  append_metric(out, "irradcast_gateway_ready", "gauge",
-                "1 once the gateway has a scene package and tile layout from the origin.",
-                s.ready ? 1.0 : 0.0);
-  append_metric(out, "irradcast_gateway_tiles_received_total", "counter",
-                "Tile versions received from NATS.", d(s.tiles_received));
-  append_metric(out, "irradcast_gateway_tiles_installed_total", "counter",
-                "Tile versions newer than the one held, installed.", d(s.tiles_installed));
-  append_metric(out, "irradcast_gateway_edits_received_total", "counter",
-                "Applied edits received from NATS.", d(s.edits_received));
-  append_metric(out, "irradcast_gateway_packages_received_total", "counter",
-                "Scene packages received and hash-checked.", d(s.packages_received));
-  append_metric(out, "irradcast_gateway_bad_messages_total", "counter",
-                "Messages from NATS ignored as malformed.", d(s.bad_messages));
-  append_metric(out, "irradcast_gateway_stream_reads_total", "counter",
-                "Reads of the scene's stream from its start (the first and each catch-up).",
-                d(s.subscriptions));
-  append_metric(out, "irradcast_gateway_lag_seconds", "gauge",
-                "Seconds from the origin computing the newest tile version received to its "
-                "arrival.",
-                s.lag_seconds);
-  append_metric(out, "irradcast_gateway_scene_revision", "gauge",
-                "The scene revision of the origin's package held.", d(s.revision));
-  append_metric(out, "irradcast_gateway_presence_received_total", "counter",
-                "Avatar sets received from the origin (--presence).", d(s.presence_received));
-  append_metric(out, "irradcast_gateway_avatars_refused_total", "counter",
-                "Avatars from the origin not shown: not finite, out of range or repeated.",
-                d(s.avatars_refused));
+#define IRRADCAST_NATS_GATEWAY_STAT(type, name, kind, metric, help) \
+  append_metric(out, metric, #kind, help, static_cast<double>(s.name));
+#include "irradcast/service/nats_gateway_stats.inc"
+#undef IRRADCAST_NATS_GATEWAY_STAT
   return out;
 }
 

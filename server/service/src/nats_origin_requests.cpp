@@ -128,43 +128,10 @@ void NatsOrigin::Impl::on_submit(natsConnection* nc, natsMsg* msg) {
 
 std::string format_nats_origin_metrics(const NatsOriginStats& s) {
   std::string out;
-  auto d = [](std::uint64_t v) { return static_cast<double>(v); };
-  append_metric(out, "irradcast_nats_connected", "gauge",
-                "1 while the origin is connected to NATS.", s.connected ? 1.0 : 0.0);
-  append_metric(out, "irradcast_nats_tiles_published_total", "counter",
-                "Tile versions published to the scene's stream.", d(s.tiles_published));
-  append_metric(out, "irradcast_nats_tiles_coalesced_total", "counter",
-                "Tile versions replaced by a newer one before they were published.",
-                d(s.tiles_coalesced));
-  append_metric(out, "irradcast_nats_edits_published_total", "counter", "Applied edits published.",
-                d(s.edits_published));
-  append_metric(out, "irradcast_nats_edits_dropped_total", "counter",
-                "Applied edits dropped from a full publish queue.", d(s.edits_dropped));
-  append_metric(out, "irradcast_nats_republished_total", "counter",
-                "Whole-state publishes after a (re)connection to NATS.", d(s.republished));
-  append_metric(out, "irradcast_nats_publish_errors_total", "counter",
-                "Publish rounds that failed.", d(s.publish_errors));
-  append_metric(out, "irradcast_nats_edit_requests_total", "counter",
-                "Scene edits accepted from gateways.", d(s.edit_requests));
-  append_metric(out, "irradcast_nats_stream_losses_total", "counter",
-                "Times the stream was found deleted, purged or rewritten (then republished).",
-                d(s.stream_losses));
-  append_metric(out, "irradcast_nats_gateways_refused_total", "counter",
-                "Camera requests refused: the origin holds max_gateways gateways already.",
-                d(s.gateways_refused));
-  append_metric(out, "irradcast_nats_refused_newer_stream", "gauge",
-                "1 while the origin publishes nothing: the stream holds a newer revision from "
-                "another origin.",
-                s.refused_newer_stream ? 1.0 : 0.0);
-  append_metric(out, "irradcast_nats_edits_refused_total", "counter",
-                "Scene edits from gateways refused (token or validation).", d(s.edits_refused));
-  append_metric(out, "irradcast_nats_camera_requests_total", "counter",
-                "Camera requests from gateways.", d(s.camera_requests));
-  append_metric(out, "irradcast_nats_presence_published_total", "counter",
-                "Avatar sets published to the gateways (--presence).", d(s.presence_published));
-  append_metric(out, "irradcast_nats_avatars_refused_total", "counter",
-                "Gateways' avatars not shown: not finite, out of range, repeated or too many.",
-                d(s.avatars_refused));
+#define IRRADCAST_NATS_ORIGIN_STAT(type, name, kind, metric, help) \
+  append_metric(out, metric, #kind, help, static_cast<double>(s.name));
+#include "irradcast/service/nats_origin_stats.inc"
+#undef IRRADCAST_NATS_ORIGIN_STAT
   return out;
 }
 

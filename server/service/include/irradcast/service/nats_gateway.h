@@ -35,25 +35,11 @@ struct NatsGatewayOptions {
   std::chrono::milliseconds presence_expiry{5000};
 };
 
+// What the gateway counts (nats_gateway_stats.inc: each member with its metric).
 struct NatsGatewayStats {
-  bool connected = false;  // to NATS
-  bool ready = false;      // has a scene package and tile layout: can serve
-  std::uint64_t messages = 0;
-  std::uint64_t tiles_received = 0;
-  std::uint64_t tiles_installed = 0;  // newer than the version held
-  std::uint64_t edits_received = 0;
-  std::uint64_t packages_received = 0;  // complete, hash-checked packages
-  std::uint64_t bad_messages = 0;
-  std::uint64_t subscriptions = 0;  // reads of the stream from its start (1 + catch-ups)
-  std::uint64_t camera_requests = 0;
-  std::uint64_t edit_requests = 0;
-  // Seconds from the origin computing a tile version to its arrival here (the newest one).
-  double lag_seconds = 0.0;
-  std::uint64_t revision = 0;
-  std::uint64_t volumes_received = 0;   // complete, checked probe volume versions
-  std::uint64_t poses_received = 0;     // pose sets from the origin
-  std::uint64_t presence_received = 0;  // avatar sets from the origin (with presence)
-  std::uint64_t avatars_refused = 0;    // avatars in them not shown (not finite, repeated...)
+#define IRRADCAST_NATS_GATEWAY_STAT(type, name, kind, metric, help) type name{};
+#include "irradcast/service/nats_gateway_stats.inc"
+#undef IRRADCAST_NATS_GATEWAY_STAT
 };
 
 class NatsGateway final : public TileSource {

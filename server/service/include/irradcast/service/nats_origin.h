@@ -48,27 +48,11 @@ struct NatsOriginOptions {
   std::chrono::milliseconds presence_expiry{5000};
 };
 
+// What the origin counts (nats_origin_stats.inc: each member with its metric).
 struct NatsOriginStats {
-  bool connected = false;
-  std::uint64_t tiles_published = 0;
-  std::uint64_t tiles_coalesced = 0;  // versions replaced before they were published
-  std::uint64_t edits_published = 0;
-  std::uint64_t edits_dropped = 0;  // queue full (a gateway reloads the package)
-  std::uint64_t packages_published = 0;
-  std::uint64_t republished = 0;  // whole-state publishes after a (re)connection
-  std::uint64_t publish_errors = 0;
-  std::uint64_t camera_requests = 0;
-  std::uint64_t edit_requests = 0;
-  std::uint64_t edits_refused = 0;       // wrong token or invalid edit
-  std::uint64_t bad_requests = 0;        // requests that do not parse
-  std::uint64_t gateways_refused = 0;    // camera requests from a gateway beyond max_gateways
-  std::uint64_t stream_losses = 0;       // the stream was found deleted, purged or rewritten
-  std::uint64_t volumes_published = 0;   // probe volume versions (docs/DYNAMIC.md)
-  std::uint64_t poses_published = 0;     // complete pose sets
-  std::uint64_t presence_published = 0;  // avatar sets (s.presence)
-  std::uint64_t avatars_refused = 0;     // gateways' avatars not shown (not finite, too many...)
-  // The stream holds a newer revision from another origin: this one publishes nothing.
-  bool refused_newer_stream = false;
+#define IRRADCAST_NATS_ORIGIN_STAT(type, name, kind, metric, help) type name{};
+#include "irradcast/service/nats_origin_stats.inc"
+#undef IRRADCAST_NATS_ORIGIN_STAT
 };
 
 class NatsOrigin final : public TileSource {
