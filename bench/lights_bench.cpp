@@ -190,22 +190,23 @@ LightCache learn(const PreparedScene& s, int updates) {
 }
 
 // One scene: the three estimators on every step-th texel, a row printed; its JSON.
-nlohmann::json measure_scene(const std::string& spec, int samples, int step, int updates,
-                             bool oracle) {
-  Scene scene = load_scene(spec);
-  PreparedSceneOptions o;
-  o.name = spec;
-  PreparedScene s = PreparedScene::build(std::move(scene), o);
-  const LightSampler& l = s.lights();
-  const auto learn_start = Clock::now();
-  const LightCache cache = learn(s, updates);
-  const double learn_s = std::chrono::duration<double>(Clock::now() - learn_start).count();
+// Every step-th visible texel of the scene, sampled `samples` times by each way (and by the
+// oracle, where asked).
+struct Tally {
   Estimator est[kWays];
-  Rng rng(1);
-  std::size_t k = 0, texels = 0;
+  std::size_t texels = 0;
   double truth_sq = 0.0;
   std::uint64_t oracle_rays = 0, oracle_occluded_rays = 0;
   std::size_t dark_texels = 0;
+};
+
+Tally sample_scene(const PreparedScene& s, const LightCache& cache, int samples, int step,
+                   bool oracle) {
+  const LightSampler& l = s.lights();
+  Tally t;
+  Estimator* est = t.est;
+  Rng rng(1);
+  std::size_t k = 0;
   for (std::uint32_t o = 0; o < s.gbuffers().size(); ++o) {
     const TexelGBuffer& g = s.gbuffers()[o];
     for (std::size_t i = 0; i < g.size(); ++i) {
@@ -224,21 +225,38 @@ nlohmann::json measure_scene(const std::string& spec, int samples, int step, int
         est[w].raw_variance += v[w];
         est[w].mean_sum += m[w];
       }
-      truth_sq += truth * truth;
-      ++texels;
+      t.truth_sq += truth * truth;
+      ++t.texels;
       if (oracle) {
         const double blocked =
-            oracle_occluded(l, s.rays(), g.position[i], g.normal[i], samples, rng, oracle_rays);
+            oracle_occluded(l, s.rays(), g.position[i], g.normal[i], samples, rng, t.oracle_rays);
         if (blocked >= 0.0) {
-          oracle_occluded_rays += static_cast<std::uint64_t>(blocked);
+          t.oracle_occluded_rays += static_cast<std::uint64_t>(blocked);
         } else {  // no light reaches the texel: any pick's rays end occluded (the hierarchy's)
-          oracle_rays += est[kTree].rays - tree_rays_before;
-          oracle_occluded_rays += est[kTree].rays - tree_rays_before;
-          ++dark_texels;
+          t.oracle_rays += est[kTree].rays - tree_rays_before;
+          t.oracle_occluded_rays += est[kTree].rays - tree_rays_before;
+          ++t.dark_texels;
         }
       }
     }
   }
+  return t;
+}
+
+nlohmann::json measure_scene(const std::string& spec, int samples, int step, int updates,
+                             bool oracle) {
+  Scene scene = load_scene(spec);
+  PreparedSceneOptions o;
+  o.name = spec;
+  PreparedScene s = PreparedScene::build(std::move(scene), o);
+  const LightSampler& l = s.lights();
+  const auto learn_start = Clock::now();
+  const LightCache cache = learn(s, updates);
+  const double learn_s = std::chrono::duration<double>(Clock::now() - learn_start).count();
+  Tally t = sample_scene(s, cache, samples, step, oracle);
+  const Estimator* est = t.est;
+  const std::size_t texels = t.texels;
+  const double truth_sq = t.truth_sq;
   auto ns = [](const Estimator& e) { return 1e9 * e.seconds / static_cast<double>(e.samples); };
   auto occl = [](const Estimator& e) {
     return e.rays ? static_cast<double>(e.occluded) / static_cast<double>(e.rays) : 0.0;
@@ -276,12 +294,12 @@ nlohmann::json measure_scene(const std::string& spec, int samples, int step, int
                         {"scene_speedup_at_equal_error", scene_speedup}};
   }
   if (oracle) {
-    const double share =
-        oracle_rays ? static_cast<double>(oracle_occluded_rays) / static_cast<double>(oracle_rays)
-                    : 0.0;
+    const double share = t.oracle_rays ? static_cast<double>(t.oracle_occluded_rays) /
+                                             static_cast<double>(t.oracle_rays)
+                                       : 0.0;
     std::printf(" %5.1f%% %5.1f%% |", 100.0 * share,
-                100.0 * static_cast<double>(dark_texels) / static_cast<double>(texels));
-    row["oracle"] = {{"occluded", share}, {"dark_texels", dark_texels}};
+                100.0 * static_cast<double>(t.dark_texels) / static_cast<double>(texels));
+    row["oracle"] = {{"occluded", share}, {"dark_texels", t.dark_texels}};
   }
   std::printf("\n");
   std::fflush(stdout);

@@ -90,6 +90,34 @@ std::vector<int> ReprojectionCache::refresh_tiles(int width, int height) {
   return out;
 }
 
+ReprojectionCache::History::Sample ReprojectionCache::History::sample(const glm::vec3& w,
+                                                                      float eps2) const {
+  Sample out;
+  // Eq. 1: the current world position seen by the previous camera.
+  const glm::vec3 s = projection.project(w);
+  if (!(s.z > 0.0f)) return out;
+  const float fx = s.x - 0.5f, fy = s.y - 0.5f;
+  const float x0f = std::floor(fx), y0f = std::floor(fy);
+  const float ax = fx - x0f, ay = fy - y0f;
+  const int x0 = static_cast<int>(x0f), y0 = static_cast<int>(y0f);
+  for (int dy = 0; dy < 2; ++dy)
+    for (int dx = 0; dx < 2; ++dx) {
+      const int hx = x0 + dx, hy = y0 + dy;
+      if (hx < 0 || hy < 0 || hx >= width || hy >= height) continue;
+      const std::size_t j = static_cast<std::size_t>(hy) * width + hx;
+      const std::uint8_t c = count[j];
+      if (c == 0) continue;
+      // Eqs. 2-3: the stored position must be the same surface point (within eps).
+      const glm::vec3 d = position[j] - w;
+      if (glm::dot(d, d) > eps2) continue;
+      const float wt = 1e-4f + (dx ? ax : 1.0f - ax) * (dy ? ay : 1.0f - ay);
+      out.weight += wt;
+      out.value += wt * value[j];
+      out.frames = std::min<int>(out.frames, c);
+    }
+  return out;
+}
+
 void ReprojectionCache::reproject(const FrameGBuffer& g, float world_epsilon,
                                   std::vector<std::uint8_t>& compute, ReprojectionStats* stats) {
   if (!(world_epsilon > 0.0f))
@@ -127,40 +155,15 @@ void ReprojectionCache::reproject(const FrameGBuffer& g, float world_epsilon,
           ++c_ref;
           continue;
         }
-        // Eq. 1: the current world position seen by the previous camera.
-        const glm::vec3 w = g.position[i];
-        const glm::vec3 s = history_.projection.project(w);
-        float wsum = 0.0f, vsum = 0.0f;
-        int cmin = 255;
-        if (s.z > 0.0f) {
-          const float fx = s.x - 0.5f, fy = s.y - 0.5f;
-          const float x0f = std::floor(fx), y0f = std::floor(fy);
-          const float ax = fx - x0f, ay = fy - y0f;
-          const int x0 = static_cast<int>(x0f), y0 = static_cast<int>(y0f);
-          for (int dy = 0; dy < 2; ++dy)
-            for (int dx = 0; dx < 2; ++dx) {
-              const int hx = x0 + dx, hy = y0 + dy;
-              if (hx < 0 || hy < 0 || hx >= history_.width || hy >= history_.height) continue;
-              const std::size_t j = static_cast<std::size_t>(hy) * history_.width + hx;
-              const std::uint8_t c = history_.count[j];
-              if (c == 0) continue;
-              // Eqs. 2-3: the stored position must be the same surface point (within eps).
-              const glm::vec3 d = history_.position[j] - w;
-              if (glm::dot(d, d) > eps2) continue;
-              const float wt = 1e-4f + (dx ? ax : 1.0f - ax) * (dy ? ay : 1.0f - ay);
-              wsum += wt;
-              vsum += wt * history_.value[j];
-              cmin = std::min<int>(cmin, c);
-            }
-        }
-        if (wsum <= 0.0f) {
+        const History::Sample h = history_.sample(g.position[i], eps2);
+        if (h.weight <= 0.0f) {
           compute[i] = 1;
           ++c_dis;
           continue;
         }
-        reprojected_[i] = vsum / wsum;
-        reprojected_count_[i] = static_cast<std::uint8_t>(cmin);
-        if (cmin >= converged) {
+        reprojected_[i] = h.value / h.weight;
+        reprojected_count_[i] = static_cast<std::uint8_t>(h.frames);
+        if (h.frames >= converged) {
           ++c_reu;
         } else {
           compute[i] = 1;

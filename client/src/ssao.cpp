@@ -40,6 +40,38 @@ void SsaoParams::validate() const {
     throw Error("ssao cosine bias " + float_text(cos_bias) + " must be in [0, 1)");
 }
 
+namespace {
+
+// One direction's occlusion at pixel i (position P, normal N, centre cx, cy): march outwards
+// over the distances dist_px; the highest attenuated horizon.
+struct HorizonMarch {
+  const FrameGBuffer& g;
+  int steps;
+  float inv_r2, cos_bias, bias_scale;
+
+  float operator()(std::size_t i, const glm::vec3& P, const glm::vec3& N, float cx, float cy,
+                   float dx, float dy, const float* dist_px) const {
+    float horizon = 0.0f;
+    for (int s = 0; s < steps; ++s) {
+      const int qx = static_cast<int>(std::floor(cx + dx * dist_px[s]));
+      const int qy = static_cast<int>(std::floor(cy + dy * dist_px[s]));
+      if (qx < 0 || qy < 0 || qx >= g.width || qy >= g.height) continue;
+      const std::size_t q = g.index(qx, qy);
+      if (q == i || !g.hit(q)) continue;
+      const glm::vec3 v = g.position[q] - P;
+      const float d2 = glm::dot(v, v);
+      const float window = 1.0f - d2 * inv_r2;  // 0 at the radius: depth discontinuity
+      if (window <= 0.0f || d2 <= 0.0f) continue;
+      const float c = glm::dot(N, v) / std::sqrt(d2);
+      if (c <= cos_bias) continue;
+      horizon = std::max(horizon, (c - cos_bias) * bias_scale * window);
+    }
+    return horizon;
+  }
+};
+
+}  // namespace
+
 std::size_t ssao(const FrameGBuffer& g, const SsaoParams& p, float world_radius,
                  std::uint32_t frame, std::vector<float>& out,
                  const std::vector<std::uint8_t>* which) {
@@ -57,6 +89,7 @@ std::size_t ssao(const FrameGBuffer& g, const SsaoParams& p, float world_radius,
   const float rot_c = std::cos(dir_step), rot_s = std::sin(dir_step);
   const float frame_angle = kRotationPerFrame * static_cast<float>(frame % 36u);
   const float frame_jitter = kGolden * static_cast<float>(frame % 64u);
+  const HorizonMarch march{g, p.steps, inv_r2, p.cos_bias, bias_scale};
   std::atomic<std::size_t> computed{0};
   tbb::parallel_for(tbb::blocked_range<int>(0, g.height, 4), [&](const tbb::blocked_range<int>& r) {
     std::size_t local = 0;
@@ -96,23 +129,7 @@ std::size_t ssao(const FrameGBuffer& g, const SsaoParams& p, float world_radius,
         float dx = std::cos(a0), dy = std::sin(a0);
         float occlusion = 0.0f;
         for (int d = 0; d < p.directions; ++d) {
-          // March outwards; the direction's occlusion is its highest attenuated horizon.
-          float horizon = 0.0f;
-          for (int s = 0; s < p.steps; ++s) {
-            const int qx = static_cast<int>(std::floor(cx + dx * dist_px[s]));
-            const int qy = static_cast<int>(std::floor(cy + dy * dist_px[s]));
-            if (qx < 0 || qy < 0 || qx >= g.width || qy >= g.height) continue;
-            const std::size_t q = g.index(qx, qy);
-            if (q == i || !g.hit(q)) continue;
-            const glm::vec3 v = g.position[q] - P;
-            const float d2 = glm::dot(v, v);
-            const float window = 1.0f - d2 * inv_r2;  // 0 at the radius: depth discontinuity
-            if (window <= 0.0f || d2 <= 0.0f) continue;
-            const float c = glm::dot(N, v) / std::sqrt(d2);
-            if (c <= p.cos_bias) continue;
-            horizon = std::max(horizon, (c - p.cos_bias) * bias_scale * window);
-          }
-          occlusion += horizon;
+          occlusion += march(i, P, N, cx, cy, dx, dy, dist_px);
           const float ndx = dx * rot_c - dy * rot_s;  // the next direction
           dy = dx * rot_s + dy * rot_c;
           dx = ndx;

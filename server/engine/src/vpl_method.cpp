@@ -276,13 +276,11 @@ void VplMethod::build_texel_map(const PassInput& in) {
   map_generation_ = in.generation;
 }
 
-BounceResult VplMethod::bounce(const PassInput& in, const RadianceField& /*prev*/,
-                               std::vector<glm::vec3>& out) {
-  const auto start = Clock::now();
-  out.assign(in.texels.size(), glm::vec3(0.0f));
-  PassResult r;
-  const int k = static_cast<int>(in.bounce);
-  if (k < 1 || k > depth_) return {{}, r};
+// 1. Gather: each texel its subset of this update's temporal set. Paths p with
+//    p % sets == set and (p / sets) % subsets == subset; an empty or ended slot counts as a
+//    VPL of zero power, so the mean over the slots estimates the pool's mean. Returns the shadow
+//    rays traced.
+std::uint64_t VplMethod::gather(const PassInput& in, int k, std::vector<glm::vec3>& raw) const {
   const std::size_t paths = starts_.size();
   const auto sets = static_cast<std::size_t>(params_.vpl_sets);
   const int n = params_.vpl_interleave;
@@ -290,10 +288,6 @@ BounceResult VplMethod::bounce(const PassInput& in, const RadianceField& /*prev*
   const float clamp_d = params_.vpl_clamp * world_->bounds.max_extent();
   const float min_d2 = clamp_d * clamp_d;
   const auto set = static_cast<std::size_t>(std::max(set_, 0));
-  // 1. Gather: each texel its subset of this update's temporal set. Paths p with
-  //    p % sets == set and (p / sets) % subsets == subset; an empty or ended slot counts as a
-  //    VPL of zero power, so the mean over the slots estimates the pool's mean.
-  std::vector<glm::vec3> raw(in.texels.size(), glm::vec3(0.0f));
   std::atomic<std::uint64_t> rays{0};
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, in.unit_texels.size(), 256),
@@ -338,11 +332,16 @@ BounceResult VplMethod::bounce(const PassInput& in, const RadianceField& /*prev*
         }
         rays += local;
       });
-  // 2. The discontinuity filter: the mean over the n x n lightmap neighbourhood (one texel of
-  //    every subset) of the neighbours on the same surface: similar normal and in the texel's
-  //    tangent plane.
-  //    Neighbours further than the window's own world size (another chart that happens to be
-  //    coplanar) are not the same surface either.
+  return rays.load();
+}
+
+// 2. The discontinuity filter: the mean over the n x n lightmap neighbourhood (one texel of
+//    every subset) of the neighbours on the same surface: similar normal and in the texel's
+//    tangent plane. Neighbours further than the window's own world size (another chart that
+//    happens to be coplanar) are not the same surface either.
+void VplMethod::filter(const PassInput& in, const std::vector<glm::vec3>& raw,
+                       std::vector<glm::vec3>& out) const {
+  const int n = params_.vpl_interleave;
   const int lo = -(n / 2);
   tbb::parallel_for(std::size_t(0), in.unit_texels.size(), [&](std::size_t j) {
     const std::uint32_t i = in.unit_texels[j];
@@ -371,7 +370,18 @@ BounceResult VplMethod::bounce(const PassInput& in, const RadianceField& /*prev*
       }
     out[i] = count > 0 ? sum / static_cast<float>(count) : raw[i];
   });
-  r.rays = rays.load();
+}
+
+BounceResult VplMethod::bounce(const PassInput& in, const RadianceField& /*prev*/,
+                               std::vector<glm::vec3>& out) {
+  const auto start = Clock::now();
+  out.assign(in.texels.size(), glm::vec3(0.0f));
+  PassResult r;
+  const int k = static_cast<int>(in.bounce);
+  if (k < 1 || k > depth_) return {{}, r};
+  std::vector<glm::vec3> raw(in.texels.size(), glm::vec3(0.0f));
+  r.rays = gather(in, k, raw);
+  filter(in, raw, out);
   r.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return {{}, r};
 }

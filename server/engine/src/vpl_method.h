@@ -50,6 +50,10 @@ class VplMethod final : public IndirectMethod {
   std::size_t invalid() const;
 
  private:
+  // bounce()'s two steps: the VPLs' light at each texel, then the discontinuity filter.
+  std::uint64_t gather(const PassInput& in, int k, std::vector<glm::vec3>& raw) const;
+  void filter(const PassInput& in, const std::vector<glm::vec3>& raw,
+              std::vector<glm::vec3>& out) const;
   struct PathStart {
     glm::vec3 origin{0.0f};  // the point on the light (the first VPL's parent)
     bool live = false;

@@ -82,6 +82,14 @@ class ReprojectionCache {
     std::vector<glm::vec3> position;
     std::vector<float> value;
     std::vector<std::uint8_t> count;  // frames accumulated; 0 = no value (miss)
+    // Eqs. 1-3: the value at world point w seen by the previous camera, bilinear over the
+    // history pixels that stored the same surface point (within eps2, squared); the weight is
+    // 0 where none did. `frames`: the fewest frames accumulated among them.
+    struct Sample {
+      float value = 0.0f, weight = 0.0f;
+      int frames = 255;
+    };
+    Sample sample(const glm::vec3& w, float eps2) const;
   };
   std::vector<int> refresh_tiles(int width, int height);
 
