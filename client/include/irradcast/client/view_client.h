@@ -8,9 +8,9 @@
 // server addresses (--connect A,B,...: origins or gateways of the same scene) a refused or lost
 // connection moves on to the next address, round after round, and resumes there with the tiles
 // held (a server of another tile epoch resends every tile; client_session.h).
-// The protocol itself is the ClientSession's (client_session.h); this class adds the blocking
-// socket, the scene cache on disk and the reconnection policy. Single-threaded: call poll() to
-// make progress.
+// The session's protocol is the ClientSession's (client_session.h; this class sends its camera,
+// StatsRequest and Bye itself); this class adds the blocking socket, the scene cache on disk and
+// the reconnection policy. Single-threaded: call poll() to make progress.
 #pragma once
 
 #include <chrono>
