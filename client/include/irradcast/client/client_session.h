@@ -1,14 +1,13 @@
 // The client side of the irradcast protocol (docs/PROTOCOL.md) for the viewer and the load users,
-// written once and without I/O:
-// fed the frames a server sends, it says what to send back and keeps the state a session builds
-// up: the Welcome's session and tile epoch, the scene package (downloaded chunk by chunk and
-// checked against the Welcome's hash, or taken from a cache), the tile cache and its versions,
-// and the scene's revision as broadcast SceneEdits are applied. A new connection resumes with the
-// Hello it makes (the scene hash held and the tile versions). Driven by the viewer (ViewClient,
-// blocking) and by each simulated user of the load generator (asynchronous), so the load test
-// runs the viewer's protocol code; the drivers send what they add themselves (CameraUpdate,
-// StatsRequest, Bye). irradcast-edit (client/tools/edit_session.h: Hello, edits, the export) and
-// the browser page (web/src/connection.js) have clients of their own.
+// written once and without I/O: fed the frames a server sends, it says what to send back and keeps
+// the state a session builds up: the Welcome's session and tile epoch, the scene package
+// (downloaded chunk by chunk and checked against the Welcome's hash, or taken from a cache), the
+// tile cache and its versions, and the scene's revision as broadcast SceneEdits are applied. A new
+// connection resumes with the Hello it makes (the scene hash held and the tile versions). Driven by
+// the viewer (ViewClient, blocking) and by each simulated user of the load generator
+// (asynchronous), so the load test runs the viewer's protocol code; the drivers send what they add
+// themselves (CameraUpdate, StatsRequest, Bye). irradcast-edit (client/tools/edit_session.h:
+// Hello, edits, the export) and the browser page (web/src/connection.js) have clients of their own.
 //
 // Phases: hello() starts AwaitWelcome. A Welcome for the scene held subscribes at once (Streaming);
 // one for another scene gives NeedScene, and the driver offers a cached package
