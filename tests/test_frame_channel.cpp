@@ -153,6 +153,26 @@ TEST(FrameChannel, AMessageAboveTheCapOrATextMessageIsRefusedAndTheErrorStillGoe
   }
 }
 
+TEST(FrameChannel, AMessageRefusedInTheSameBytesAsTheUpgradeStillGetsTheErrorAndCloseFrame) {
+  WebPort w(64);
+  // The upgrade request and, in the same read, a binary frame of 200 bytes (masked with a zero
+  // key, as a client must mask).
+  std::string bytes = w.client.take_output();
+  bytes += std::string("\x82\xfe\x00\xc8\x00\x00\x00\x00", 8) + std::string(200, 'x');
+  w.feed(bytes);
+  EXPECT_TRUE(w.ch->upgraded());
+  EXPECT_EQ(w.ch->state(), State::TooLarge);
+  EXPECT_TRUE(w.ch->carries_frames());
+  EXPECT_GT(w.ch->output_size(), 0u);  // the 101 reply
+  const std::string reply = w.ch->take_output();
+  w.client.receive(reply.data(), reply.size());
+  ASSERT_TRUE(w.client.is_open());
+  const std::string close = w.ch->closing_bytes();
+  ASSERT_FALSE(close.empty());
+  w.client.receive(close.data(), close.size());
+  EXPECT_EQ(w.client.remote_close_code(), static_cast<std::uint16_t>(wire::WsCloseCode::TooBig));
+}
+
 TEST(FrameChannel, TheCapRisesAfterWelcome) {
   WebPort w(64);
   w.upgrade();

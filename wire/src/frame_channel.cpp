@@ -2,6 +2,7 @@
 #include "irradcast/wire/frame_channel.h"
 
 #include <cstdint>
+#include <stdexcept>
 #include <utility>
 
 #include "irradcast/wire/frame.h"
@@ -52,7 +53,6 @@ class WebSocketChannel final : public FrameChannel {
     to_protocol_ = &to_protocol;
     ws_.receive(data, n);  // complete messages reach the protocol through on_binary
     to_protocol_ = nullptr;
-    upgraded_ = upgraded_ || ws_.is_open();
   }
   State state() const override {
     using End = WsServerConnection::End;
@@ -75,8 +75,8 @@ class WebSocketChannel final : public FrameChannel {
   const std::string& state_message() const override { return ws_.end_message(); }
   // Once upgraded, frames go out until the peer closes: after a message refused (TooLarge,
   // BadMessage) the protocol's Error still goes out, then the close frame.
-  bool carries_frames() const override { return upgraded_ && !finished(); }
-  bool upgraded() const override { return upgraded_; }
+  bool carries_frames() const override { return ws_.upgraded() && !finished(); }
+  bool upgraded() const override { return ws_.upgraded(); }
   std::size_t output_size() const override { return ws_.output_size(); }
   std::string take_output() override { return ws_.take_output(); }
   std::size_t held_bytes() const override { return ws_.partial_message_bytes(); }
@@ -89,6 +89,8 @@ class WebSocketChannel final : public FrameChannel {
   std::size_t frames_per_write() const override { return 1; }
   std::vector<asio::const_buffer> frame_buffers(
       const std::vector<std::string_view>& frames) override {
+    if (frames.size() != 1)
+      throw std::logic_error("a WebSocket write carries one frame (frames_per_write)");
     // The payload after the 4-byte length, behind the message's header: no copy of the frame.
     const std::string_view payload = frames.front().substr(kFrameHeaderBytes);
     header_ = WsServerConnection::binary_frame_header(payload.size());
@@ -113,7 +115,7 @@ class WebSocketChannel final : public FrameChannel {
   WsServerConnection ws_;
   const FrameBytes* to_protocol_ = nullptr;  // during receive()
   std::string header_;                       // the message header of the write in flight
-  bool close_sent_ = false, upgraded_ = false;
+  bool close_sent_ = false;
 };
 
 }  // namespace

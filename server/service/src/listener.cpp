@@ -24,10 +24,13 @@ bool out_of_descriptors(const std::error_code& ec) {
 }  // namespace
 
 Listener::Listener(asio::io_context& io, Options options)
-    : io_(io), options_(std::move(options)), acceptor_(io), pause_(io) {}
+    : io_(io),
+      options_(std::move(options)),
+      strand_(asio::make_strand(io)),
+      acceptor_(strand_),
+      pause_(strand_) {}
 
 void Listener::listen(const std::string& bind, std::uint16_t port) {
-  asked_port_ = port;
   std::error_code ec;
   const asio::ip::address address = asio::ip::make_address(bind, ec);
   if (ec) throw Error(options_.bind_flag + ": '" + bind + "' is not an IP address");
@@ -39,6 +42,7 @@ void Listener::listen(const std::string& bind, std::uint16_t port) {
   if (ec)
     throw Error(options_.component + ": cannot listen on " + bind + ":" + std::to_string(port) +
                 ": " + ec.message());
+  bound_port_ = acceptor_.local_endpoint(ec).port();
 }
 
 void Listener::start(OnSocket on_socket, std::function<void()> on_error) {
@@ -48,16 +52,12 @@ void Listener::start(OnSocket on_socket, std::function<void()> on_error) {
 }
 
 void Listener::close() {
-  closed_ = true;
-  std::error_code ignored;
-  acceptor_.close(ignored);
-  pause_.cancel();
-}
-
-std::uint16_t Listener::port() const {
-  std::error_code ec;
-  const tcp::endpoint ep = acceptor_.local_endpoint(ec);
-  return ec ? asked_port_ : ep.port();
+  if (closed_.exchange(true)) return;
+  asio::dispatch(strand_, [this] {
+    std::error_code ignored;
+    acceptor_.close(ignored);
+    pause_.cancel();
+  });
 }
 
 void Listener::accept() {
@@ -77,7 +77,7 @@ void Listener::on_accept(std::error_code ec, tcp::socket socket) {
     return;
   }
   if (backoff_.count() > 0) {
-    log::warn(options_.component, "accepting connections again");
+    warn("accepting connections again");
     backoff_ = std::chrono::milliseconds(0);
   }
   on_socket_(std::move(socket));
@@ -87,30 +87,32 @@ void Listener::on_accept(std::error_code ec, tcp::socket socket) {
 void Listener::on_error(const std::error_code& ec) {
   if (on_error_) on_error_();
   if (!out_of_descriptors(ec)) {
-    const auto now = Clock::now();
-    if (now - last_warning_ >= kWarnEvery) {
-      std::string line = "accept: " + ec.message();
-      if (unlogged_ > 0)
-        line += " (" + std::to_string(unlogged_) + " more since the last such line)";
-      log::warn(options_.component, line);
-      last_warning_ = now;
-      unlogged_ = 0;
-    } else {
-      ++unlogged_;
-    }
+    warn("accept: " + ec.message());
     accept();
     return;
   }
   if (backoff_.count() == 0)
-    log::warn(options_.component,
-              "accept: " + ec.message() +
-                  (options_.describe ? " (" + options_.describe() + ")" : std::string()) +
-                  "; pausing accepts until descriptors are free");
+    warn("accept: " + ec.message() +
+         (options_.describe ? " (" + options_.describe() + ")" : std::string()) +
+         "; pausing accepts until descriptors are free");
   backoff_ = std::clamp(backoff_ * 2, kFirstPause, kLongestPause);
   pause_.expires_after(backoff_);
   pause_.async_wait([this](std::error_code tec) {
     if (!tec && !closed_) accept();
   });
+}
+
+void Listener::warn(const std::string& line) {
+  const auto now = Clock::now();
+  if (now - last_warning_ < kWarnEvery) {
+    ++unlogged_;
+    return;
+  }
+  log::warn(options_.component, unlogged_ > 0 ? line + " (" + std::to_string(unlogged_) +
+                                                    " more such lines left out since the last)"
+                                              : line);
+  last_warning_ = now;
+  unlogged_ = 0;
 }
 
 }  // namespace irradcast

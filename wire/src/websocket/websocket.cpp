@@ -306,6 +306,9 @@ std::size_t WsServerConnection::partial_message_bytes() const {
 bool WsServerConnection::is_open() const {
   return impl_->open && impl_->end == End::None;
 }
+bool WsServerConnection::upgraded() const {
+  return impl_->open;
+}
 WsServerConnection::End WsServerConnection::end() const {
   return impl_->end;
 }

@@ -77,7 +77,10 @@ class WsServerConnection {
   // The largest message accepted from now on (a larger one ends the connection: TooLarge).
   void set_max_message(std::size_t bytes);
 
-  bool is_open() const;  // the WebSocket is established
+  bool is_open() const;  // the WebSocket is established and has not ended
+  // The upgrade succeeded at some point (true from then on, also after the end): a message
+  // refused in the same bytes as the upgrade ends it before is_open() was ever seen true.
+  bool upgraded() const;
   // Payload bytes of the message being received that the library holds (frames without FIN so
   // far, and the received part of the current frame): what the peer makes the server hold for an
   // incomplete message, counted in the server's budget of incomplete frames.

@@ -66,15 +66,15 @@ Cert make_cert(EVP_PKEY* key, const char* cn, X509* issuer, EVP_PKEY* issuer_key
 void write_pem(const std::string& path, X509* cert) {
   FILE* f = std::fopen(path.c_str(), "w");
   if (!f) throw std::runtime_error("cannot write " + path);
-  PEM_write_X509(f, cert);
-  std::fclose(f);
+  const bool written = PEM_write_X509(f, cert) == 1;
+  if (std::fclose(f) != 0 || !written) throw std::runtime_error("cannot write " + path);
 }
 
 void write_pem(const std::string& path, EVP_PKEY* key) {
   FILE* f = std::fopen(path.c_str(), "w");
   if (!f) throw std::runtime_error("cannot write " + path);
-  PEM_write_PrivateKey(f, key, nullptr, nullptr, 0, nullptr, nullptr);
-  std::fclose(f);
+  const bool written = PEM_write_PrivateKey(f, key, nullptr, nullptr, 0, nullptr, nullptr) == 1;
+  if (std::fclose(f) != 0 || !written) throw std::runtime_error("cannot write " + path);
 }
 
 }  // namespace
