@@ -42,7 +42,6 @@ struct Texels {
         t.position.push_back(origin + (i + 0.5f) * u + (j + 0.5f) * v);
         t.normal.push_back(normal);
         t.geo_normal.push_back(normal);
-        t.albedo.push_back(glm::vec3(0.5f));
         t.object.push_back(0);
         t.texel.push_back(static_cast<std::uint32_t>(t.texel.size()));
         t.cell.push_back(0);

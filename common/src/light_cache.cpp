@@ -60,6 +60,27 @@ void LightCache::Record::add(std::uint64_t region, std::uint32_t light, float lu
     }
   }
   entries_.push_back({region, light, q, 1, q > 0 ? 1u : 0u});
+  if (entries_.size() >= compact_at_) compact();
+}
+
+void LightCache::Record::compact() {
+  std::sort(entries_.begin(), entries_.end(), [](const Entry& a, const Entry& b) {
+    return a.region != b.region ? a.region < b.region : a.light < b.light;
+  });
+  std::size_t out = 0;
+  for (std::size_t k = 0; k < entries_.size(); ++k) {
+    const Entry& e = entries_[k];
+    if (out > 0 && entries_[out - 1].region == e.region && entries_[out - 1].light == e.light) {
+      Entry& m = entries_[out - 1];
+      m.sum = saturating_add(m.sum, e.sum);
+      m.count += e.count;
+      m.lit += e.lit;
+    } else {
+      entries_[out++] = e;
+    }
+  }
+  entries_.resize(out);
+  compact_at_ = std::max(kCompactAt, 2 * out);
 }
 
 LightCache::LightCache(const Bounds& bounds, std::size_t lights, float unit)

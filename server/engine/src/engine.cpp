@@ -96,7 +96,6 @@ void Engine::build_texels(const std::vector<TexelGBuffer>& gbuffers) {
   texels_.position.reserve(total);
   texels_.normal.reserve(total);
   texels_.geo_normal.reserve(total);
-  texels_.albedo.reserve(total);
   texels_.object.reserve(total);
   texels_.texel.reserve(total);
   texels_.cell.reserve(total);
@@ -112,7 +111,6 @@ void Engine::build_texels(const std::vector<TexelGBuffer>& gbuffers) {
       texels_.position.push_back(g.position[i]);
       texels_.normal.push_back(n);
       texels_.geo_normal.push_back(ng);
-      texels_.albedo.push_back(g.albedo[i]);
       texels_.object.push_back(static_cast<std::uint32_t>(o));
       texels_.texel.push_back(static_cast<std::uint32_t>(i));
       texels_.cell.push_back(static_cast<std::uint32_t>(probes_.grid.cell_index(g.position[i])));

@@ -210,7 +210,6 @@ void fill_attributes(const World& world, std::size_t oi, float inset, const Samp
       }
       g.position[i] = wo.position(t, u, v);
       g.normal[i] = wo.shading_normal(t, u, v);
-      g.albedo[i] = world.albedo(static_cast<int>(oi), t, u, v);
       if (cut_outs && cut_out(world, static_cast<int>(oi), t, u, v)) g.kind[i] = TexelKind::Hidden;
     }
   });
@@ -229,7 +228,6 @@ TexelGBuffer rasterize_object(const World& world, std::size_t oi, const ObjectLi
   const std::size_t size = static_cast<std::size_t>(g.width) * static_cast<std::size_t>(g.height);
   g.position.assign(size, glm::vec3(0.0f));
   g.normal.assign(size, glm::vec3(0.0f));
-  g.albedo.assign(size, glm::vec3(0.0f));
   g.triangle.assign(size, -1);
   g.kind.assign(size, TexelKind::Empty);
   if (size == 0) return g;

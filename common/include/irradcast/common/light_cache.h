@@ -97,7 +97,13 @@ class LightCache {
       std::uint64_t count;
       std::uint64_t lit;  // rays that brought light
     };
+    // Every kCompactAt entries (or twice the distinct pairs, when more), the entries of the same
+    // region and light are merged: a record holds about its distinct pairs, not one entry per
+    // sample (the sums are integers, so merging early changes no table).
+    static constexpr std::size_t kCompactAt = std::size_t{1} << 15;
+    void compact();
     std::vector<Entry> entries_;
+    std::size_t compact_at_ = kCompactAt;
     float scale_;
   };
 

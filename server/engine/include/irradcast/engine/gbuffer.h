@@ -1,5 +1,6 @@
-// The texel G-buffer ("global G-buffer" of seed 001): per lightmap texel the world position,
-// normal and albedo of the surface point it stands for. Texels whose centre lies in a triangle
+// The texel G-buffer ("global G-buffer" of seed 001): per lightmap texel the world position and
+// normal of the surface point it stands for (its triangle and kind too; the albedo is read where
+// light leaves a surface, at hits, so no texel keeps one). Texels whose centre lies in a triangle
 // sample that point; texels a triangle only partly covers sample the triangle's point closest to
 // the texel centre (so bilinear lookups at chart borders read real surface values); the rest
 // (gutters, unused space) are empty and filled by dilation of the lightmap values.
@@ -29,7 +30,6 @@ struct TexelGBuffer {
   int height = 0;
   std::vector<glm::vec3> position;     // world space
   std::vector<glm::vec3> normal;       // unit, world space (shading normal)
-  std::vector<glm::vec3> albedo;       // linear
   std::vector<std::int32_t> triangle;  // -1 for empty texels
   std::vector<TexelKind> kind;
 

@@ -26,7 +26,6 @@ struct SurfaceTexels {
   std::vector<glm::vec3> position;
   std::vector<glm::vec3> normal;      // shading normal
   std::vector<glm::vec3> geo_normal;  // geometric normal, same side as `normal`
-  std::vector<glm::vec3> albedo;
   std::vector<std::uint32_t> object;  // object index
   std::vector<std::uint32_t> texel;   // index in that object's lightmap
   std::vector<std::uint32_t> cell;    // radiance cell containing the texel
@@ -155,7 +154,8 @@ struct Probes {
 // What a scene edit changed, for Engine::scene_changed.
 struct SceneChange {
   bool geometry = false;  // objects moved, shown or hidden: texels, probes and visibility change
-  bool surfaces = false;  // albedo changed somewhere: texel albedo is read from the G-buffers
+  // A material changed (albedo, emission, cut-out): the texels a cut-out hides or shows change.
+  bool surfaces = false;
   // The sky changed (colour, strength or map): its light reaches every texel that sees out, so
   // every texel restarts, as after a changed light.
   bool sky = false;
