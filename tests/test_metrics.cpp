@@ -5,6 +5,7 @@
 
 #include <asio.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <limits>
@@ -21,6 +22,8 @@
 #include "irradcast/service/engine_host.h"
 #include "irradcast/service/metrics_endpoint.h"
 #include "irradcast/service/metrics_text.h"
+#include "irradcast/service/nats_gateway.h"
+#include "irradcast/service/nats_origin.h"
 #include "irradcast/service/net_server.h"
 #include "irradcast/wire/frame.h"
 #include "service_fixture.h"
@@ -1182,4 +1185,54 @@ TEST(Metrics, UpdateRateCountsRecentUpdatesOnly) {
   EXPECT_EQ(rays, s.rays_total);
   EXPECT_GT(s.texels, 0u);
   EXPECT_EQ(s.tiles, host.tiles().tile_count());
+}
+
+// The NATS families come from their declared lists (nats_origin_stats.inc,
+// nats_gateway_stats.inc): every statistic is one metric with its HELP, TYPE and the value it
+// holds (each member set to a value of its own here; a bool reads 1).
+static void expect_each_declared_metric(
+    const std::string& text, const std::vector<std::pair<std::string, double>>& expected) {
+  for (const auto& [name, value] : expected) {
+    EXPECT_NE(text.find("# HELP " + name + " "), std::string::npos) << name;
+    EXPECT_NE(text.find("# TYPE " + name + " "), std::string::npos) << name;
+    EXPECT_NE(text.find("\n" + name + " " + format_metric_value(value) + "\n"), std::string::npos)
+        << name << " in\n"
+        << text;
+  }
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\n'),
+            3 * static_cast<std::ptrdiff_t>(expected.size()));
+}
+
+TEST(Metrics, TheNatsFamiliesHaveEveryDeclaredStatisticOnce) {
+  NatsOriginStats o;
+  std::vector<std::pair<std::string, double>> want_o;
+  double v = 0.0;
+#define IRRADCAST_NATS_ORIGIN_STAT(type, name, kind, metric, help) \
+  v += 1.0;                                                        \
+  o.name = static_cast<type>(v);                                   \
+  want_o.emplace_back(metric, static_cast<double>(o.name));
+#include "irradcast/service/nats_origin_stats.inc"
+#undef IRRADCAST_NATS_ORIGIN_STAT
+  const std::string origin = format_nats_origin_metrics(o);
+  expect_each_declared_metric(origin, want_o);
+
+  NatsGatewayStats g;
+  std::vector<std::pair<std::string, double>> want_g;
+  v = 0.5;
+#define IRRADCAST_NATS_GATEWAY_STAT(type, name, kind, metric, help) \
+  v += 1.0;                                                         \
+  g.name = static_cast<type>(v);                                    \
+  want_g.emplace_back(metric, static_cast<double>(g.name));
+#include "irradcast/service/nats_gateway_stats.inc"
+#undef IRRADCAST_NATS_GATEWAY_STAT
+  const std::string gateway = format_nats_gateway_metrics(g);
+  expect_each_declared_metric(gateway, want_g);
+  // Some that were counted but not shown before the lists.
+  for (const char* m :
+       {"irradcast_nats_packages_published_total", "irradcast_nats_bad_requests_total",
+        "irradcast_nats_poses_published_total"})
+    EXPECT_NE(origin.find(m), std::string::npos) << m;
+  for (const char* m :
+       {"irradcast_gateway_messages_total", "irradcast_gateway_edit_requests_total"})
+    EXPECT_NE(gateway.find(m), std::string::npos) << m;
 }
