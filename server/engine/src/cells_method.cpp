@@ -131,30 +131,24 @@ void CellsMethod::place(const std::vector<std::size_t>& which, Probes& probes) c
 }
 
 void CellsMethod::weigh(const SurfaceTexels& texels, Probes& probes) const {
-  // Probe weights per texel: trilinear over the 8 surrounding probes, keeping only usable probes
-  // the texel can see (a wall between them means the probe sees another room's light). A texel
-  // that sees none of them keeps an empty list: any other probe would be one it cannot see.
+  // Which of the 8 surrounding probes each texel reads: the usable ones it can see (a wall
+  // between them means the probe sees another room's light). A texel that sees none of them reads
+  // none: any other probe would be one it cannot see; its scatter rays go on to their hit instead.
+  // The weights follow (probe_weights()).
   const ProbeGrid& grid = probes.grid;
-  probes.weights.resize(texels.size());
+  probes.corners.resize(texels.size());
   tbb::parallel_for(std::size_t(0), texels.size(), [&](std::size_t t) {
     const glm::vec3 p = texels.position[t];
-    glm::vec3 f = (p - grid.origin) / grid.cell - 0.5f;
-    glm::ivec3 base = glm::ivec3(glm::floor(f));
-    glm::vec3 frac = f - glm::vec3(base);
-    ProbeWeights w;
-    w.base = (base.z * grid.dims.y + base.y) * grid.dims.x + base.x;
-    float sum = 0.0f;
+    const ProbeBlock block(grid, p);
+    std::uint8_t mask = 0;
     for (int c = 0; c < 8; ++c) {
-      glm::ivec3 o(c & 1, (c >> 1) & 1, (c >> 2) & 1);
-      glm::ivec3 cell = base + o;
+      const glm::ivec3 cell = block.base + glm::ivec3(c & 1, (c >> 1) & 1, (c >> 2) & 1);
       if (glm::any(glm::lessThan(cell, glm::ivec3(0))) ||
           glm::any(glm::greaterThanEqual(cell, grid.dims)))
         continue;
       auto index =
           static_cast<std::uint32_t>((cell.z * grid.dims.y + cell.y) * grid.dims.x + cell.x);
       if (!grid.usable[index]) continue;
-      glm::vec3 tw = glm::mix(1.0f - frac, frac, glm::vec3(o));
-      float weight = glm::max(tw.x, 0.0f) * glm::max(tw.y, 0.0f) * glm::max(tw.z, 0.0f);
       glm::vec3 to = grid.position[index] - p;
       float dist = glm::length(to);
       if (params_.probe_visibility && dist > 0.0f) {
@@ -164,14 +158,9 @@ void CellsMethod::weigh(const SurfaceTexels& texels, Probes& probes) const {
         r.tmax = glm::length(grid.position[index] - r.origin);
         if (rays_->occluded(r)) continue;
       }
-      weight = std::max(weight, 1e-4f);
-      w.add(c, weight);
-      sum += weight;
+      mask = static_cast<std::uint8_t>(mask | 1u << c);
     }
-    // No visible usable neighbour (the outside of a building, a gap behind furniture): the
-    // texel reads no probe; its scatter rays go on to their hit instead.
-    for (int k = 0; k < w.count(); ++k) w.weight[k] /= sum;
-    probes.weights[t] = w;
+    probes.corners[t] = mask;
   });
 }
 

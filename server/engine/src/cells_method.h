@@ -32,7 +32,7 @@ class CellsMethod final : public IndirectMethod {
  private:
   // Places the probes of cells `which` (from their centres, moved out of geometry).
   void place(const std::vector<std::size_t>& which, Probes& probes) const;
-  // Per texel: the usable probes around it that it sees, trilinearly weighted.
+  // Per texel: the usable probes around it that it sees (Probes::corners).
   void weigh(const SurfaceTexels& texels, Probes& probes) const;
 
   const EngineParams params_;

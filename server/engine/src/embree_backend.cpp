@@ -67,9 +67,8 @@ glm::vec3 exit_point(const Bounds& b, glm::vec3 p, glm::vec3 d) {
 }
 
 float scatter_range(const PassInput& in, std::uint32_t i) {
-  const bool probes =
-      !in.params.unbiased() && !in.probe_weights.empty() && in.probe_weights[i].count() > 0;
-  return probes ? in.params.tracing_range.resolve(in.world.bounds.max_extent()) : 3.4e38f;
+  return in.reads_probes(i) ? in.params.tracing_range.resolve(in.world.bounds.max_extent())
+                            : 3.4e38f;
 }
 
 ScatterMiss::ScatterMiss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance)
@@ -79,7 +78,6 @@ ScatterMiss::ScatterMiss(const PassInput& in, const std::vector<glm::vec3>& prob
       hi_(in.world.bounds.hi + exit_pad(in.world.bounds)),
       range_(in.params.tracing_range.resolve(in.world.bounds.max_extent())),
       extent_(in.world.bounds.max_extent()),
-      probes_(!in.params.unbiased() && !in.probe_weights.empty()),
       fixed_(in.params.distant_point == DistantPoint::FixedDistance) {}
 
 glm::vec3 ScatterMiss::operator()(std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng& pick) const {
@@ -89,7 +87,7 @@ glm::vec3 ScatterMiss::operator()(std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng
   // as the weighted sum over all (up to 8) of them, at one lookup instead of eight; over many
   // rays and updates the choice averages out.
   const glm::vec3 q = fixed_ ? p + extent_ * d : p + exit * d;
-  const ProbeWeights& w = in_->probe_weights[i];
+  const ProbeWeights w = in_->probe_weights(i);
   const int k = pick_probe(w, pick.next_float());
   const std::uint32_t probe = w.probe(k, in_->probes.dims);
   const glm::vec3 to = q - in_->probes.position[probe];

@@ -54,7 +54,7 @@ class ScatterMiss {
  public:
   ScatterMiss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance);
   // Whether texel i's misses can bring anything (it reads probes); if not, they bring zero.
-  bool reads_probes(std::uint32_t i) const { return probes_ && in_->probe_weights[i].count() > 0; }
+  bool reads_probes(std::uint32_t i) const { return in_->reads_probes(i); }
   // scatter_miss for a texel that reads_probes().
   glm::vec3 operator()(std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng& pick) const;
 
@@ -63,7 +63,7 @@ class ScatterMiss {
   const std::vector<glm::vec3>* radiance_;
   glm::vec3 lo_, hi_;  // the scene's bounds, enlarged as exit_distance enlarges them
   float range_, extent_;
-  bool probes_, fixed_;
+  bool fixed_;
   friend class ScatterTexel;  // its batches run operator()'s arithmetic over many misses at once
 };
 // The direction of a probe's gather ray for octahedral texel t (res x res), jittered.

@@ -182,7 +182,7 @@ UpdateStats Engine::update() {
   }
   const std::vector<std::uint32_t>& texels = partial ? batch_texels : unit_texels_;
   const std::vector<std::uint32_t>& offsets = partial ? batch_offsets : unit_offsets_;
-  PassInput in{*world_, *atlas_,  texels_, probes_.weights, probes_.grid, params_, texels,
+  PassInput in{*world_, *atlas_,  texels_, probes_.corners, probes_.grid, params_, texels,
                offsets, updates_, 0,       generation_};
   std::vector<glm::vec3> est;
   stats.direct = backend_->direct(in, est);

@@ -1,5 +1,5 @@
 // The engine's shared pass data (pass_data.h): the grid of radiance cells (cell lookup, cell
-// centres), and where a scene change happened.
+// centres), a texel's probe weights, and where a scene change happened.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -51,6 +51,33 @@ ProbeGrid ProbeGrid::cells_of(const Bounds& b, const EngineParams& params) {
         g.position[(z * g.dims.y + y) * g.dims.x + x] =
             g.origin + (glm::vec3(x, y, z) + 0.5f) * g.cell;
   return g;
+}
+
+ProbeBlock::ProbeBlock(const ProbeGrid& grid, glm::vec3 p) {
+  const glm::vec3 f = (p - grid.origin) / grid.cell - 0.5f;
+  base = glm::ivec3(glm::floor(f));
+  frac = f - glm::vec3(base);
+}
+
+float ProbeBlock::trilinear(int c) const {
+  const glm::ivec3 o(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+  const glm::vec3 tw = glm::mix(1.0f - frac, frac, glm::vec3(o));
+  return glm::max(tw.x, 0.0f) * glm::max(tw.y, 0.0f) * glm::max(tw.z, 0.0f);
+}
+
+ProbeWeights probe_weights(const ProbeGrid& grid, glm::vec3 p, std::uint8_t mask) {
+  const ProbeBlock block(grid, p);
+  ProbeWeights w;
+  w.base = (block.base.z * grid.dims.y + block.base.y) * grid.dims.x + block.base.x;
+  float sum = 0.0f;
+  for (int c = 0; c < 8; ++c) {
+    if (!(mask >> c & 1u)) continue;
+    const float weight = std::max(block.trilinear(c), 1e-4f);
+    w.add(c, weight);
+    sum += weight;
+  }
+  for (int k = 0; k < w.count(); ++k) w.weight[k] /= sum;
+  return w;
 }
 
 float SceneChange::distance(glm::vec3 p) const {

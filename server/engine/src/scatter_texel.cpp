@@ -16,6 +16,7 @@ struct ScatterTexel::Texel {
              // which rays missed
   float range = 0.0f;
   bool probes = false;
+  ProbeWeights weights;  // its probes (when it reads them)
   // The running sums of its probe weights as pick_probe forms them (the unused ones +inf), and
   // whether they never fall (weights >= 0, as CellsMethod makes them).
   float sums[7];
@@ -62,7 +63,7 @@ int pick_probe_flat(const ProbeWeights& w, float u) {
 // The misses of batch b that go on past the tracing range inside the scene read one probe each
 // (ScatterMiss::operator(), step by step over arrays): which misses do, their picks in ray order,
 // the direction to the picked probe and its octahedral coordinates four at a time, the lookups.
-void ScatterTexel::shade_misses(std::uint32_t i, Texel& t, Batch& b) const {
+void ScatterTexel::shade_misses(Texel& t, Batch& b) const {
   const ScatterMiss& miss = *miss_;
   const RayBatch& r = b.rays;
   const int m = r.count;
@@ -87,7 +88,7 @@ void ScatterTexel::shade_misses(std::uint32_t i, Texel& t, Batch& b) const {
   alignas(16) float u[kBatch];
   alignas(16) int which[kBatch];
   for (int j = 0; j < k; ++j) u[j] = pick.next_float();
-  const ProbeWeights& w = in_->probe_weights[i];
+  const ProbeWeights& w = t.weights;
   if (t.sums_rise) {
     for (int j = 0; j < k; ++j) {
       int c = 0;
@@ -174,7 +175,8 @@ void ScatterTexel::begin(std::uint32_t i, Texel& t) const {
   t.range = scatter_range(in, i);
   t.probes = miss_->reads_probes(i);
   if (!t.probes) return;
-  const ProbeWeights& w = in.probe_weights[i];
+  t.weights = in.probe_weights(i);
+  const ProbeWeights& w = t.weights;
   float acc = 0.0f;
   t.sums_rise = true;
   const int count = w.count();
@@ -236,7 +238,7 @@ void ScatterTexel::run(const std::uint32_t* texels, std::size_t count,
       __builtin_prefetch(&in.texels.position[a]);
       __builtin_prefetch(&in.texels.normal[a]);
       __builtin_prefetch(&in.texels.geo_normal[a]);
-      if (t.probes) __builtin_prefetch(&in.probe_weights[a]);
+      if (t.probes) __builtin_prefetch(&in.probe_corners[a]);
     }
     begin(i, t);
     glm::vec3 sum(0.0f);
@@ -247,7 +249,7 @@ void ScatterTexel::run(const std::uint32_t* texels, std::size_t count,
       rays_->intersect(b.rays);
       for (int s = 0; s < m; ++s) b.radiance[s] = glm::vec3(0.0f);
       shade_hits(b);
-      if (t.probes) shade_misses(i, t, b);
+      if (t.probes) shade_misses(t, b);
       for (int s = 0; s < m; ++s) sum += b.radiance[s];
     }
     // Cosine-weighted sampling: E = pi / N * sum L.

@@ -207,8 +207,8 @@ void VulkanBackend::Impl::prepare(const PassInput& in) {
                 in.unit_texels.size(),
                 in.probes.position.data(),
                 in.probes.count(),
-                in.probe_weights.data(),
-                in.probe_weights.size(),
+                in.probe_corners.data(),
+                in.probe_corners.size(),
                 in.generation};
   if (key == engine_key) return;
   if (in.atlas.objects.size() != world->objects.size())
@@ -229,10 +229,10 @@ void VulkanBackend::Impl::prepare(const PassInput& in) {
   for (std::size_t p = 0; p < in.probes.count(); ++p)
     probes.emplace_back(in.probes.position[p], in.probes.usable[p] ? 1.0f : 0.0f);
   write(kProbes, probes);
-  write(kProbeWeights, in.probe_weights.size() * 20 * sizeof(std::uint32_t), [&](void* dst) {
+  write(kProbeWeights, in.probe_corners.size() * 20 * sizeof(std::uint32_t), [&](void* dst) {
     auto* w = static_cast<std::uint32_t*>(dst);
-    for (std::size_t i = 0; i < in.probe_weights.size(); ++i) {
-      const ProbeWeights& pw = in.probe_weights[i];
+    for (std::size_t i = 0; i < in.probe_corners.size(); ++i) {
+      const ProbeWeights pw = in.probe_weights(static_cast<std::uint32_t>(i));
       std::uint32_t* o = w + 20 * i;
       for (int k = 0; k < 8; ++k) {
         const bool used = k < pw.count();
@@ -290,7 +290,7 @@ PushConstants VulkanBackend::Impl::constants(const PassInput& in) const {
   pc.flags |= sky_flags;
   if (in.params.unbiased()) pc.flags |= kFlagUnbiased;
   if (in.params.distant_point == DistantPoint::FixedDistance) pc.flags |= kFlagFixed;
-  if (!in.probe_weights.empty()) pc.flags |= kFlagProbes;
+  if (!in.probe_corners.empty()) pc.flags |= kFlagProbes;
   return pc;
 }
 

@@ -36,8 +36,9 @@ struct SurfaceTexels {
 // when it sees none of its neighbour probes, and then its scatter rays go on to their hit.
 // A texel's probes: the usable ones of the 8 around it (the corners of the cell block below and
 // above it) that it can see, in corner order, with their trilinear weights (summing to one).
-// Named by the block's lower corner and 3 bits per probe rather than by 8 indices: 40 bytes per
-// texel instead of 68.
+// Named by the block's lower corner and 3 bits per probe rather than by 8 indices. The engine
+// keeps only which corners a texel reads (one byte, Probes::corners); probe_weights() works the
+// rest out where it is read.
 struct ProbeWeights {
   std::int32_t base = 0;      // linear index of the lower corner's cell (may lie outside the grid)
   std::uint32_t corners = 0;  // probe k's corner in bits 3k..3k+2; the count in bits 24..31
@@ -80,6 +81,20 @@ struct ProbeGrid {
   static ProbeGrid cells_of(const Bounds& bounds, const EngineParams& params);
 };
 
+// The block of 8 cells whose probes surround p: its lower corner (may lie outside the grid) and
+// p's trilinear weights for corner c (bit 0: +x, 1: +y, 2: +z), before any probe is left out.
+struct ProbeBlock {
+  glm::ivec3 base{0};
+  glm::vec3 frac{0.0f};
+  ProbeBlock(const ProbeGrid& grid, glm::vec3 p);
+  float trilinear(int c) const;
+};
+
+// The probes of a texel at p that reads the corners in `mask` (bit c: corner c), with their
+// weights: the trilinear ones, at least 1e-4 each, divided by their sum. A pure function of p,
+// the grid and the mask: the same bits wherever it is worked out.
+ProbeWeights probe_weights(const ProbeGrid& grid, glm::vec3 p, std::uint8_t mask);
+
 // The previous bounce's outgoing radiance: albedo / pi * E_prev, read bilinearly at a hit.
 struct RadianceField {
   const World* world = nullptr;
@@ -95,7 +110,8 @@ struct PassInput {
   const World& world;
   const Atlas& atlas;
   const SurfaceTexels& texels;
-  const std::vector<ProbeWeights>& probe_weights;  // per texel (empty in unbiased mode)
+  // Per texel, the corners of its cell block whose probes it reads (empty in unbiased mode).
+  const std::vector<std::uint8_t>& probe_corners;
   const ProbeGrid& probes;
   const EngineParams& params;
   // Work units in dispatch order: texel index ranges [begin, end) of one cell or one object.
@@ -106,6 +122,14 @@ struct PassInput {
   // Changes whenever the texels, units, probes or probe weights change (a scene edit, a batch
   // of texels): backends that keep copies compare it.
   std::uint64_t generation = 0;
+  // Whether texel i reads probes (a texel that sees none, or the unbiased mode, does not).
+  bool reads_probes(std::uint32_t i) const {
+    return !params.unbiased() && !probe_corners.empty() && probe_corners[i] != 0;
+  }
+  // Texel i's probes and weights (probe_weights() at its position).
+  ProbeWeights probe_weights(std::uint32_t i) const {
+    return irradcast::probe_weights(probes, texels.position[i], probe_corners[i]);
+  }
 };
 
 // What one pass cost. `seconds` is wall time around the whole pass (uploads, submission, waits
@@ -147,7 +171,9 @@ struct ProbeStats {
 // probe stays at its cell's centre and `weights` is empty.
 struct Probes {
   ProbeGrid grid;
-  std::vector<ProbeWeights> weights;  // per texel (empty when no probes are read)
+  // Per texel, the corners whose probes it reads (empty when no probes are read): one byte
+  // instead of its 40-byte ProbeWeights, which probe_weights() works out from it.
+  std::vector<std::uint8_t> corners;
   ProbeStats stats;
 };
 
