@@ -170,16 +170,17 @@ LightCache learn(const PreparedScene& s, int updates) {
       const TexelGBuffer& g = s.gbuffers()[o];
       for (std::size_t i = 0; i < g.size(); ++i) {
         if (!g.valid(i)) continue;
-        const std::uint64_t region = cache.region(g.position[i], g.normal[i], o);
+        const TexelPoint p = g.point(s.world().objects[o], i);
+        const std::uint64_t region = cache.region(p.position, p.normal, o);
         const int count = cache.samples_in(region, kSamples);
         LightSampler::FrontLights front;
-        const bool culled = l.front_lights(g.position[i], g.normal[i], front);
+        const bool culled = l.front_lights(p.position, p.normal, front);
         for (int k = 0; k < count; ++k) {
           const glm::vec3 u((static_cast<float>(k) + rng.next_float()) / static_cast<float>(count),
                             rng.next_2d());
           Traced t;
-          sample(l, s.rays(), cache, culled ? &front : nullptr, g.position[i], g.normal[i], o,
-                 kLearned, u, ignored, &t);
+          sample(l, s.rays(), cache, culled ? &front : nullptr, p.position, p.normal, o, kLearned,
+                 u, ignored, &t);
           if (t.light >= 0) record.add(region, static_cast<std::uint32_t>(t.light), t.luminance);
         }
       }
@@ -211,11 +212,12 @@ Tally sample_scene(const PreparedScene& s, const LightCache& cache, int samples,
     const TexelGBuffer& g = s.gbuffers()[o];
     for (std::size_t i = 0; i < g.size(); ++i) {
       if (!g.valid(i) || k++ % static_cast<std::size_t>(step) != 0) continue;
+      const TexelPoint p = g.point(s.world().objects[o], i);
       double m[kWays], v[kWays], truth = 0.0;
       const std::uint64_t tree_rays_before = est[kTree].rays;
       for (int w = 0; w < kWays; ++w) {
-        run_texel(l, s.rays(), cache, g.position[i], g.normal[i], o, static_cast<Way>(w), samples,
-                  rng, est[w], m[w], v[w]);
+        run_texel(l, s.rays(), cache, p.position, p.normal, o, static_cast<Way>(w), samples, rng,
+                  est[w], m[w], v[w]);
         truth += m[w] / static_cast<double>(kWays);
       }
       // The variance of each texel's mean relative to its squared mean (the estimators' means
@@ -229,7 +231,7 @@ Tally sample_scene(const PreparedScene& s, const LightCache& cache, int samples,
       ++t.texels;
       if (oracle) {
         const double blocked =
-            oracle_occluded(l, s.rays(), g.position[i], g.normal[i], samples, rng, t.oracle_rays);
+            oracle_occluded(l, s.rays(), p.position, p.normal, samples, rng, t.oracle_rays);
         if (blocked >= 0.0) {
           t.oracle_occluded_rays += static_cast<std::uint64_t>(blocked);
         } else {  // no light reaches the texel: any pick's rays end occluded (the hierarchy's)

@@ -369,7 +369,7 @@ void expect_valid_gbuffer(const World& world, std::size_t oi, const ObjectLightm
         if (!centre_inside) ++bad_kind;
         // Position is the surface point at the texel centre.
         glm::vec3 p = wo.position(t, static_cast<float>(w.y), static_cast<float>(w.z));
-        if (glm::length(p - g.position[i]) > sample_tol) ++bad_position;
+        if (glm::length(p - g.position(wo, i)) > sample_tol) ++bad_position;
       } else {
         // Conservative: the triangle overlaps the texel (or it is the triangle's centroid texel)
         // and no triangle contains the centre.
@@ -381,13 +381,13 @@ void expect_valid_gbuffer(const World& world, std::size_t oi, const ObjectLightm
         double d = closest_point(c, glm::dvec2(x + 0.5, y + 0.5), cw);
         if (d > f.nearest[i] + 1e-4) ++not_nearest;
         glm::vec3 p = wo.position(t, static_cast<float>(cw.y), static_cast<float>(cw.z));
-        if (glm::length(p - g.position[i]) > sample_tol) ++bad_position;
+        if (glm::length(p - g.position(wo, i)) > sample_tol) ++bad_position;
       }
       const glm::uvec3& tri = tris[t];
-      float d = point_triangle_distance(g.position[i], wo.positions[tri.x], wo.positions[tri.y],
+      float d = point_triangle_distance(g.position(wo, i), wo.positions[tri.x], wo.positions[tri.y],
                                         wo.positions[tri.z]);
       if (d > position_tol) ++bad_position;
-      glm::vec3 n = g.normal[i];
+      glm::vec3 n = g.point(wo, i).normal;
       if (std::abs(glm::length(n) - 1.0f) > 1e-3f || glm::dot(n, wo.geometric_normal(t)) < 0.5f)
         ++bad_normal;
     }
@@ -717,9 +717,9 @@ TEST(GBuffer, CubeTexelsLieOnTheirTriangles) {
   for (std::size_t i = 0; i < g[0].size(); ++i) {
     if (!g[0].valid(i)) continue;
     (g[0].kind[i] == TexelKind::Covered ? covered : conservative)++;
-    EXPECT_GT(
-        glm::dot(g[0].normal[i], wo.geometric_normal(static_cast<std::uint32_t>(g[0].triangle[i]))),
-        0.9999f);
+    EXPECT_GT(glm::dot(g[0].point(wo, i).normal,
+                       wo.geometric_normal(static_cast<std::uint32_t>(g[0].triangle[i]))),
+              0.9999f);
   }
   // Each face is a square of side s texels centred in its cells: at least floor(s)^2 covered
   // centres, and partial texels only along its border.
@@ -743,8 +743,9 @@ TEST(GBuffer, SphereNormalsAndPositions) {
   std::size_t conservative = 0;
   for (std::size_t i = 0; i < g[0].size(); ++i) {
     if (!g[0].valid(i)) continue;
-    glm::vec3 radial = glm::normalize(g[0].position[i] - glm::vec3(1, 2, 3));
-    worst = std::min(worst, glm::dot(radial, g[0].normal[i]));
+    const TexelPoint p = g[0].point(ts.world.objects[0], i);
+    glm::vec3 radial = glm::normalize(p.position - glm::vec3(1, 2, 3));
+    worst = std::min(worst, glm::dot(radial, p.normal));
     conservative += g[0].kind[i] == TexelKind::Conservative;
   }
   EXPECT_GT(worst, 0.99f);
@@ -788,7 +789,7 @@ TEST(GBuffer, EmptyTexelsStayEmpty) {
     ++empty;
     EXPECT_EQ(f.chart[i], -1);
     EXPECT_EQ(g[0].triangle[i], -1);
-    EXPECT_EQ(g[0].position[i], glm::vec3(0.0f));
+    EXPECT_EQ(g[0].bary[i], glm::vec2(0.0f));
   }
   EXPECT_GT(empty, 0u);  // at least the gutters
 }
@@ -809,10 +810,11 @@ TEST(Dilate, FillsTheGuttersOfARealLightmap) {
   ts.build();
   Atlas atlas = build_atlas(ts.world);
   auto gbs = rasterize_gbuffer(ts.world, atlas);
-  for (const TexelGBuffer& g : gbs) {
+  for (std::size_t o = 0; o < gbs.size(); ++o) {
+    const TexelGBuffer& g = gbs[o];
     std::vector<glm::vec3> lm(g.size(), glm::vec3(kNaN));
     for (std::size_t i = 0; i < g.size(); ++i)
-      if (g.valid(i)) lm[i] = 0.5f * g.normal[i] + 0.5f;
+      if (g.valid(i)) lm[i] = 0.5f * g.point(ts.world.objects[o], i).normal + 0.5f;
     std::vector<glm::vec3> before = lm;
     dilate(lm, g.width, g.height, g.kind);
     std::size_t near = 0;

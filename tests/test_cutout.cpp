@@ -152,7 +152,7 @@ TEST(Cutout, SunThroughAHoleLightsExactlyItsShareOfTheFloor) {
     int count = 0;
     for (std::size_t i = 0; i < g.size(); ++i) {
       if (!g.valid(i)) continue;
-      const float x = g.position[i].x, e = map.texels[i].x;
+      const float x = g.position(s.world.objects[floor], i).x, e = map.texels[i].x;
       if (in_hole(x, 1e-4f)) {
         EXPECT_NEAR(e, w, 1e-5f * w) << "texel at x=" << x;
       } else if (outside_hole(x, 1e-4f)) {
@@ -181,7 +181,7 @@ TEST(Cutout, TexelsInTheHoleHoldNoEstimate) {
   std::size_t cut = 0, kept = 0;
   for (std::size_t i = 0; i < g.size(); ++i) {
     if (g.kind[i] == TexelKind::Empty) continue;
-    const float x = g.position[i].x;
+    const float x = g.position(s.world.objects[plane], i).x;
     if (!g.valid(i)) {
       ++cut;
       EXPECT_EQ(g.kind[i], TexelKind::Hidden);

@@ -164,7 +164,7 @@ LeakErrors leak_errors(const EngineSetup& s, const std::vector<Lightmap>& engine
     double e[2][2] = {}, r[2][2] = {};
     for (std::size_t t = 0; t < engine[o].texels.size(); ++t) {
       if (!s.gbuffers[o].valid(t)) continue;
-      const glm::vec3 q = s.gbuffers[o].position[t];
+      const glm::vec3 q = s.gbuffers[o].position(s.world.objects[o], t);
       if (q.y < -0.05f || q.y > 2.85f) continue;  // the building's outside
       const int i = static_cast<int>(std::floor(q.x / 4.0f));
       const int j = static_cast<int>(std::floor(q.z / 4.0f));

@@ -84,8 +84,9 @@ Group group(const EngineSetup& s, const std::vector<Lightmap>& maps,
   double sum = 0.0;
   for (std::size_t o = 0; o < maps.size(); ++o)
     for (std::size_t i = 0; i < maps[o].texels.size(); ++i) {
-      if (!s.gbuffers[o].valid(i) || !keep(s.gbuffers[o].position[i], s.gbuffers[o].normal[i]))
-        continue;
+      if (!s.gbuffers[o].valid(i)) continue;
+      const TexelPoint p = s.gbuffers[o].point(s.world.objects[o], i);
+      if (!keep(p.position, p.normal)) continue;
       const glm::vec3 e = maps[o].texels[i];
       const double v = (e.x + e.y + e.z) / 3.0;
       sum += v;

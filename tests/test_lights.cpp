@@ -32,9 +32,14 @@ struct Texel {
 std::vector<Texel> texels(const PreparedScene& s, std::size_t step) {
   std::vector<Texel> t;
   std::size_t k = 0;
-  for (const TexelGBuffer& g : s.gbuffers())
-    for (std::size_t i = 0; i < g.size(); ++i)
-      if (g.valid(i) && k++ % step == 0) t.push_back({g.position[i], g.normal[i]});
+  for (std::size_t o = 0; o < s.gbuffers().size(); ++o) {
+    const TexelGBuffer& g = s.gbuffers()[o];
+    for (std::size_t i = 0; i < g.size(); ++i) {
+      if (!g.valid(i) || k++ % step != 0) continue;
+      const TexelPoint p = g.point(s.world().objects[o], i);
+      t.push_back({p.position, p.normal});
+    }
+  }
   return t;
 }
 

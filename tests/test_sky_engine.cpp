@@ -140,8 +140,7 @@ TEST(SkyEngine, OpenPlaneUnderAConstantSkyReceivesPiL) {
   }
   // The default cells' whole lightmaps too: their scatter rays leave the scene, and a ray that
   // leaves brings nothing (it once read a probe that saw the lit plane: 1.5-1.65 x pi L).
-  const auto direct = engine->component(0), total = exact->lightmaps(),
-             cells = engine->lightmaps();
+  const auto direct = engine->component(0), total = exact->lightmaps(), cells = engine->lightmaps();
   std::size_t texels = 0;
   for_valid(s, [&](std::size_t o, std::size_t i) {
     ++texels;
@@ -240,7 +239,8 @@ TEST(SkyEngine, SunThroughAnOpeningCastsHardShadows) {
   const TexelGBuffer& g = s.gbuffers[0];  // the floor
   const float density = s.atlas.objects[0].texels_per_unit;
   auto ring = [&](std::size_t i) {
-    return std::max(std::fabs(g.position[i].x), std::fabs(g.position[i].z));
+    const glm::vec3 p = g.position(s.world.objects[0], i);
+    return std::max(std::fabs(p.x), std::fabs(p.z));
   };
   struct Case {
     const char* name;

@@ -2,11 +2,11 @@
 
 #include "irradcast/common/atlas.h"
 #include "irradcast/common/error.h"
-#include "irradcast/engine/gbuffer.h"
 #include "irradcast/common/progress.h"
 #include "irradcast/common/ray_scene.h"
-#include "irradcast/engine/texel_validity.h"
 #include "irradcast/common/world.h"
+#include "irradcast/engine/gbuffer.h"
+#include "irradcast/engine/texel_validity.h"
 #include "scene_builders.h"
 
 using namespace irradcast;
@@ -59,7 +59,7 @@ TEST(TexelValidity, TexelsUnderABlockAreHiddenAndTheRestStayValid) {
   const TexelGBuffer& g = s.gbuffers[floor];
   for (std::size_t i = 0; i < g.size(); ++i) {
     if (g.kind[i] != TexelKind::Hidden) continue;
-    const glm::vec3 q = g.position[i];
+    const glm::vec3 q = g.position(s.world.objects[floor], i);
     EXPECT_LE(std::max(std::abs(q.x), std::abs(q.z)), 0.5f + 0.05f) << "hidden outside the block";
   }
   for (std::size_t o = 0; o < s.gbuffers.size(); ++o)

@@ -157,13 +157,12 @@ std::vector<Lightmap> cpu_sky(const EngineSetup& s, int n, std::uint64_t seed) {
     maps[o] = Lightmap(g.width, g.height);
     for (std::size_t i = 0; i < g.size(); ++i) {
       if (!g.valid(i)) continue;
-      glm::vec3 ng = s.world.objects[o].geometric_normal(static_cast<std::uint32_t>(g.triangle[i]));
-      if (glm::dot(ng, g.normal[i]) < 0.0f) ng = -ng;
+      const TexelPoint p = g.point(s.world.objects[o], i);
       glm::dvec3 sum(0.0);
       for (int k = 0; k < n; ++k) {
         const glm::vec2 a = rng.next_2d(), b = rng.next_2d();
         sum += glm::dvec3(
-            s.lights.sky_irradiance(s.rays, g.position[i], g.normal[i], ng, glm::vec4(a, b)));
+            s.lights.sky_irradiance(s.rays, p.position, p.normal, p.geo_normal, glm::vec4(a, b)));
       }
       maps[o].texels[i] = glm::vec3(sum / static_cast<double>(n));
     }
@@ -364,7 +363,7 @@ TEST(VulkanCutOut, AMaskPlaneLetsThroughExactlyItsHoles) {
       int texels = 0, judged = 0, wrong = 0;
       for (std::size_t i = 0; i < g.size(); ++i) {
         if (!g.valid(i)) continue;
-        const glm::vec3 p = g.position[i];
+        const glm::vec3 p = g.position(s.world.objects[floor], i);
         const float f = p.x - std::floor(p.x);
         const bool hole = mask && (p.z > 0.0f || f < 0.25f);
         const float edge = std::min({std::fabs(p.z), std::fabs(f - 0.25f), f, 1.0f - f});

@@ -105,15 +105,13 @@ void Engine::build_texels(const std::vector<TexelGBuffer>& gbuffers) {
     if (!obj.in_static_scene()) continue;  // hidden: its lightmap keeps its last values
     for (std::size_t i = 0; i < g.size(); ++i) {
       if (!g.valid(i)) continue;
-      glm::vec3 n = g.normal[i];
-      glm::vec3 ng = obj.geometric_normal(static_cast<std::uint32_t>(g.triangle[i]));
-      if (glm::dot(ng, n) < 0.0f) ng = -ng;
-      texels_.position.push_back(g.position[i]);
-      texels_.normal.push_back(n);
-      texels_.geo_normal.push_back(ng);
+      const TexelPoint p = g.point(obj, i);
+      texels_.position.push_back(p.position);
+      texels_.normal.push_back(p.normal);
+      texels_.geo_normal.push_back(p.geo_normal);
       texels_.object.push_back(static_cast<std::uint32_t>(o));
       texels_.texel.push_back(static_cast<std::uint32_t>(i));
-      texels_.cell.push_back(static_cast<std::uint32_t>(probes_.grid.cell_index(g.position[i])));
+      texels_.cell.push_back(static_cast<std::uint32_t>(probes_.grid.cell_index(p.position)));
     }
   }
 }

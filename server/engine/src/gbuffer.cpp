@@ -208,8 +208,7 @@ void fill_attributes(const World& world, std::size_t oi, float inset, const Samp
         u += k * (1.0f / 3.0f - u);
         v += k * (1.0f / 3.0f - v);
       }
-      g.position[i] = wo.position(t, u, v);
-      g.normal[i] = wo.shading_normal(t, u, v);
+      g.bary[i] = glm::vec2(u, v);
       if (cut_outs && cut_out(world, static_cast<int>(oi), t, u, v)) g.kind[i] = TexelKind::Hidden;
     }
   });
@@ -226,8 +225,7 @@ TexelGBuffer rasterize_object(const World& world, std::size_t oi, const ObjectLi
   g.width = std::max(0, lm.width);
   g.height = std::max(0, lm.height);
   const std::size_t size = static_cast<std::size_t>(g.width) * static_cast<std::size_t>(g.height);
-  g.position.assign(size, glm::vec3(0.0f));
-  g.normal.assign(size, glm::vec3(0.0f));
+  g.bary.assign(size, glm::vec2(0.0f));
   g.triangle.assign(size, -1);
   g.kind.assign(size, TexelKind::Empty);
   if (size == 0) return g;
@@ -249,6 +247,22 @@ TexelGBuffer rasterize_object(const World& world, std::size_t oi, const ObjectLi
 }
 
 }  // namespace
+
+TexelPoint TexelGBuffer::point(const WorldObject& object, std::size_t i) const {
+  if (triangle[i] < 0) return {};
+  const auto t = static_cast<std::uint32_t>(triangle[i]);
+  TexelPoint p;
+  p.position = object.position(t, bary[i].x, bary[i].y);
+  p.normal = object.shading_normal(t, bary[i].x, bary[i].y);
+  p.geo_normal = object.geometric_normal(t);
+  if (glm::dot(p.geo_normal, p.normal) < 0.0f) p.geo_normal = -p.geo_normal;
+  return p;
+}
+
+glm::vec3 TexelGBuffer::position(const WorldObject& object, std::size_t i) const {
+  if (triangle[i] < 0) return glm::vec3(0.0f);
+  return object.position(static_cast<std::uint32_t>(triangle[i]), bary[i].x, bary[i].y);
+}
 
 std::size_t TexelGBuffer::valid_count() const {
   return static_cast<std::size_t>(std::count_if(kind.begin(), kind.end(), holds_estimate));

@@ -30,25 +30,23 @@ std::vector<Lightmap> reference_lightmaps(const World& world, const PathTracer& 
     const WorldObject& obj = world.objects[o];
     Lightmap& map = maps[o];
     map = Lightmap(g.width, g.height);
-    tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(0, g.size(), 64),
-        [&](const tbb::blocked_range<std::size_t>& r) {
-          std::uint64_t local = 0, texels = 0;
-          for (std::size_t i = r.begin(); i < r.end(); ++i) {
-            if (!g.valid(i)) continue;
-            glm::vec3 n = g.normal[i];
-            glm::vec3 ng = obj.geometric_normal(static_cast<std::uint32_t>(g.triangle[i]));
-            if (glm::dot(ng, n) < 0.0f) ng = -ng;
-            glm::dvec3 sum(0.0);
-            Rng rng(mix64(tracer.options().seed + o) ^ i, 0x11c0ffee);
-            for (int s = 0; s < samples_per_texel; ++s)
-              sum += glm::dvec3(tracer.irradiance(g.position[i], n, ng, bounces, rng, &local));
-            map.texels[i] = glm::vec3(sum / static_cast<double>(samples_per_texel));
-            ++texels;
-          }
-          rays += local;
-          progress.advance(texels);
-        });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, g.size(), 64),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        std::uint64_t local = 0, texels = 0;
+                        for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                          if (!g.valid(i)) continue;
+                          const TexelPoint p = g.point(obj, i);
+                          glm::dvec3 sum(0.0);
+                          Rng rng(mix64(tracer.options().seed + o) ^ i, 0x11c0ffee);
+                          for (int s = 0; s < samples_per_texel; ++s)
+                            sum += glm::dvec3(tracer.irradiance(p.position, p.normal, p.geo_normal,
+                                                                bounces, rng, &local));
+                          map.texels[i] = glm::vec3(sum / static_cast<double>(samples_per_texel));
+                          ++texels;
+                        }
+                        rays += local;
+                        progress.advance(texels);
+                      });
     dilate(map.texels, map.width, map.height, g.kind);
   }
   progress.finish();

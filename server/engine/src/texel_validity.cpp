@@ -38,33 +38,32 @@ std::size_t mark_hidden_texels(const RayScene& rays, std::vector<TexelGBuffer>& 
     if (o >= which.size() || !which[o]) continue;
     TexelGBuffer& g = gbuffers[o];
     const WorldObject& obj = world.objects[o];
-    tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(0, g.size(), 256),
-        [&](const tbb::blocked_range<std::size_t>& r) {
-          std::size_t count = 0;
-          for (std::size_t i = r.begin(); i < r.end(); ++i) {
-            if (!g.valid(i)) continue;
-            const glm::vec3 n = g.normal[i];
-            glm::vec3 ng = obj.geometric_normal(static_cast<std::uint32_t>(g.triangle[i]));
-            if (glm::dot(ng, n) < 0.0f) ng = -ng;
-            Frame frame(n);
-            int back = 0;
-            for (const glm::vec3& l : local) {
-              Ray ray;
-              ray.direction = frame.to_world(l);
-              ray.origin = rays.offset(g.position[i], ng, ray.direction);
-              Hit h = rays.intersect(ray);
-              if (!h.valid() || world.material(h.object, h.triangle).double_sided) continue;
-              const glm::vec3 hn = world.objects[h.object].geometric_normal(h.triangle);
-              if (glm::dot(hn, ray.direction) > 0.0f) ++back;
-            }
-            if (back > limit) {
-              g.kind[i] = TexelKind::Hidden;
-              ++count;
-            }
-          }
-          marked += count;
-        });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, g.size(), 256),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        std::size_t count = 0;
+                        for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                          if (!g.valid(i)) continue;
+                          const TexelPoint p = g.point(obj, i);
+                          Frame frame(p.normal);
+                          int back = 0;
+                          for (const glm::vec3& l : local) {
+                            Ray ray;
+                            ray.direction = frame.to_world(l);
+                            ray.origin = rays.offset(p.position, p.geo_normal, ray.direction);
+                            Hit h = rays.intersect(ray);
+                            if (!h.valid() || world.material(h.object, h.triangle).double_sided)
+                              continue;
+                            const glm::vec3 hn =
+                                world.objects[h.object].geometric_normal(h.triangle);
+                            if (glm::dot(hn, ray.direction) > 0.0f) ++back;
+                          }
+                          if (back > limit) {
+                            g.kind[i] = TexelKind::Hidden;
+                            ++count;
+                          }
+                        }
+                        marked += count;
+                      });
   }
   return marked.load();
 }

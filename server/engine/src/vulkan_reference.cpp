@@ -77,13 +77,10 @@ std::vector<Lightmap> VulkanBackend::reference_lightmaps(const std::vector<Texel
     auto* v = static_cast<glm::vec4*>(dst);
     for (std::size_t k = 0; k < where.size(); ++k) {
       const auto [o, i] = where[k];
-      const TexelGBuffer& g = gbuffers[o];
-      const glm::vec3 n = g.normal[i];
-      glm::vec3 ng = world.objects[o].geometric_normal(static_cast<std::uint32_t>(g.triangle[i]));
-      if (glm::dot(ng, n) < 0.0f) ng = -ng;
-      v[3 * k] = glm::vec4(g.position[i], 0.0f);
-      v[3 * k + 1] = glm::vec4(n, 0.0f);
-      v[3 * k + 2] = glm::vec4(ng, 0.0f);
+      const TexelPoint p = gbuffers[o].point(world.objects[o], i);
+      v[3 * k] = glm::vec4(p.position, 0.0f);
+      v[3 * k + 1] = glm::vec4(p.normal, 0.0f);
+      v[3 * k + 2] = glm::vec4(p.geo_normal, 0.0f);
     }
   });
   const std::vector<glm::dvec3> sum =

@@ -1,6 +1,7 @@
-// The texel G-buffer ("global G-buffer" of seed 001): per lightmap texel the world position and
-// normal of the surface point it stands for (its triangle and kind too; the albedo is read where
-// light leaves a surface, at hits, so no texel keeps one). Texels whose centre lies in a triangle
+// The texel G-buffer ("global G-buffer" of seed 001): per lightmap texel the surface point it
+// stands for, as its triangle and barycentric coordinates (the world position and normals follow
+// from the object's placement: TexelGBuffer::point), and its kind. The albedo is read where light
+// leaves a surface, at hits, so no texel keeps one. Texels whose centre lies in a triangle
 // sample that point; texels a triangle only partly covers sample the triangle's point closest to
 // the texel centre (so bilinear lookups at chart borders read real surface values); the rest
 // (gutters, unused space) are empty and filled by dilation of the lightmap values.
@@ -25,17 +26,29 @@ inline bool holds_estimate(TexelKind k) {
   return k == TexelKind::Covered || k == TexelKind::Conservative;
 }
 
+// A texel's surface point in world space.
+struct TexelPoint {
+  glm::vec3 position{0.0f};
+  glm::vec3 normal{0.0f};      // unit shading normal
+  glm::vec3 geo_normal{0.0f};  // unit geometric normal, on the shading normal's side
+};
+
+// One object's texels. 13 bytes a texel: the world position and normals (36 bytes) are worked out
+// from the object where they are read, with the arithmetic that placed the sample.
 struct TexelGBuffer {
   int width = 0;
   int height = 0;
-  std::vector<glm::vec3> position;     // world space
-  std::vector<glm::vec3> normal;       // unit, world space (shading normal)
+  std::vector<glm::vec2> bary;         // the sample's barycentric (u, v) in its triangle
   std::vector<std::int32_t> triangle;  // -1 for empty texels
   std::vector<TexelKind> kind;
 
   std::size_t size() const { return kind.size(); }
   bool valid(std::size_t i) const { return holds_estimate(kind[i]); }
   std::size_t valid_count() const;
+  // Texel i's point on `object` (the world object these texels were rasterized for, as placed
+  // then); all zero for an Empty texel.
+  TexelPoint point(const WorldObject& object, std::size_t i) const;
+  glm::vec3 position(const WorldObject& object, std::size_t i) const;
 };
 
 // Per object: a texel whose centre lies in a triangle (inclusive; the lowest triangle index wins
