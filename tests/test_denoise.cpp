@@ -41,10 +41,9 @@ struct Texels {
       for (int i = 0; i < n; ++i) {
         t.position.push_back(origin + (i + 0.5f) * u + (j + 0.5f) * v);
         t.normal.push_back(normal);
-        t.geo_normal.push_back(normal);
         t.object.push_back(0);
         t.texel.push_back(static_cast<std::uint32_t>(t.texel.size()));
-        t.cell.push_back(0);
+        t.triangle.push_back(0);
         guide.chart.push_back(chart(i, j));
         const float e = level(i, j);
         truth.push_back(glm::vec3(e));

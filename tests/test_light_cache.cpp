@@ -254,7 +254,9 @@ class RecordingDirect final : public test::EmbreeForwarder {
     outputs.push_back(out);
     position = in.texels.position;
     normal = in.texels.normal;
-    geo_normal = in.texels.geo_normal;
+    geo_normal.resize(in.texels.size());
+    for (std::size_t i = 0; i < in.texels.size(); ++i)
+      geo_normal[i] = in.texels.geo_normal(in.world, i);
     return r;
   }
   std::vector<std::vector<glm::vec3>> outputs;

@@ -26,7 +26,7 @@ bool same_bits(glm::vec3 a, glm::vec3 b) {
 glm::vec3 scatter_ray_by_ray(const RayScene& rays, const PassInput& in, const RadianceField& prev,
                              const std::vector<glm::vec3>& probe_radiance, std::uint32_t i) {
   const int n = in.params.indirect_samples;
-  const glm::vec3 p = in.texels.position[i], ng = in.texels.geo_normal[i];
+  const glm::vec3 p = in.texels.position[i], ng = in.texels.geo_normal(in.world, i);
   Rng rng = texel_rng(in.params, i, in.update, kScatter, in.bounce);
   Rng pick = texel_rng(in.params, i, in.update, kProbePick, in.bounce);
   const Frame frame(in.texels.normal[i]);

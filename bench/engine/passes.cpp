@@ -92,7 +92,7 @@ Capture capture_direct(const RayScene& rays, const LightSampler& lights, const L
   c.area_samples.assign(in.texels.size(), in.params.direct_samples);
   for_each_texel_in_order(in, [&](std::uint32_t i) {
     const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
-                    ng = in.texels.geo_normal[i];
+                    ng = in.texels.geo_normal(in.world, i);
     LightSampler::ShadowSample s;
     for (const WorldLight& l : in.world.lights) {
       if (!LightSampler::punctual_sample(rays, l, p, nrm, ng, s)) continue;
@@ -161,7 +161,7 @@ Capture capture_scatter(const RayScene& rays, const PassInput& in) {
   c.rays.reserve(in.texels.size() * static_cast<std::size_t>(n));
   for_each_texel_in_order(in, [&](std::uint32_t i) {
     const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
-                    ng = in.texels.geo_normal[i];
+                    ng = in.texels.geo_normal(in.world, i);
     Rng rng = texel_rng(in.params, i, in.update, kScatter, in.bounce);
     const float range = scatter_range(in, i);
     Frame frame(nrm);

@@ -30,6 +30,11 @@ std::uint64_t saturating_add(std::uint64_t a, std::uint64_t b) {
   return a > ~b ? ~std::uint64_t{0} : a + b;
 }
 
+std::uint32_t saturating_add32(std::uint32_t a, std::uint64_t b) {
+  return static_cast<std::uint32_t>(
+      std::min<std::uint64_t>(a + std::min<std::uint64_t>(b, ~0u), ~0u));
+}
+
 // The direction of the normal's largest component: 0..5 (+x, -x, +y, -y, +z, -z).
 std::uint64_t direction_of(glm::vec3 n) {
   const glm::vec3 a = glm::abs(n);
@@ -117,8 +122,8 @@ void LightCache::learn(std::vector<Record*> records) {
     auto& sums = it->second;
     for (Sum& s : sums) {
       s.sum = fade(s.sum);
-      s.count = fade(s.count);
-      s.lit = std::min(fade(s.lit), s.count);
+      s.count = static_cast<std::uint32_t>(fade(s.count));
+      s.lit = std::min(static_cast<std::uint32_t>(fade(s.lit)), s.count);
     }
     std::erase_if(sums, [](const Sum& s) { return s.count == 0; });
     it = sums.empty() ? sums_.erase(it) : std::next(it);
@@ -131,10 +136,10 @@ void LightCache::learn(std::vector<Record*> records) {
                                        [](const Sum& s, std::uint32_t l) { return s.light < l; });
       if (at != sums.end() && at->light == e.light) {
         at->sum = saturating_add(at->sum, e.sum);
-        at->count = saturating_add(at->count, e.count);
-        at->lit = saturating_add(at->lit, e.lit);
+        at->count = saturating_add32(at->count, e.count);
+        at->lit = saturating_add32(at->lit, e.lit);
       } else {
-        sums.insert(at, {e.light, e.sum, e.count, e.lit});
+        sums.insert(at, {e.sum, e.light, saturating_add32(0, e.count), saturating_add32(0, e.lit)});
       }
     }
   // Each region's table: its kMaxLights lights of the largest mean (ties by index); a region

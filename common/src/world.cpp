@@ -9,6 +9,11 @@
 namespace irradcast {
 
 glm::vec3 WorldObject::geometric_normal(std::uint32_t t) const {
+  if (t < face_normals.size()) return face_normals[t];
+  return face_normal(t);
+}
+
+glm::vec3 WorldObject::face_normal(std::uint32_t t) const {
   const glm::uvec3& tri = source->triangles[t];
   glm::vec3 n =
       glm::cross(positions[tri.y] - positions[tri.x], positions[tri.z] - positions[tri.x]);
@@ -60,6 +65,10 @@ void place_object(WorldObject& wo, const glm::mat4& m) {
     float len = glm::length(q);
     wo.normals[i] = len > 0.0f ? q / len : glm::vec3(0.0f);
   }
+  wo.face_normals.clear();
+  const auto triangles = static_cast<std::uint32_t>(mesh.triangles.size());
+  wo.face_normals.reserve(triangles);
+  for (std::uint32_t t = 0; t < triangles; ++t) wo.face_normals.push_back(wo.face_normal(t));
 }
 
 void place_lights(World& w, const Scene& scene, const std::vector<glm::mat4>& mats,

@@ -154,7 +154,7 @@ void CellsMethod::weigh(const SurfaceTexels& texels, Probes& probes) const {
       if (params_.probe_visibility && dist > 0.0f) {
         Ray r;
         r.direction = to / dist;
-        r.origin = rays_->offset(p, texels.geo_normal[t], r.direction);
+        r.origin = rays_->offset(p, texels.geo_normal(*world_, t), r.direction);
         r.tmax = glm::length(grid.position[index] - r.origin);
         if (rays_->occluded(r)) continue;
       }

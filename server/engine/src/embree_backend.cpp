@@ -158,6 +158,8 @@ glm::vec3 EmbreeBackend::sky_direct(const PassInput& in, std::uint32_t i,
   const float inv = 1.0f / static_cast<float>(n);
   const bool map = lights_->sky_distribution().valid();
   Rng rng = texel_rng(in.params, i, in.update, kSky, 0);
+  const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
+                  ng = in.texels.geo_normal(in.world, i);
   glm::vec3 sum(0.0f);
   for (int s = 0; s < n; ++s) {
     const float a = (static_cast<float>(s) + rng.next_float()) * inv;
@@ -165,8 +167,7 @@ glm::vec3 EmbreeBackend::sky_direct(const PassInput& in, std::uint32_t i,
     const float c = (static_cast<float>(n - 1 - s) + rng.next_float()) * inv;
     const glm::vec4 u =
         map ? glm::vec4(b, a, c, rng.next_float()) : glm::vec4(a, b, c, rng.next_float());
-    sum += lights_->sky_irradiance(*rays_, in.texels.position[i], in.texels.normal[i],
-                                   in.texels.geo_normal[i], u, traced);
+    sum += lights_->sky_irradiance(*rays_, p, nrm, ng, u, traced);
   }
   return sum * inv;
 }
@@ -207,7 +208,7 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, AreaR
   // stratified in the pick; every sample drawn first (4 at a time in SIMD lanes), then the shadow
   // rays of those that can contribute traced (8 to a packet), then summed in order.
   const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
-                  ng = in.texels.geo_normal[i];
+                  ng = in.texels.geo_normal(in.world, i);
   LightSampler::FrontLights front;
   const bool culled = lights_->front_lights(p, nrm, front);
   if (culled && front.count == 0) return glm::vec3(0.0f);
@@ -314,7 +315,7 @@ PassResult EmbreeBackend::direct(const PassInput& in, std::vector<glm::vec3>& ou
     for (std::size_t k = 0; k < size; ++k) {
       const std::uint32_t i = run[k];
       const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
-                      ng = in.texels.geo_normal[i];
+                      ng = in.texels.geo_normal(in.world, i);
       glm::vec3 e =
           punctual > 0 ? lights_->punctual_irradiance(*rays_, p, nrm, ng) : glm::vec3(0.0f);
       traced += punctual;

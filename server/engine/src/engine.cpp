@@ -79,8 +79,8 @@ Engine::Engine(const World& world, const Atlas& atlas, const std::vector<TexelGB
   mean_.assign(k + 1, std::vector<glm::vec3>(texels_.size(), glm::vec3(0.0f)));
   samples_.assign(texels_.size(), 0);
   bounce_samples_.assign(texels_.size(), 0);
-  total_mean_.assign(texels_.size(), 0.0);
-  total_m2_.assign(texels_.size(), 0.0);
+  total_mean_.assign(texels_.size(), 0.0f);
+  total_m2_.assign(texels_.size(), 0.0f);
 }
 
 Engine::~Engine() = default;
@@ -95,10 +95,9 @@ void Engine::build_texels(const std::vector<TexelGBuffer>& gbuffers) {
   for (const auto& g : gbuffers) total += g.valid_count();
   texels_.position.reserve(total);
   texels_.normal.reserve(total);
-  texels_.geo_normal.reserve(total);
   texels_.object.reserve(total);
   texels_.texel.reserve(total);
-  texels_.cell.reserve(total);
+  texels_.triangle.reserve(total);
   for (std::size_t o = 0; o < gbuffers.size(); ++o) {
     const TexelGBuffer& g = gbuffers[o];
     const WorldObject& obj = world_->objects[o];
@@ -108,10 +107,9 @@ void Engine::build_texels(const std::vector<TexelGBuffer>& gbuffers) {
       const TexelPoint p = g.point(obj, i);
       texels_.position.push_back(p.position);
       texels_.normal.push_back(p.normal);
-      texels_.geo_normal.push_back(p.geo_normal);
       texels_.object.push_back(static_cast<std::uint32_t>(o));
       texels_.texel.push_back(static_cast<std::uint32_t>(i));
-      texels_.cell.push_back(static_cast<std::uint32_t>(probes_.grid.cell_index(p.position)));
+      texels_.triangle.push_back(static_cast<std::uint32_t>(g.triangle[i]));
     }
   }
 }
@@ -130,13 +128,16 @@ void Engine::build_dispatch() {
     return;
   }
   // Per cell: a counting sort of the texels by cell, one work unit per non-empty cell.
+  std::vector<std::uint32_t> cell(n);
+  tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
+    cell[i] = static_cast<std::uint32_t>(probes_.grid.cell_index(texels_.position[i]));
+  });
   std::vector<std::uint32_t> counts(probes_.grid.count() + 1, 0);
-  for (std::uint32_t c : texels_.cell) ++counts[c + 1];
+  for (std::uint32_t c : cell) ++counts[c + 1];
   for (std::size_t c = 1; c < counts.size(); ++c) counts[c] += counts[c - 1];
   unit_texels_.resize(n);
   std::vector<std::uint32_t> fill(counts.begin(), counts.end() - 1);
-  for (std::size_t i = 0; i < n; ++i)
-    unit_texels_[fill[texels_.cell[i]]++] = static_cast<std::uint32_t>(i);
+  for (std::size_t i = 0; i < n; ++i) unit_texels_[fill[cell[i]]++] = static_cast<std::uint32_t>(i);
   for (std::size_t c = 1; c < counts.size(); ++c)
     if (counts[c] > counts[c - 1]) unit_offsets_.push_back(counts[c]);
 }
@@ -192,7 +193,13 @@ UpdateStats Engine::update() {
     // first full update, whose bounces all read new direct light.
     for (std::uint32_t i : texels) ++samples_[i];
   } else {
-    bounces(in, std::move(est), stats);
+    // The update's total per texel, as the luminance its statistics read (4 bytes a texel where
+    // the direct estimate takes 12).
+    std::vector<float> total(est.size());
+    tbb::parallel_for(std::size_t(0), texels.size(),
+                      [&](std::size_t j) { total[texels[j]] = luminance(est[texels[j]]); });
+    std::vector<glm::vec3>().swap(est);
+    bounces(in, total, stats);
   }
   ++updates_;
   stats.total_seconds = std::chrono::duration<double>(Clock::now() - start).count();
@@ -212,15 +219,16 @@ void Engine::next_batch(std::vector<std::uint32_t>& texels, std::vector<std::uin
   offsets.push_back(0);
   for (std::size_t i = 1; i < texels.size(); ++i) {
     const std::uint32_t a = texels[i - 1], b = texels[i];
-    const bool split =
-        by_object ? texels_.object[a] != texels_.object[b] : texels_.cell[a] != texels_.cell[b];
+    const bool split = by_object ? texels_.object[a] != texels_.object[b]
+                                 : probes_.grid.cell_index(texels_.position[a]) !=
+                                       probes_.grid.cell_index(texels_.position[b]);
     if (split) offsets.push_back(static_cast<std::uint32_t>(i));
   }
   offsets.push_back(static_cast<std::uint32_t>(texels.size()));
   ++generation_;
 }
 
-void Engine::bounces(PassInput& in, std::vector<glm::vec3> total, UpdateStats& stats) {
+void Engine::bounces(PassInput& in, std::vector<float>& total, UpdateStats& stats) {
   const int k = params_.indirect_bounces;
   const std::vector<std::uint32_t>& texels = in.unit_texels;
   std::vector<glm::vec3> est;
@@ -235,7 +243,7 @@ void Engine::bounces(PassInput& in, std::vector<glm::vec3> total, UpdateStats& s
     accumulate(mean_[b], est, bounce_samples_, texels);
     tbb::parallel_for(std::size_t(0), texels.size(), [&](std::size_t j) {
       const std::uint32_t i = texels[j];
-      total[i] += est[i];
+      total[i] += luminance(est[i]);
     });
     if (b < k) to_lightmaps(mean_[b], prev);  // in place: one set of maps at a time
   }
@@ -244,11 +252,13 @@ void Engine::bounces(PassInput& in, std::vector<glm::vec3> total, UpdateStats& s
   tbb::parallel_for(std::size_t(0), texels.size(), [&](std::size_t j) {
     const std::uint32_t i = texels[j];
     const double n = static_cast<double>(bounce_samples_[i]) + 1.0;
-    double x = luminance(total[i]);
-    if (bounce_samples_[i] == 0) total_mean_[i] = total_m2_[i] = 0.0;
-    double d = x - total_mean_[i];
-    total_mean_[i] += d / n;
-    total_m2_[i] += d * (x - total_mean_[i]);
+    const double x = total[i];
+    const double mean = bounce_samples_[i] == 0 ? 0.0 : total_mean_[i];
+    const double m2 = bounce_samples_[i] == 0 ? 0.0 : total_m2_[i];
+    const double d = x - mean;
+    const double next = mean + d / n;
+    total_mean_[i] = static_cast<float>(next);
+    total_m2_[i] = static_cast<float>(m2 + d * (x - next));
     ++samples_[i];
     ++bounce_samples_[i];
   });
@@ -338,7 +348,7 @@ struct Engine::Before {
   std::vector<std::vector<glm::vec3>> mean;  // its component means
   SurfaceTexels texels;
   std::vector<std::uint32_t> samples, bounce_samples;
-  std::vector<double> total_mean, total_m2;
+  std::vector<float> total_mean, total_m2;
   std::vector<std::uint8_t> restarted;
 };
 
@@ -454,7 +464,7 @@ std::vector<std::uint8_t> Engine::priorities(const SceneChange& change,
   std::vector<std::uint8_t> tier(n, 0);
   tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
     const glm::vec3 p = texels_.position[i];
-    const glm::vec3 ng = texels_.geo_normal[i];
+    const glm::vec3 ng = texels_.geo_normal(*world_, i);
     auto sees = [&](glm::vec3 q) {
       glm::vec3 to = q - p;
       const float dist = glm::length(to);
@@ -502,8 +512,8 @@ void Engine::restart(const Before& before, const std::vector<std::int32_t>& old_
   const std::size_t n = texels_.size();
   samples_.assign(n, 0);
   bounce_samples_.assign(n, 0);
-  total_mean_.assign(n, 0.0);
-  total_m2_.assign(n, 0.0);
+  total_mean_.assign(n, 0.0f);
+  total_m2_.assign(n, 0.0f);
   restarted_.assign(n, 1);
   const auto keep = static_cast<std::uint32_t>(params_.edit_keep);
   for (std::size_t i = 0; i < n; ++i) {
@@ -518,7 +528,10 @@ void Engine::restart(const Before& before, const std::vector<std::int32_t>& old_
     bounce_samples_[i] = std::min(before.bounce_samples[k], keep);
     total_mean_[i] = before.total_mean[k];
     const std::uint32_t full = before.bounce_samples[k];
-    total_m2_[i] = full > 1 ? before.total_m2[k] * (bounce_samples_[i] - 1.0) / (full - 1.0) : 0.0;
+    total_m2_[i] =
+        full > 1
+            ? static_cast<float>(before.total_m2[k] * (bounce_samples_[i] - 1.0) / (full - 1.0))
+            : 0.0f;
   }
   // The texels wait in priority order; the method restarts its own estimates (the probes).
   queue_.clear();

@@ -177,7 +177,8 @@ void IrradianceCache::build_splats(const PassInput& in) {
     const glm::vec3 p = in.texels.position[i], nn = in.texels.normal[i];
     for (std::uint32_t k : cell_records(p)) {
       const float w = weight(records_[k], p, nn);
-      if (w > 0.0f && visible(records_[k], p, in.texels.geo_normal[i])) lists[i].push_back({k, w});
+      if (w > 0.0f && visible(records_[k], p, in.texels.geo_normal(in.world, i)))
+        lists[i].push_back({k, w});
     }
   });
   splat_offsets_.assign(n + 1, 0);
@@ -216,9 +217,10 @@ PassResult IrradianceCache::prepare(const PassInput& in) {
     std::vector<std::uint8_t> uncovered(c1 - c0, 0);
     tbb::parallel_for(c0, c1, [&](std::size_t j) {
       const std::uint32_t i = order[j];
-      uncovered[j - c0] =
-          coverage(in.texels.position[i], in.texels.normal[i], in.texels.geo_normal[i]) > 0.0f ? 0
-                                                                                               : 1;
+      uncovered[j - c0] = coverage(in.texels.position[i], in.texels.normal[i],
+                                   in.texels.geo_normal(in.world, i)) > 0.0f
+                              ? 0
+                              : 1;
     });
     std::vector<std::uint32_t> candidates;
     for (std::size_t j = c0; j < c1; ++j)
@@ -231,7 +233,7 @@ PassResult IrradianceCache::prepare(const PassInput& in) {
       Rng rng(mix64(params_.seed) ^ i, 0x1c0ull);
       float h = kMiss;
       estimate_record(*rays_, nullptr, in.texels.position[i], in.texels.normal[i],
-                      in.texels.geo_normal[i], params_.ic_rays, rng, &h);
+                      in.texels.geo_normal(in.world, i), params_.ic_rays, rng, &h);
       radius[j] = std::clamp(h, rmin, rmax);
       rays += static_cast<std::uint64_t>(4 * params_.ic_rays * params_.ic_rays);
     });
@@ -240,11 +242,12 @@ PassResult IrradianceCache::prepare(const PassInput& in) {
     const std::size_t chunk_first = records_.size();
     for (std::size_t j = 0; j < candidates.size(); ++j) {
       const std::uint32_t i = candidates[j];
-      if (records_.size() > chunk_first && coverage(in.texels.position[i], in.texels.normal[i],
-                                                    in.texels.geo_normal[i], chunk_first) > 0.0f)
+      if (records_.size() > chunk_first &&
+          coverage(in.texels.position[i], in.texels.normal[i], in.texels.geo_normal(in.world, i),
+                   chunk_first) > 0.0f)
         continue;
-      records_.push_back(
-          {in.texels.position[i], in.texels.normal[i], in.texels.geo_normal[i], radius[j]});
+      records_.push_back({in.texels.position[i], in.texels.normal[i],
+                          in.texels.geo_normal(in.world, i), radius[j]});
       insert(static_cast<std::uint32_t>(records_.size() - 1));
     }
   }

@@ -16,6 +16,7 @@ struct ScatterTexel::Texel {
              // which rays missed
   float range = 0.0f;
   bool probes = false;
+  bool weighed = false;  // `weights` and `sums` set: at its first miss that reads a probe
   ProbeWeights weights;  // its probes (when it reads them)
   // The running sums of its probe weights as pick_probe forms them (the unused ones +inf), and
   // whether they never fall (weights >= 0, as CellsMethod makes them).
@@ -63,7 +64,7 @@ int pick_probe_flat(const ProbeWeights& w, float u) {
 // The misses of batch b that go on past the tracing range inside the scene read one probe each
 // (ScatterMiss::operator(), step by step over arrays): which misses do, their picks in ray order,
 // the direction to the picked probe and its octahedral coordinates four at a time, the lookups.
-void ScatterTexel::shade_misses(Texel& t, Batch& b) const {
+void ScatterTexel::shade_misses(std::uint32_t i, Texel& t, Batch& b) const {
   const ScatterMiss& miss = *miss_;
   const RayBatch& r = b.rays;
   const int m = r.count;
@@ -85,6 +86,8 @@ void ScatterTexel::shade_misses(Texel& t, Batch& b) const {
   }
   // The picks, in ray order (pick_probe's result: with running sums that never fall, the count
   // of those at or below u).
+  if (k == 0) return;
+  if (!t.weighed) weigh(i, t);
   alignas(16) float u[kBatch];
   alignas(16) int which[kBatch];
   for (int j = 0; j < k; ++j) u[j] = pick.next_float();
@@ -168,14 +171,18 @@ void ScatterTexel::probe_lookups(int k, const int* idx, const std::uint32_t* pro
 void ScatterTexel::begin(std::uint32_t i, Texel& t) const {
   const PassInput& in = *in_;
   t.p = in.texels.position[i];
-  t.ng = in.texels.geo_normal[i];
+  t.ng = in.texels.geo_normal(in.world, i);
   t.frame = Frame(in.texels.normal[i]);
   t.rng = texel_rng(in.params, i, in.update, kScatter, in.bounce);
   t.pick = texel_rng(in.params, i, in.update, kProbePick, in.bounce);
   t.range = scatter_range(in, i);
   t.probes = miss_->reads_probes(i);
-  if (!t.probes) return;
-  t.weights = in.probe_weights(i);
+  t.weighed = false;
+}
+
+void ScatterTexel::weigh(std::uint32_t i, Texel& t) const {
+  t.weights = in_->probe_weights(i);
+  t.weighed = true;
   const ProbeWeights& w = t.weights;
   float acc = 0.0f;
   t.sums_rise = true;
@@ -237,7 +244,7 @@ void ScatterTexel::run(const std::uint32_t* texels, std::size_t count,
       const std::uint32_t a = texels[k + kAhead];
       __builtin_prefetch(&in.texels.position[a]);
       __builtin_prefetch(&in.texels.normal[a]);
-      __builtin_prefetch(&in.texels.geo_normal[a]);
+      __builtin_prefetch(&in.texels.triangle[a]);
       if (t.probes) __builtin_prefetch(&in.probe_corners[a]);
     }
     begin(i, t);
@@ -249,7 +256,7 @@ void ScatterTexel::run(const std::uint32_t* texels, std::size_t count,
       rays_->intersect(b.rays);
       for (int s = 0; s < m; ++s) b.radiance[s] = glm::vec3(0.0f);
       shade_hits(b);
-      if (t.probes) shade_misses(t, b);
+      if (t.probes) shade_misses(i, t, b);
       for (int s = 0; s < m; ++s) sum += b.radiance[s];
     }
     // Cosine-weighted sampling: E = pi / N * sum L.

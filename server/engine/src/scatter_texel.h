@@ -37,7 +37,10 @@ class ScatterTexel {
   void begin(std::uint32_t i, Texel& t) const;
   void draw(Texel& t, RayBatch& b) const;
   void shade_hits(Batch& b) const;
-  void shade_misses(Texel& t, Batch& b) const;
+  // Texel i's probe weights and their running sums, worked out at its first miss that reads a
+  // probe (a texel whose rays all hit within the tracing range reads none).
+  void weigh(std::uint32_t i, Texel& t) const;
+  void shade_misses(std::uint32_t i, Texel& t, Batch& b) const;
   void probe_lookups(int k, const int* idx, const std::uint32_t* probe, const float* ex,
                      const float* ey, const int* valid, Batch& b) const;
 

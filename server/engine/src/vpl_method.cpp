@@ -301,7 +301,7 @@ std::uint64_t VplMethod::gather(const PassInput& in, int k, std::vector<glm::vec
               (t % w) % static_cast<std::uint32_t>(n) +
               static_cast<std::size_t>(n) * ((t / w) % static_cast<std::uint32_t>(n));
           const glm::vec3 p = in.texels.position[i], nrm = in.texels.normal[i],
-                          ng = in.texels.geo_normal[i];
+                          ng = in.texels.geo_normal(in.world, i);
           glm::vec3 sum(0.0f);
           std::size_t slots = 0;
           for (std::size_t path = set + sets * subset; path < paths; path += sets * subsets) {

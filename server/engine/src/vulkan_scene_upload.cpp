@@ -221,7 +221,7 @@ void VulkanBackend::Impl::prepare(const PassInput& in) {
     for (std::size_t i = 0; i < st.size(); ++i) {
       v[3 * i] = glm::vec4(st.position[i], 0.0f);
       v[3 * i + 1] = glm::vec4(st.normal[i], 0.0f);
-      v[3 * i + 2] = glm::vec4(st.geo_normal[i], 0.0f);
+      v[3 * i + 2] = glm::vec4(st.geo_normal(*world, i), 0.0f);
     }
   });
   write(kUnits, in.unit_texels);

@@ -186,9 +186,10 @@ class LightCache {
   std::size_t lights_ = 0;
   float unit_ = 1.0f;
   // Per region: each light's summed luminance (fixed point) and count of samples, by light.
+  // 24 bytes: the counts of one region and light stay far below 2^32 (they fade each pass).
   struct Sum {
-    std::uint32_t light;
-    std::uint64_t sum, count, lit;
+    std::uint64_t sum;
+    std::uint32_t light, count, lit;
   };
   std::unordered_map<std::uint64_t, std::vector<Sum>> sums_;
   std::unordered_map<std::uint64_t, Table> tables_;

@@ -34,10 +34,13 @@ struct WorldObject {
   int mesh = -1;
   std::vector<glm::vec3> positions;  // world space
   std::vector<glm::vec3> normals;    // world space, unit; empty if the mesh has none
-  const Mesh* source = nullptr;      // uv0 / uv1 / triangles / materials live here
-  glm::mat4 transform{1.0f};         // object to world (the node's world matrix)
-  bool visible = true;               // false: hidden by an edit (no rays hit it, no texels lit)
-  bool dynamic = false;              // a dynamic node's (Node::dynamic): not in the static scene
+  // Per triangle, its unit geometric normal (geometric_normal), worked out once per placement:
+  // every texel and hit of the triangle reads it.
+  std::vector<glm::vec3> face_normals;
+  const Mesh* source = nullptr;  // uv0 / uv1 / triangles / materials live here
+  glm::mat4 transform{1.0f};     // object to world (the node's world matrix)
+  bool visible = true;           // false: hidden by an edit (no rays hit it, no texels lit)
+  bool dynamic = false;          // a dynamic node's (Node::dynamic): not in the static scene
   // Part of the static scene as it is now: what the engine lights, its rays hit and its lightmaps
   // cover.
   bool in_static_scene() const { return visible && !dynamic; }
@@ -45,6 +48,8 @@ struct WorldObject {
   const std::vector<glm::uvec3>& triangles() const { return source->triangles; }
   // Unit geometric normal of triangle t (counter-clockwise winding) and twice its area.
   glm::vec3 geometric_normal(std::uint32_t t) const;
+  // geometric_normal() worked out from the positions (what face_normals holds).
+  glm::vec3 face_normal(std::uint32_t t) const;
   float area(std::uint32_t t) const;
   // Interpolated shading normal at barycentrics (u, v) (geometric if the mesh has no normals),
   // flipped to the geometric normal's side.

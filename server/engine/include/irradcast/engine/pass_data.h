@@ -24,12 +24,17 @@ namespace irradcast {
 // object by object.
 struct SurfaceTexels {
   std::vector<glm::vec3> position;
-  std::vector<glm::vec3> normal;      // shading normal
-  std::vector<glm::vec3> geo_normal;  // geometric normal, same side as `normal`
-  std::vector<std::uint32_t> object;  // object index
-  std::vector<std::uint32_t> texel;   // index in that object's lightmap
-  std::vector<std::uint32_t> cell;    // radiance cell containing the texel
+  std::vector<glm::vec3> normal;        // shading normal
+  std::vector<std::uint32_t> object;    // object index
+  std::vector<std::uint32_t> texel;     // index in that object's lightmap
+  std::vector<std::uint32_t> triangle;  // in that object
   std::size_t size() const { return position.size(); }
+  // Texel i's geometric normal (its triangle's in `world`, the world these texels were built
+  // from), turned to the side of its shading normal.
+  glm::vec3 geo_normal(const World& world, std::size_t i) const {
+    const glm::vec3 ng = world.objects[object[i]].geometric_normal(triangle[i]);
+    return glm::dot(ng, normal[i]) < 0.0f ? -ng : ng;
+  }
 };
 
 // Up to 8 probes a texel reads for distant light, with weights summing to 1; none (count 0)
