@@ -59,12 +59,12 @@ void LightCache::Record::add(std::uint64_t region, std::uint32_t light, float lu
     Entry& e = entries_[k - 1];
     if (e.region == region && e.light == light) {
       e.sum = saturating_add(e.sum, q);
-      ++e.count;
-      e.lit += q > 0 ? 1u : 0u;
+      e.count = saturating_add32(e.count, 1);
+      e.lit = saturating_add32(e.lit, q > 0 ? 1u : 0u);
       return;
     }
   }
-  entries_.push_back({region, light, q, 1, q > 0 ? 1u : 0u});
+  entries_.push_back({region, q, light, 1, q > 0 ? 1u : 0u});
   if (entries_.size() >= compact_at_) compact();
 }
 
@@ -78,8 +78,8 @@ void LightCache::Record::compact() {
     if (out > 0 && entries_[out - 1].region == e.region && entries_[out - 1].light == e.light) {
       Entry& m = entries_[out - 1];
       m.sum = saturating_add(m.sum, e.sum);
-      m.count += e.count;
-      m.lit += e.lit;
+      m.count = saturating_add32(m.count, e.count);
+      m.lit = saturating_add32(m.lit, e.lit);
     } else {
       entries_[out++] = e;
     }
@@ -139,7 +139,7 @@ void LightCache::learn(std::vector<Record*> records) {
         at->count = saturating_add32(at->count, e.count);
         at->lit = saturating_add32(at->lit, e.lit);
       } else {
-        sums.insert(at, {e.sum, e.light, saturating_add32(0, e.count), saturating_add32(0, e.lit)});
+        sums.insert(at, {e.sum, e.light, e.count, e.lit});
       }
     }
   // Each region's table: its kMaxLights lights of the largest mean (ties by index); a region

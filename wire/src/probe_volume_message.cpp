@@ -43,6 +43,7 @@ std::string compress(const std::string& raw) {
   if (ZSTD_isError(n))
     throw irradcast::Error(std::string("probe volume: zstd: ") + ZSTD_getErrorName(n));
   z.resize(n);
+  z.shrink_to_fit();  // kept by the host until the next refine: without the bound's room
   return z;
 }
 

@@ -90,12 +90,12 @@ class LightCache {
 
    private:
     friend class LightCache;
-    struct Entry {
+    struct Entry {  // 32 bytes
       std::uint64_t region;
-      std::uint32_t light;
       std::uint64_t sum;
-      std::uint64_t count;
-      std::uint64_t lit;  // rays that brought light
+      std::uint32_t light;
+      std::uint32_t count;
+      std::uint32_t lit;  // rays that brought light
     };
     // Every kCompactAt entries (or twice the distinct pairs, when more), the entries of the same
     // region and light are merged: a record holds about its distinct pairs, not one entry per
