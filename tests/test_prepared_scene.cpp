@@ -70,6 +70,9 @@ void expect_same_gbuffers(const PreparedScene& a, const PreparedScene& b, float 
     }
     EXPECT_LE(d, tolerance) << "object " << o;
     EXPECT_EQ(normals, 0u) << "object " << o;
+    if (tolerance == 0.0f) {
+      EXPECT_EQ(x.bary, y.bary) << "object " << o;
+    }
     EXPECT_EQ(x.triangle, y.triangle) << "object " << o;
     EXPECT_EQ(x.kind, y.kind) << "object " << o;
   }

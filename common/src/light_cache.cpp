@@ -59,12 +59,12 @@ void LightCache::Record::add(std::uint64_t region, std::uint32_t light, float lu
     Entry& e = entries_[k - 1];
     if (e.region == region && e.light == light) {
       e.sum = saturating_add(e.sum, q);
-      e.count = saturating_add32(e.count, 1);
+      ++e.count;
       e.lit = saturating_add32(e.lit, q > 0 ? 1u : 0u);
       return;
     }
   }
-  entries_.push_back({region, q, light, 1, q > 0 ? 1u : 0u});
+  entries_.push_back({region, q, 1, light, q > 0 ? 1u : 0u});
   if (entries_.size() >= compact_at_) compact();
 }
 
@@ -78,7 +78,7 @@ void LightCache::Record::compact() {
     if (out > 0 && entries_[out - 1].region == e.region && entries_[out - 1].light == e.light) {
       Entry& m = entries_[out - 1];
       m.sum = saturating_add(m.sum, e.sum);
-      m.count = saturating_add32(m.count, e.count);
+      m.count += e.count;
       m.lit = saturating_add32(m.lit, e.lit);
     } else {
       entries_[out++] = e;
@@ -122,8 +122,8 @@ void LightCache::learn(std::vector<Record*> records) {
     auto& sums = it->second;
     for (Sum& s : sums) {
       s.sum = fade(s.sum);
-      s.count = static_cast<std::uint32_t>(fade(s.count));
-      s.lit = std::min(static_cast<std::uint32_t>(fade(s.lit)), s.count);
+      s.count = fade(s.count);
+      s.lit = static_cast<std::uint32_t>(std::min<std::uint64_t>(fade(s.lit), s.count));
     }
     std::erase_if(sums, [](const Sum& s) { return s.count == 0; });
     it = sums.empty() ? sums_.erase(it) : std::next(it);
@@ -136,10 +136,10 @@ void LightCache::learn(std::vector<Record*> records) {
                                        [](const Sum& s, std::uint32_t l) { return s.light < l; });
       if (at != sums.end() && at->light == e.light) {
         at->sum = saturating_add(at->sum, e.sum);
-        at->count = saturating_add32(at->count, e.count);
+        at->count = saturating_add(at->count, e.count);
         at->lit = saturating_add32(at->lit, e.lit);
       } else {
-        sums.insert(at, {e.sum, e.light, e.count, e.lit});
+        sums.insert(at, {e.sum, e.count, e.light, e.lit});
       }
     }
   // Each region's table: its kMaxLights lights of the largest mean (ties by index); a region

@@ -93,9 +93,9 @@ class LightCache {
     struct Entry {  // 32 bytes
       std::uint64_t region;
       std::uint64_t sum;
+      std::uint64_t count;
       std::uint32_t light;
-      std::uint32_t count;
-      std::uint32_t lit;  // rays that brought light
+      std::uint32_t lit;  // rays that brought light (saturating: at most 2^32 - 1)
     };
     // Every kCompactAt entries (or twice the distinct pairs, when more), the entries of the same
     // region and light are merged: a record holds about its distinct pairs, not one entry per
@@ -186,10 +186,11 @@ class LightCache {
   std::size_t lights_ = 0;
   float unit_ = 1.0f;
   // Per region: each light's summed luminance (fixed point) and count of samples, by light.
-  // 24 bytes: the counts of one region and light stay far below 2^32 (they fade each pass).
+  // 24 bytes. `lit` saturates at 2^32 - 1 (about 537 M lit rays a pass from one region to
+  // one light, with the fade); the sum and the count, which make the mean, do not.
   struct Sum {
-    std::uint64_t sum;
-    std::uint32_t light, count, lit;
+    std::uint64_t sum, count;
+    std::uint32_t light, lit;
   };
   std::unordered_map<std::uint64_t, std::vector<Sum>> sums_;
   std::unordered_map<std::uint64_t, Table> tables_;
