@@ -134,8 +134,15 @@ TEST(PreparedScene, AMoveGivesTheWorldAndGBuffersOfAFreshBuild) {
   apply_edit(edited, move);
   const PreparedScene fresh = PreparedScene::build(std::move(edited), options(true));
   ASSERT_EQ(p.world().objects.size(), fresh.world().objects.size());
-  for (std::size_t o = 0; o < p.world().objects.size(); ++o)
-    EXPECT_EQ(p.world().objects[o].positions, fresh.world().objects[o].positions);
+  for (std::size_t o = 0; o < p.world().objects.size(); ++o) {
+    const WorldObject& moved = p.world().objects[o];
+    EXPECT_EQ(moved.positions, fresh.world().objects[o].positions);
+    // The per-triangle normals follow the move (every texel's geometric normal reads them).
+    EXPECT_EQ(moved.face_normals, fresh.world().objects[o].face_normals);
+    ASSERT_EQ(moved.face_normals.size(), moved.triangles().size());
+    for (std::uint32_t t = 0; t < moved.face_normals.size(); ++t)
+      EXPECT_EQ(moved.face_normals[t], moved.face_normal(t)) << "object " << o << " triangle " << t;
+  }
   // The same texels, at the same points up to rounding (the edited G-buffers interpolate over
   // the atlas charts of the scene as loaded).
   expect_same_gbuffers(p, fresh, 1e-5f);
