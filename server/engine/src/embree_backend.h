@@ -49,7 +49,7 @@ glm::vec3 scatter_miss(const PassInput& in, const std::vector<glm::vec3>& probe_
                        std::uint32_t i, glm::vec3 p, glm::vec3 d, Rng& pick);
 class ScatterTexel;
 // scatter_miss with what is the same for every miss of a pass worked out once (the enlarged
-// bounds, the range, whether probes are read): the same arithmetic, less of it per miss.
+// bounds, the range, the distant point's mode): the same arithmetic, less of it per miss.
 class ScatterMiss {
  public:
   ScatterMiss(const PassInput& in, const std::vector<glm::vec3>& probe_radiance);
