@@ -367,9 +367,13 @@ TEST(DynamicView, SsaoSeesThemAndReprojectionDoesNotGhost) {
 
 // Part 5 in the sky-lit Sponza: a sphere on the floor of the atrium and a textured one in the
 // shade of the side gallery, against the path tracer (the sun's direct light traced by the viewer,
-// the rest from the volume at the default 1 m spacing; lightmaps at 160 texels per scene). In the
-// gallery the volume reads 8 % bright: the engine's lightmaps are bright in the Sponza's shade
-// (issue 33 part 5) and the probes there interpolate across the arcades; held at 10 %.
+// the rest from the volume at the default 1 m spacing; lightmaps at 160 texels per scene).
+// Measured 2026-12-07 (mean ratios, atrium / gallery): 0.950 / 0.966 at the default cells and
+// range (1 m, 1.2 m here); 0.957 / 0.999 from the unbiased mode's lightmaps (16 updates), so the
+// atrium's 4-5 % is the volume's own (its probes in the sunlit atrium), held at 6 %; with the
+// cells and range of before (0.25, 0.3 of the scene: 8.7 m cells) 1.019 / 1.128, the engine's
+// bias in the shade (issue 33 part 5) then hiding the volume's in the atrium. The gallery is held
+// at 5 %.
 TEST(DynamicView, SponzaSpheresAgainstThePathTracer) {
   IRRADCAST_NEED_TESTDATA();
   ::setenv("IRRADCAST_TESTDATA", test::testdata_dir().c_str(), 1);
@@ -384,12 +388,12 @@ TEST(DynamicView, SponzaSpheresAgainstThePathTracer) {
                          false,
                          looking({-11.0f, 1.8f, 0.5f}, {-6.0f, 0.8f, 0.0f}, 0.5f),
                          "in the atrium",
-                         0.05},
+                         0.06},
                         {{-4.0f, 0.8f, -4.6f},
                          true,
                          looking({-9.0f, 1.6f, -4.6f}, {-4.0f, 0.8f, -4.6f}, 0.5f),
                          "textured, in the gallery",
-                         0.10}};
+                         0.05}};
   // Both spheres in one scene: dynamic objects change nothing of the static lighting, so one
   // engine run and one volume serve both views.
   const auto t0 = std::chrono::steady_clock::now();

@@ -223,7 +223,8 @@ TEST(EngineParams, LengthsTakeMetres) {
   EXPECT_TRUE(parse({"--tracing-range", "inf"}).unbiased());
   EXPECT_EQ(parse({"--tracing-range", "0m"}).tracing_range, Length::in_metres(0.0f));
   EXPECT_EQ(tools::params_json(m).at("cell_size"), "2m");
-  EXPECT_EQ(tools::params_json(EngineParams{}).at("cell_size"), 0.25f);
+  EXPECT_EQ(tools::params_json(EngineParams{}).at("cell_size"), "0.25:1m");
+  EXPECT_EQ(tools::params_json(parse({"--cell-size", "0.125"})).at("cell_size"), 0.125f);
   EngineParams fraction;
   fraction.cell_size = 2.0f / 8.0f;
   EngineParams metres;
@@ -246,7 +247,9 @@ TEST(EngineParams, LengthsTakeMetres) {
   const ProbeGrid g = ProbeGrid::cells_of(floor, m);
   EXPECT_EQ(g.cell, 2.0f);
   EXPECT_EQ(g.dims, glm::ivec3(20, 2, 5));
-  const ProbeGrid f = ProbeGrid::cells_of(floor, EngineParams{});
+  EngineParams fractions;
+  fractions.cell_size = 0.25f;
+  const ProbeGrid f = ProbeGrid::cells_of(floor, fractions);
   EXPECT_EQ(f.cell, 10.0f);
   EXPECT_EQ(f.dims, glm::ivec3(4, 1, 1));
   EngineParams huge;
@@ -262,5 +265,64 @@ TEST(EngineParams, LengthsTakeMetres) {
     ADD_FAILURE() << "400 cells accepted";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("at most 256"), std::string::npos) << e.what();
+  }
+}
+
+// The defaults (issue 33 part 2): fractions capped in metres, "0.25:1m" and "0.3:1.2m". A scene
+// up to 4 m across keeps seed 001's fractions exactly; beyond, cells of 1 m and rays of 1.2 m;
+// a scene too large for 1 m cubes gets cubes grown just enough to keep 256 along its largest
+// extent and ProbeGrid::kMaxCappedCells in all, where an explicit size in metres is refused.
+TEST(EngineParams, DefaultsAreFractionsCappedInMetres) {
+  const EngineParams d;
+  EXPECT_EQ(d.cell_size, Length::capped(0.25f, 1.0f));
+  EXPECT_EQ(d.tracing_range, Length::capped(0.3f, 1.2f));
+  EXPECT_EQ(param_text(d.cell_size), "0.25:1m");
+  EXPECT_EQ(param_text(d.tracing_range), "0.3:1.2m");
+  const EngineParams p = parse({"--cell-size", "0.5:2.5m", "--tracing-range", "0.1:0m"});
+  EXPECT_EQ(p.cell_size, Length::capped(0.5f, 2.5f));
+  EXPECT_EQ(p.tracing_range, Length::capped(0.1f, 0.0f));
+  EXPECT_FALSE(p.unbiased());
+  EXPECT_EQ(parse({"--cell-size", param_text(d.cell_size)}).cell_size, d.cell_size);
+  EXPECT_EQ(d.tracing_range.resolve(2.0f), 0.3f * 2.0f);  // the fraction below the cap
+  EXPECT_EQ(d.tracing_range.resolve(40.0f), 1.2f);        // the cap
+  EXPECT_EQ(p.tracing_range.resolve(40.0f), 0.0f);
+  EXPECT_NE(engine_params_key(d), engine_params_key(parse({"--cell-size", "0.25"})));
+  for (const char* bad : {"0.25:", "0.25:1", ":1m", "0.25:-1m", "0.25:0m", "2:1m", "0:1m", "inf:1m",
+                          "0.25:infm", "0.25:1m:2m", "0.25 :1m", "1m:0.25"}) {
+    SCOPED_TRACE(bad);
+    try {
+      parse({"--cell-size", bad});
+      ADD_FAILURE() << "accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("cell_size"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(parse({"--tracing-range", "inf:1m"}), Error);
+  EXPECT_THROW(parse({"--tracing-range", "0.3:-1m"}), Error);
+
+  // A 2 x 2 x 2 m box: the cap does not bind, the grid is the fraction's, bit for bit.
+  EngineParams fractions;
+  fractions.cell_size = 0.25f;
+  const Bounds box{glm::vec3(0.0f), glm::vec3(2.0f)};
+  const ProbeGrid small = ProbeGrid::cells_of(box, d), seed = ProbeGrid::cells_of(box, fractions);
+  EXPECT_EQ(small.cell, seed.cell);
+  EXPECT_EQ(small.dims, glm::ivec3(4));
+  EXPECT_EQ(small.position, seed.position);
+  // A 40 x 3 x 10 m floor: 1 m cubes, 40 x 3 x 10 of them.
+  const Bounds floor{glm::vec3(0.0f), glm::vec3(40.0f, 3.0f, 10.0f)};
+  const ProbeGrid g = ProbeGrid::cells_of(floor, d);
+  EXPECT_EQ(g.cell, 1.0f);
+  EXPECT_EQ(g.dims, glm::ivec3(40, 3, 10));
+  // A 1 km floor, 3 m high: 256 cubes along it, at most kMaxCappedCells in all; a 1 km cube the
+  // same. Explicit 1 m cubes are refused.
+  for (const glm::vec3 size : {glm::vec3(1000.0f, 3.0f, 1000.0f), glm::vec3(1000.0f)}) {
+    const ProbeGrid big = ProbeGrid::cells_of(Bounds{glm::vec3(0.0f), size}, d);
+    EXPECT_LE(big.dims.x, 256);
+    EXPECT_GE(big.cell, 1000.0f / 256.0f);
+    EXPECT_LE(big.count(), ProbeGrid::kMaxCappedCells);
+    EXPECT_GT(big.count(), ProbeGrid::kMaxCappedCells * 9 / 10);  // grown no more than needed
+    EngineParams metres;
+    metres.cell_size = Length::in_metres(1.0f);
+    EXPECT_THROW(ProbeGrid::cells_of(Bounds{glm::vec3(0.0f), size}, metres), Error);
   }
 }

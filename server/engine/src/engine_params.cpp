@@ -51,21 +51,33 @@ float parse_distance(const char* what, double lo, const std::string& text) {
   }
 }
 
+// A number and nothing else, finite (inf only where `inf_ok`); throws std::invalid_argument.
+float parse_number(const std::string& text, bool inf_ok) {
+  if (inf_ok && text == "inf") return std::numeric_limits<float>::infinity();
+  std::size_t used = 0;
+  const float v = std::stof(text, &used);
+  if (text.empty() || used != text.size() || !std::isfinite(v)) throw std::invalid_argument(text);
+  return v;
+}
+
 Length parse_length(const ParamSpec& s, const std::string& text) {
+  const bool distance = s.kind == ParamKind::Distance;
   const bool metres = !text.empty() && text.back() == 'm';
-  const std::string number = metres ? text.substr(0, text.size() - 1) : text;
+  const std::size_t colon = text.find(':');
   try {
-    if (s.kind == ParamKind::Distance && !metres && number == "inf")
-      return Length(std::numeric_limits<float>::infinity());
-    std::size_t used = 0;
-    const float v = std::stof(number, &used);
-    if (number.empty() || used != number.size() || !std::isfinite(v))
-      throw std::invalid_argument(text);
+    if (colon != std::string::npos) {  // "0.25:1m": a fraction, at most that many metres
+      if (!metres) throw std::invalid_argument(text);
+      const std::string cap = text.substr(colon + 1, text.size() - colon - 2);
+      return Length::capped(parse_number(text.substr(0, colon), false), parse_number(cap, false));
+    }
+    const std::string number = metres ? text.substr(0, text.size() - 1) : text;
+    const float v = parse_number(number, distance && !metres);
     return metres ? Length::in_metres(v) : Length(v);
   } catch (const std::exception&) {
     throw Error(std::string(s.name) + " '" + text + "' must be a fraction of the scene (" +
-                (s.kind == ParamKind::Distance ? "0.3" : "0.25") + "), metres (2m)" +
-                (s.kind == ParamKind::Distance ? " or inf" : ""));
+                (distance ? "0.3" : "0.25") + "), metres (2m), a fraction of at most so many " +
+                "metres (" + (distance ? "0.3:1.2m" : "0.25:1m") + ")" +
+                (distance ? " or inf" : ""));
   }
 }
 
@@ -102,11 +114,18 @@ std::string range_text(const ParamSpec& s) {
 template <class T>
 void check_param(const ParamSpec& s, T v) {
   if constexpr (std::is_same_v<T, Length>) {
-    if (!v.metres) return check_param(s, v.value);
-    // Metres: finite and above zero (a Distance may also be zero, or inf written as a fraction).
-    const bool ok = s.kind == ParamKind::Distance ? v.value >= 0.0f && std::isfinite(v.value)
-                                                  : v.value > 0.0f && std::isfinite(v.value);
-    if (!ok)
+    // Metres, and a fraction's cap: finite and above zero (a Distance may also be zero, or inf
+    // written as a plain fraction).
+    auto metres_ok = [&](float m) {
+      return (s.kind == ParamKind::Distance ? m >= 0.0f : m > 0.0f) && std::isfinite(m);
+    };
+    if (v.has_cap()) {
+      if (v.infinite()) throw Error(std::string(s.name) + " capped in metres must be finite");
+      check_param(s, v.value);
+    } else if (!v.metres) {
+      return check_param(s, v.value);
+    }
+    if (!metres_ok(v.metres ? v.value : v.cap))
       throw Error(std::string(s.name) + " in metres must be " +
                   (s.kind == ParamKind::Distance ? ">= 0" : "> 0") + " and finite");
   } else if constexpr (std::is_enum_v<T>) {
@@ -138,7 +157,8 @@ std::string param_text(float v) {
   return v == std::numeric_limits<float>::infinity() ? "inf" : shortest(v);
 }
 std::string param_text(Length v) {
-  return v.metres ? shortest(v.value) + "m" : param_text(v.value);
+  if (v.metres) return shortest(v.value) + "m";
+  return v.has_cap() ? param_text(v.value) + ":" + shortest(v.cap) + "m" : param_text(v.value);
 }
 std::string param_text(int v) {
   return std::to_string(v);

@@ -21,12 +21,32 @@ glm::vec3 ProbeGrid::centre(std::size_t i) const {
   return origin + (glm::vec3(c) + 0.5f) * cell;
 }
 
+namespace {
+
+// Cubes of `cap` metres over a box of extents `e` (largest `extent`), grown by 1 % steps until
+// at most 256 lie along the largest extent and ProbeGrid::kMaxCappedCells in all.
+float capped_cell(glm::vec3 e, float extent, float cap) {
+  float cell = std::max(cap, extent / 256.0f);
+  auto count = [&](float c) {
+    double n = 1.0;
+    for (int a = 0; a < 3; ++a) n *= std::max(1.0f, std::ceil(e[a] / c - 1e-4f));
+    return n;
+  };
+  while (count(cell) > static_cast<double>(ProbeGrid::kMaxCappedCells)) cell *= 1.01f;
+  return cell;
+}
+
+}  // namespace
+
 ProbeGrid ProbeGrid::cells_of(const Bounds& b, const EngineParams& params) {
   ProbeGrid g;
   const float extent = std::max(b.max_extent(), 1e-6f);
   // A fraction: ceil(1 / cell_size) cubes across the largest extent (seed 001 grids the
   // normalised cube). Metres: cubes of that edge, as many as cover the largest extent.
-  const Length size = params.cell_size;
+  // A capped fraction whose cap binds is metres, grown where it must to keep the grid's limits.
+  Length size = params.cell_size;
+  if (size.has_cap() && size.value * extent > size.cap)
+    size = Length::in_metres(capped_cell(b.extent(), extent, size.cap));
   const float across =
       size.metres ? std::ceil(extent / size.value - 1e-4f) : std::ceil(1.0f / size.value);
   if (!(across <= 256.0f))

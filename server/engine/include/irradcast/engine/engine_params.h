@@ -34,11 +34,14 @@ enum class ParamKind {
 inline constexpr double kNoLimit = std::numeric_limits<double>::infinity();
 
 // A length in the scene: a fraction of its largest extent (seed 001's convention: the scene
-// normalised to its bounding box), or metres (world units), whatever the scene's size. On the
-// command line "0.25" is a fraction and "2m" metres (docs/ENGINE.md, "Sizes in metres").
+// normalised to its bounding box), metres (world units) whatever the scene's size, or a fraction
+// capped in metres (the defaults: a small scene keeps seed 001's grid, a large one gets cells and
+// rays of a room's size). On the command line "0.25" is a fraction, "2m" metres and "0.25:1m" a
+// quarter of the scene, at most 1 m (docs/ENGINE.md, "Sizes in metres").
 struct Length {
   float value = 0.0f;
   bool metres = false;
+  float cap = std::numeric_limits<float>::infinity();  // a fraction's ceiling, metres
   constexpr Length() = default;
   constexpr Length(float fraction) : value(fraction) {}  // NOLINT: a plain number is a fraction
   static constexpr Length in_metres(float m) {
@@ -46,8 +49,19 @@ struct Length {
     l.metres = true;
     return l;
   }
+  static constexpr Length capped(float fraction, float max_metres) {
+    Length l(fraction);
+    l.cap = max_metres;
+    return l;
+  }
+  // A fraction with a ceiling in metres.
+  bool has_cap() const { return !metres && cap < std::numeric_limits<float>::infinity(); }
   // In world units, for a scene whose largest extent is `extent`.
-  float resolve(float extent) const { return metres ? value : value * extent; }
+  float resolve(float extent) const {
+    if (metres) return value;
+    const float v = value * extent;
+    return cap < v ? cap : v;
+  }
   bool infinite() const { return !(value < std::numeric_limits<float>::infinity()); }
   bool operator==(const Length&) const = default;
 };
@@ -98,7 +112,7 @@ void for_each_param(Params& p, F&& f) {
 // A parameter's value as the command line spells it: numbers in their shortest exact form,
 // inf as "inf", enums by name.
 std::string param_text(float v);
-std::string param_text(Length v);  // "0.25", "2m" or "inf"
+std::string param_text(Length v);  // "0.25", "2m", "0.25:1m" or "inf"
 std::string param_text(int v);
 std::string param_text(std::uint64_t v);
 std::string param_text(bool v);
@@ -122,7 +136,7 @@ std::string engine_params_key(const EngineParams& p);
 
 Dispatch parse_dispatch(const std::string& name);           // "cell" | "object"
 DistantPoint parse_distant_point(const std::string& name);  // "project" | "fixed"
-Length parse_tracing_range(const std::string& text);        // a fraction, "2m" or "inf"
+Length parse_tracing_range(const std::string& text);        // a fraction, "2m", "0.3:1.2m" or "inf"
 Method parse_method(const std::string& name);               // "cells" | "vpl" | "irradiance-cache"
 std::string method_name(Method m);
 

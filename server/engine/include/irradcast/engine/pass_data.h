@@ -82,8 +82,11 @@ struct ProbeGrid {
   glm::vec3 centre(std::size_t i) const;
   // The cells over `bounds` (cubes of params.cell_size: metres, or that fraction of the largest
   // extent), every probe at its cell's centre and usable. Throws irradcast::Error for more than
-  // 256 cells along the largest extent.
+  // 256 cells along the largest extent. A fraction capped in metres (the default) whose cap
+  // binds gives cubes of the cap, grown as little as keeps 256 along the largest extent and
+  // kMaxCappedCells in all (a default never refuses a scene, however large).
   static ProbeGrid cells_of(const Bounds& bounds, const EngineParams& params);
+  static constexpr std::size_t kMaxCappedCells = std::size_t{1} << 16;
 };
 
 // The block of 8 cells whose probes surround p: its lower corner (may lie outside the grid) and
