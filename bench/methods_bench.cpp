@@ -301,10 +301,11 @@ int main(int argc, char** argv) {
   std::vector<std::string> cell_sizes, tracing_ranges;
   app.add_option("--cell-size", cell_sizes,
                  "adds a configuration 'sized ...': the default cells with this cell size (a "
-                 "fraction, or metres: 2m); repeat with --tracing-range for more");
+                 "fraction, metres: 2m, or capped: 0.25:1m); repeat with --tracing-range for "
+                 "more");
   app.add_option("--tracing-range", tracing_ranges,
-                 "... and this tracing range (a fraction, metres or inf); the n-th goes with the "
-                 "n-th --cell-size");
+                 "... and this tracing range (a fraction, metres, capped or inf); the n-th goes "
+                 "with the n-th --cell-size");
   CLI11_PARSE(app, argc, argv);
   try {
     quiet_run();

@@ -6,6 +6,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <initializer_list>
 #include <iterator>
 #include <limits>
 #include <string>
@@ -86,6 +87,19 @@ EngineParams parse(std::vector<std::string> args) {
   std::reverse(args.begin(), args.end());  // CLI11 takes them last first
   app.parse(args);
   return options.params();
+}
+
+// Each of `texts` given to --cell-size is refused with an error that names cell_size.
+void expect_cell_size_refused(std::initializer_list<const char*> texts) {
+  for (const char* bad : texts) {
+    SCOPED_TRACE(bad);
+    try {
+      parse({"--cell-size", bad});
+      ADD_FAILURE() << "accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("cell_size"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(EngineParams, DenoiseIsOffByDefaultAndSetByItsFlag) {
@@ -230,15 +244,7 @@ TEST(EngineParams, LengthsTakeMetres) {
   EngineParams metres;
   metres.cell_size = Length::in_metres(0.25f);
   EXPECT_NE(engine_params_key(fraction), engine_params_key(metres));
-  for (const char* bad : {"m", "2mm", "-1m", "0m", "infm", "nanm", "2 m", "2km", "", "inf"}) {
-    SCOPED_TRACE(bad);
-    try {
-      parse({"--cell-size", bad});
-      ADD_FAILURE() << "accepted";
-    } catch (const Error& e) {
-      EXPECT_NE(std::string(e.what()).find("cell_size"), std::string::npos) << e.what();
-    }
-  }
+  expect_cell_size_refused({"m", "2mm", "-1m", "0m", "infm", "nanm", "2 m", "2km", "", "inf"});
   EXPECT_THROW(parse({"--tracing-range", "-0.5m"}), Error);
   EXPECT_THROW(parse({"--tracing-range", "far"}), Error);
 
@@ -287,16 +293,8 @@ TEST(EngineParams, DefaultsAreFractionsCappedInMetres) {
   EXPECT_EQ(d.tracing_range.resolve(40.0f), 1.2f);        // the cap
   EXPECT_EQ(p.tracing_range.resolve(40.0f), 0.0f);
   EXPECT_NE(engine_params_key(d), engine_params_key(parse({"--cell-size", "0.25"})));
-  for (const char* bad : {"0.25:", "0.25:1", ":1m", "0.25:-1m", "0.25:0m", "2:1m", "0:1m", "inf:1m",
-                          "0.25:infm", "0.25:1m:2m", "0.25 :1m", "1m:0.25"}) {
-    SCOPED_TRACE(bad);
-    try {
-      parse({"--cell-size", bad});
-      ADD_FAILURE() << "accepted";
-    } catch (const Error& e) {
-      EXPECT_NE(std::string(e.what()).find("cell_size"), std::string::npos) << e.what();
-    }
-  }
+  expect_cell_size_refused({"0.25:", "0.25:1", ":1m", "0.25:-1m", "0.25:0m", "2:1m", "0:1m",
+                            "inf:1m", "0.25:infm", "0.25:1m:2m", "0.25 :1m", "1m:0.25"});
   EXPECT_THROW(parse({"--tracing-range", "inf:1m"}), Error);
   EXPECT_THROW(parse({"--tracing-range", "0.3:-1m"}), Error);
 
