@@ -86,7 +86,7 @@ struct Options {
   std::string out = "out/backend";
   std::string json_path;
   float texels_per_scene = 256.0f;
-  float range = 0.3f;
+  std::string range;  // --tracing-range as the engine reads it ("": its default)
   int updates = 4, warmup = 1, threads = 0, vulkan_device = -1, reference_spp = 16;
 };
 
@@ -272,7 +272,7 @@ int run(Options o) {
   for (const std::string& spec : split_list(o.scenes_text)) {
     const PreparedScene s = prepare(load_scene(spec), density(o.texels_per_scene));
     EngineParams params;
-    params.tracing_range = o.range;
+    if (!o.range.empty()) params.tracing_range = parse_tracing_range(o.range);
     std::size_t texels = 0;
     const std::vector<BackendRun> runs = run_backends(o, s, backends, params, texels);
     json sj = scene_json(spec, texels, o.updates, runs);
@@ -304,7 +304,9 @@ int main(int argc, char** argv) {
                  "the host)");
   app.add_option("--vulkan-device", o.vulkan_device, "Vulkan device index (--list-devices)");
   add_texels_per_scene(app, o.texels_per_scene)->check(CLI::Range(4.0f, 8192.0f));
-  app.add_option("--tracing-range", o.range, "tracing range (fraction of the scene)");
+  app.add_option("--tracing-range", o.range,
+                 "tracing range: a fraction of the scene (0.3), metres (2.4m), a capped fraction "
+                 "(0.3:1.2m) or inf; the engine's default when not given");
   app.add_option("--updates", o.updates, "timed updates per backend")->check(CLI::Range(1, 1000));
   app.add_option("--warmup", o.warmup, "untimed updates first (uploads, shader compilation)")
       ->check(CLI::Range(0, 100));

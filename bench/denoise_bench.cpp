@@ -285,7 +285,8 @@ int main(int argc, char** argv) {
   app.add_option("--width", o.width, "view width")->check(CLI::Range(16, 4096));
   app.add_option("--height", o.height, "view height")->check(CLI::Range(16, 4096));
   app.add_option("--tracing-range", o.tracing_range,
-                 "the engine's tracing range (fraction of the scene, or inf: no probes)");
+                 "the engine's tracing range (a fraction of the scene, metres: 2.4m, a capped "
+                 "fraction: 0.3:1.2m, or inf: no probes; its default when not given)");
   app.add_option("--threads", o.threads, "TBB threads (0 = all cores)");
   app.add_option("--out", o.out, "output directory (PNGs)");
   app.add_option("--json", o.json, "JSON report (default OUT/denoise_bench.json)");

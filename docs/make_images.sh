@@ -17,7 +17,7 @@ err "$OUT/cornell/report.json" "cornell, range 0.3"
 $BAKE --quiet --scene cornell --out "$OUT/cornell_inf" --updates 16 --reference 256 --tracing-range inf
 cp "$OUT/cornell_inf/view_vs_reference.png" "$IMG/cornell_unbiased_vs_reference.png"
 err "$OUT/cornell_inf/report.json" "cornell, range inf"
-$BAKE --quiet --scene rooms:2 --out "$OUT/rooms2" --width 480 --height 360 --updates 16 --reference 512
+$BAKE --quiet --scene rooms:2 --out "$OUT/rooms2" --width 480 --height 360 --updates 16 --reference 512 --cell-size 0.25 --tracing-range 0.3
 cp "$OUT/rooms2/view_vs_reference.png" "$IMG/rooms2_engine_vs_reference.png"
 err "$OUT/rooms2/report.json" "rooms:2, range 0.3"
 

@@ -297,6 +297,26 @@ TEST(EngineParams, DefaultsAreFractionsCappedInMetres) {
                             "inf:1m", "0.25:infm", "0.25:1m:2m", "0.25 :1m", "1m:0.25"});
   EXPECT_THROW(parse({"--tracing-range", "inf:1m"}), Error);
   EXPECT_THROW(parse({"--tracing-range", "0.3:-1m"}), Error);
+  // Built in code rather than parsed: a cap that is not a number, negative or (for the cell)
+  // zero, a cap on metres and an infinite fraction with a cap are refused too.
+  EXPECT_NO_THROW(d.validate());
+  const float inf = std::numeric_limits<float>::infinity(),
+              nan = std::numeric_limits<float>::quiet_NaN();
+  Length capped_metres = Length::in_metres(2.0f);
+  capped_metres.cap = 1.0f;
+  for (const Length bad :
+       {Length::capped(0.25f, nan), Length::capped(0.25f, -inf), Length::capped(0.25f, 0.0f),
+        Length::capped(0.25f, -1.0f), capped_metres}) {
+    EngineParams q;
+    q.cell_size = bad;
+    EXPECT_THROW(q.validate(), Error) << param_text(bad);
+  }
+  for (const Length bad :
+       {Length::capped(inf, 1.0f), Length::capped(0.3f, nan), Length::capped(0.3f, -1.0f)}) {
+    EngineParams q;
+    q.tracing_range = bad;
+    EXPECT_THROW(q.validate(), Error) << param_text(bad);
+  }
 
   // A 2 x 2 x 2 m box: the cap does not bind, the grid is the fraction's, bit for bit.
   EngineParams fractions;

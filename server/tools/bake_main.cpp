@@ -238,17 +238,24 @@ struct PassTotals {
   std::vector<PassTiming> probes, scatter;
 };
 
-// The engine's report: every parameter by name, then its probes, convergence and passes.
-json engine_report(const Bake& b, const Engine& engine, const PassTotals& passes) {
+// The engine's report: every parameter by name, then its probes (with the cube edge and the
+// tracing range in metres that the parameters gave this scene), convergence and passes.
+json engine_report(const Bake& b, const PreparedScene& p, const Engine& engine,
+                   const PassTotals& passes) {
   const ProbeStats& ps = engine.probe_stats();
   json report = tools::params_json(b.ep);
-  report.update(
-      {{"backend", engine.backend().describe()},
-       {"updates", engine.updates()},
-       {"texels", engine.texel_count()},
-       {"probes", {{"count", ps.probes}, {"relocated", ps.relocated}, {"unusable", ps.unusable}}},
-       {"mean_relative_error", engine.mean_relative_error()},
-       {"passes", passes.to_json(b.ep.unbiased())}});
+  const float range = b.ep.tracing_range.resolve(p.world().bounds.max_extent());
+  report.update({{"backend", engine.backend().describe()},
+                 {"updates", engine.updates()},
+                 {"texels", engine.texel_count()},
+                 {"probes",
+                  {{"count", ps.probes},
+                   {"relocated", ps.relocated},
+                   {"unusable", ps.unusable},
+                   {"cell_m", engine.probes().cell},
+                   {"tracing_range_m", b.ep.unbiased() ? json("inf") : json(range)}}},
+                 {"mean_relative_error", engine.mean_relative_error()},
+                 {"passes", passes.to_json(b.ep.unbiased())}});
   return report;
 }
 
@@ -283,7 +290,7 @@ Lightmaps engine_method(Bake& b, const PreparedScene& p) {
                           std::to_string(ds.kept) + " kept (outside their confidence), " +
                           std::to_string(ds.seams) + " across chart seams");
   b.timings["lightmaps"] = b.sw.lap();
-  b.report["engine"] = engine_report(b, engine, passes);
+  b.report["engine"] = engine_report(b, p, engine, passes);
   return out;
 }
 

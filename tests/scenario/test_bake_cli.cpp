@@ -57,6 +57,14 @@ TEST(BakeCli, WritesEveryFileAndAReport) {
   double rel = report["error"]["rel_mse"].get<double>();
   EXPECT_GT(rel, 0.0);
   EXPECT_LT(rel, 1.0);
+  // The defaults as given, and what they gave this 0.56 m box: the fractions (the caps in
+  // metres do not bind), a quarter and 0.3 of its largest extent.
+  EXPECT_EQ(report["engine"]["cell_size"], "0.25:1m");
+  EXPECT_EQ(report["engine"]["tracing_range"], "0.3:1.2m");
+  const double cell = report["engine"]["probes"]["cell_m"].get<double>();
+  const double range = report["engine"]["probes"]["tracing_range_m"].get<double>();
+  EXPECT_NEAR(cell, 0.25 * 0.5592, 0.005);
+  EXPECT_NEAR(range / cell, 0.3 / 0.25, 1e-5);
   fs::remove_all(out);
 }
 

@@ -65,14 +65,16 @@ CellsMethod::CellsMethod(const EngineParams& params, const World& world, const R
     : params_(params), world_(&world), rays_(&rays), backend_(&backend) {
   // Seed 001 section 4.3.2 and our rooms test: probes stand in for everything beyond the range,
   // so a range much shorter than a cell makes the probes' parallax dominate the error.
-  const float extent = world.bounds.max_extent();
-  const float range = params_.tracing_range.resolve(extent),
-              cell = params_.cell_size.resolve(extent);
-  if (params_.uses_probes() && range < 0.4f * cell)
-    log::warn("engine", "tracing range " + param_text(params_.tracing_range) +
-                            " is short for cells of " + param_text(params_.cell_size) +
-                            ": expect probe error; use a cell size of at most " +
-                            std::to_string(2.5f * range) + " m");
+  // The grid's own cube: a capped cell size grows past its cap in a scene too large for it.
+  if (!params_.uses_probes()) return;
+  const float range = params_.tracing_range.resolve(world.bounds.max_extent()),
+              cell = ProbeGrid::cell_edge(world.bounds, params_);
+  if (range < 0.4f * cell)
+    log::warn("engine", "tracing range " + param_text(params_.tracing_range) + " (" +
+                            param_text(range) + " m) is short for cells of " +
+                            param_text(params_.cell_size) + " (" + param_text(cell) +
+                            " m): expect probe error; use a cell size of at most " +
+                            param_text(2.5f * range) + " m or a longer range");
 }
 
 void CellsMethod::place_probes(const SurfaceTexels& texels, const SceneChange* change,

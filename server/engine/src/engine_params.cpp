@@ -75,9 +75,9 @@ Length parse_length(const ParamSpec& s, const std::string& text) {
     return metres ? Length::in_metres(v) : Length(v);
   } catch (const std::exception&) {
     throw Error(std::string(s.name) + " '" + text + "' must be a fraction of the scene (" +
-                (distance ? "0.3" : "0.25") + "), metres (2m), a fraction of at most so many " +
-                "metres (" + (distance ? "0.3:1.2m" : "0.25:1m") + ")" +
-                (distance ? " or inf" : ""));
+                (distance ? "0.3" : "0.25") + "), metres (2m)" + (distance ? ", " : " or ") +
+                "a fraction of at most so many metres (" + (distance ? "0.3:1.2m" : "0.25:1m") +
+                ")" + (distance ? " or inf" : ""));
   }
 }
 
@@ -119,6 +119,8 @@ void check_param(const ParamSpec& s, T v) {
     auto metres_ok = [&](float m) {
       return (s.kind == ParamKind::Distance ? m >= 0.0f : m > 0.0f) && std::isfinite(m);
     };
+    if (v.metres && !(v.cap == std::numeric_limits<float>::infinity()))
+      throw Error(std::string(s.name) + " in metres takes no cap");
     if (v.has_cap()) {
       if (v.infinite()) throw Error(std::string(s.name) + " capped in metres must be finite");
       check_param(s, v.value);

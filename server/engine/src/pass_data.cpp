@@ -38,8 +38,15 @@ float capped_cell(glm::vec3 e, float extent, float cap) {
 
 }  // namespace
 
-ProbeGrid ProbeGrid::cells_of(const Bounds& b, const EngineParams& params) {
-  ProbeGrid g;
+namespace {
+
+// The grid's cube edge and its cells along the largest extent.
+struct Edge {
+  float cell;
+  int per_axis;
+};
+
+Edge edge_of(const Bounds& b, const EngineParams& params) {
   const float extent = std::max(b.max_extent(), 1e-6f);
   // A fraction: ceil(1 / cell_size) cubes across the largest extent (seed 001 grids the
   // normalised cube). Metres: cubes of that edge, as many as cover the largest extent.
@@ -54,9 +61,22 @@ ProbeGrid ProbeGrid::cells_of(const Bounds& b, const EngineParams& params) {
                 " cells along the scene's largest extent of " + param_text(extent) +
                 " m (at most 256)");
   const int per_axis = std::max(1, static_cast<int>(across));
-  // Axes shorter than the largest get fewer cells (cells outside the bounds would hold nothing).
   // (A cube larger than the scene is one cell over it: its probe stays inside the bounds.)
-  g.cell = size.metres ? std::min(size.value, extent) : extent / static_cast<float>(per_axis);
+  return {size.metres ? std::min(size.value, extent) : extent / static_cast<float>(per_axis),
+          per_axis};
+}
+
+}  // namespace
+
+float ProbeGrid::cell_edge(const Bounds& b, const EngineParams& params) {
+  return edge_of(b, params).cell;
+}
+
+ProbeGrid ProbeGrid::cells_of(const Bounds& b, const EngineParams& params) {
+  ProbeGrid g;
+  const auto [cell, per_axis] = edge_of(b, params);
+  // Axes shorter than the largest get fewer cells (cells outside the bounds would hold nothing).
+  g.cell = cell;
   g.origin = b.lo;
   glm::vec3 e = b.extent();
   for (int a = 0; a < 3; ++a)

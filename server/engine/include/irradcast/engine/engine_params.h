@@ -21,9 +21,11 @@ enum class ParamKind {
   Int,       // int in lo..hi
   IntShown,  // the same, and the command line checks it too, showing the range in --help
   Real,      // float in [lo, hi]
-  Positive,  // float in (lo, hi]; a Length: a fraction in (lo, hi], or metres > 0 ("2m")
+  Positive,  // float in (lo, hi]; a Length: a fraction in (lo, hi], metres > 0 ("2m"), or
+             // such a fraction capped at metres > 0 ("0.25:1m")
   Distance,  // float >= lo, or inf; on the command line a number or "inf"; a Length: a
-             // fraction >= lo, metres >= 0 ("2m"), or inf
+             // fraction >= lo, metres >= 0 ("2m"), such a finite fraction capped at metres
+             // >= 0 ("0.3:1.2m"), or inf
   Choice,    // an enum, on the command line one of choice_names()
   Off,       // a bool, true by default; its command-line flag turns it off
   On,        // a bool, false by default; its command-line flag turns it on
@@ -54,8 +56,9 @@ struct Length {
     l.cap = max_metres;
     return l;
   }
-  // A fraction with a ceiling in metres.
-  bool has_cap() const { return !metres && cap < std::numeric_limits<float>::infinity(); }
+  // A fraction with a ceiling in metres (any cap but +inf, NaN included, which validate()
+  // refuses).
+  bool has_cap() const { return !metres && !(cap == std::numeric_limits<float>::infinity()); }
   // In world units, for a scene whose largest extent is `extent`.
   float resolve(float extent) const {
     if (metres) return value;

@@ -83,9 +83,12 @@ struct ProbeGrid {
   // The cells over `bounds` (cubes of params.cell_size: metres, or that fraction of the largest
   // extent), every probe at its cell's centre and usable. Throws irradcast::Error for more than
   // 256 cells along the largest extent. A fraction capped in metres (the default) whose cap
-  // binds gives cubes of the cap, grown as little as keeps 256 along the largest extent and
-  // kMaxCappedCells in all (a default never refuses a scene, however large).
+  // binds gives cubes of the cap, grown in 1 % steps until 256 lie along the largest extent and
+  // kMaxCappedCells in all (a default refuses no scene of finite size); where the cap does not
+  // bind it is the fraction's grid, whatever its count.
   static ProbeGrid cells_of(const Bounds& bounds, const EngineParams& params);
+  // The edge of cells_of's cubes (the same checks, no grid built).
+  static float cell_edge(const Bounds& bounds, const EngineParams& params);
   static constexpr std::size_t kMaxCappedCells = std::size_t{1} << 16;
 };
 
