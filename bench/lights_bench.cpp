@@ -89,13 +89,13 @@ glm::vec3 sample(const LightSampler& l, const RayScene& rays, const LightCache& 
 }
 
 // One texel's `samples` estimates (stratified in the pick; learned: an eighth of them where the
-// region is dark, as the engine's pass takes); its mean and the variance of that.
+// patch is dark, as the engine's pass takes); its mean and the variance of that.
 void run_texel(const LightSampler& l, const RayScene& rays, const LightCache& cache, glm::vec3 p,
                glm::vec3 n, std::uint32_t object, Way way, int samples, Rng& rng, Estimator& e,
                double& mean, double& var) {
   const auto start = Clock::now();
   if (way == kLearned && cache.valid())
-    samples = cache.samples_in(cache.region(p, n, object), samples);
+    samples = cache.samples_in(cache.patch(p, n, object), samples);
   LightSampler::FrontLights front;
   const bool culled = l.front_lights(p, n, front);
   double sum = 0.0, sq = 0.0;
@@ -172,7 +172,9 @@ LightCache learn(const PreparedScene& s, int updates) {
         if (!g.valid(i)) continue;
         const TexelPoint p = g.point(s.world().objects[o], i);
         const std::uint64_t region = cache.region(p.position, p.normal, o);
-        const int count = cache.samples_in(region, kSamples);
+        const std::uint64_t patch = cache.patch(p.position, p.normal, o);
+        const int count = cache.samples_in(patch, kSamples);
+        std::uint32_t rays = 0, lit = 0;
         LightSampler::FrontLights front;
         const bool culled = l.front_lights(p.position, p.normal, front);
         for (int k = 0; k < count; ++k) {
@@ -181,8 +183,12 @@ LightCache learn(const PreparedScene& s, int updates) {
           Traced t;
           sample(l, s.rays(), cache, culled ? &front : nullptr, p.position, p.normal, o, kLearned,
                  u, ignored, &t);
-          if (t.light >= 0) record.add(region, static_cast<std::uint32_t>(t.light), t.luminance);
+          if (t.light < 0) continue;
+          record.add(region, static_cast<std::uint32_t>(t.light), t.luminance);
+          ++rays;
+          lit += t.luminance > 0.0f ? 1u : 0u;
         }
+        record.add_patch(patch, rays, lit);
       }
     }
     cache.learn({&record});

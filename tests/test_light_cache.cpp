@@ -75,6 +75,52 @@ TEST(LightCache, RegionsAreGridCubesNormalDirectionsAndObjects) {
   EXPECT_EQ(c.region({nan, 0.5f, 0.5f}, up), c.region({0.5f, 0.5f, 0.5f}, up));
 }
 
+// The dark test's patches: a region's cube split kPatchSplit ways along each axis. Where light
+// reaches part of a region (its table learns from the lit part), a patch no light reaches
+// becomes dark once kDarkRays of its rays brought nothing, takes an eighth of the samples, and
+// stops being dark at the first learn() after one of its rays brings light.
+TEST(LightCache, PatchesNoLightReachesAreDarkInsideALitRegion) {
+  const LightCache c(box(glm::vec3(0.0f), glm::vec3(24.0f)), 10, 1.0f);  // 1 m regions
+  const glm::vec3 up(0, 1, 0);
+  const float patch = 1.0f / LightCache::kPatchSplit;
+  const glm::vec3 lit_p(3.01f, 0.5f, 7.01f), shade_p = lit_p + glm::vec3(0.5f, 0.0f, 0.5f);
+  ASSERT_EQ(c.region(lit_p, up, 2), c.region(shade_p, up, 2));
+  EXPECT_NE(c.patch(lit_p, up, 2), c.patch(shade_p, up, 2));
+  EXPECT_EQ(c.patch(lit_p, up, 2), c.patch(lit_p + glm::vec3(0.9f * patch, 0, 0), up, 2));
+  EXPECT_NE(c.patch(lit_p, up, 2), c.patch(lit_p, up, 3));
+  EXPECT_NE(c.patch(lit_p, up, 2), c.patch(lit_p, -up, 2));
+
+  LightCache cache(box(glm::vec3(0.0f), glm::vec3(24.0f)), 10, 1.0f);
+  const std::uint64_t region = cache.region(lit_p, up, 2);
+  const std::uint64_t lit = cache.patch(lit_p, up, 2), shade = cache.patch(shade_p, up, 2);
+  // One learn() of 8 texels a patch, 8 rays each: light 3 seen from one patch, nothing from the
+  // other.
+  auto pass = [&](int shade_lit) {
+    LightCache::Record r(cache.unit());
+    for (int texel = 0; texel < 8; ++texel) {
+      for (int ray = 0; ray < 8; ++ray) r.add(region, 3, ray % 2 == 0 ? 1.0f : 0.0f);
+      r.add_patch(lit, 8, 4);
+      for (int ray = 0; ray < 8; ++ray) r.add(region, 3, 0.0f);
+      r.add_patch(shade, 8, texel == 0 ? static_cast<std::uint32_t>(shade_lit) : 0u);
+    }
+    cache.learn({&r});
+  };
+  static_assert(LightCache::kDarkRays <= 64);
+  pass(0);  // 64 rays from the shaded patch, none lit
+  ASSERT_NE(cache.find(region), nullptr) << "the region learned light 3";
+  EXPECT_TRUE(cache.dark(shade));
+  EXPECT_FALSE(cache.dark(lit));
+  EXPECT_EQ(cache.samples_in(shade, 64), 8);
+  EXPECT_EQ(cache.samples_in(shade, 4), 1);
+  EXPECT_EQ(cache.samples_in(lit, 64), 64);
+  pass(1);  // one ray brought light: no longer dark, for as long as that ray counts
+  EXPECT_FALSE(cache.dark(shade));
+  for (int k = 0; k < 3; ++k) pass(0);
+  EXPECT_FALSE(cache.dark(shade)) << "a lit ray fades out slowly";
+  cache.clear();
+  EXPECT_FALSE(cache.dark(shade));
+}
+
 TEST(LightCache, TablesDoNotDependOnTheOrderOfTheSamples) {
   const Bounds b = box(glm::vec3(0.0f), glm::vec3(10.0f));
   LightCache one(b, 50, 2.0f), other(b, 50, 2.0f);

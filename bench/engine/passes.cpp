@@ -106,8 +106,9 @@ Capture capture_direct(const RayScene& rays, const LightSampler& lights, const L
     const bool learned = !culled && cache.valid();
     const std::uint64_t region = learned ? cache.region(p, nrm, in.texels.object[i]) : 0;
     const LightCache::Table* table = learned ? cache.find(region) : nullptr;
-    const int n =
-        learned ? cache.samples_in(region, in.params.direct_samples) : in.params.direct_samples;
+    const int n = learned ? cache.samples_in(cache.patch(p, nrm, in.texels.object[i]),
+                                             in.params.direct_samples)
+                          : in.params.direct_samples;
     c.area_samples[i] = n;
     Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
     int packet_rays = 0, packet_batch = -1;  // the current packet's rays and sample batch

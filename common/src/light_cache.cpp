@@ -18,6 +18,10 @@ constexpr std::size_t kCoalesce = 64;
 // Each learn() keeps 1 - 2^-kForget of the old sums (7/8: a light no longer seen fades out
 // over tens of passes).
 constexpr int kForget = 3;
+// A patch's lit rays count 2^kLitShift each, so that one of them keeps the patch from being dark
+// for about 80 passes (as a light's fixed-point sum keeps it in a region's table) rather than
+// the next pass only.
+constexpr int kLitShift = 16;
 
 // x less its 2^-kForget part, rounded up, so that every count reaches 0 (and its entry goes)
 // once nothing adds to it.
@@ -68,6 +72,17 @@ void LightCache::Record::add(std::uint64_t region, std::uint32_t light, float lu
   if (entries_.size() >= compact_at_) compact();
 }
 
+void LightCache::Record::add_patch(std::uint64_t patch, std::uint32_t rays, std::uint32_t lit) {
+  if (rays == 0) return;
+  if (!patches_.empty() && patches_.back().patch == patch) {
+    patches_.back().rays += rays;
+    patches_.back().lit += lit;
+    return;
+  }
+  patches_.push_back({patch, rays, lit});
+  if (patches_.size() >= compact_at_) compact();
+}
+
 void LightCache::Record::compact() {
   std::sort(entries_.begin(), entries_.end(), [](const Entry& a, const Entry& b) {
     return a.region != b.region ? a.region < b.region : a.light < b.light;
@@ -85,7 +100,19 @@ void LightCache::Record::compact() {
     }
   }
   entries_.resize(out);
-  compact_at_ = std::max(kCompactAt, 2 * out);
+  std::sort(patches_.begin(), patches_.end(),
+            [](const PatchEntry& a, const PatchEntry& b) { return a.patch < b.patch; });
+  std::size_t patches = 0;
+  for (const PatchEntry& e : patches_) {
+    if (patches > 0 && patches_[patches - 1].patch == e.patch) {
+      patches_[patches - 1].rays += e.rays;
+      patches_[patches - 1].lit += e.lit;
+    } else {
+      patches_[patches++] = e;
+    }
+  }
+  patches_.resize(patches);
+  compact_at_ = std::max(kCompactAt, 2 * std::max(out, patches));
 }
 
 LightCache::LightCache(const Bounds& bounds, std::size_t lights, float unit)
@@ -95,7 +122,16 @@ LightCache::LightCache(const Bounds& bounds, std::size_t lights, float unit)
       unit_(unit > 0.0f && std::isfinite(unit) ? unit : 1.0f) {}
 
 std::uint64_t LightCache::region(glm::vec3 p, glm::vec3 n, std::uint32_t object) const {
-  const glm::vec3 g = (p - origin_) * inv_cell_;
+  return key(p, n, object, inv_cell_);
+}
+
+std::uint64_t LightCache::patch(glm::vec3 p, glm::vec3 n, std::uint32_t object) const {
+  return key(p, n, object, inv_cell_ * static_cast<float>(kPatchSplit));
+}
+
+std::uint64_t LightCache::key(glm::vec3 p, glm::vec3 n, std::uint32_t object,
+                              float inv_cell) const {
+  const glm::vec3 g = (p - origin_) * inv_cell;
   auto axis = [](float v) {  // NaN and below 0 to 0
     return v > 0.0f ? static_cast<std::uint64_t>(std::min(v, static_cast<float>(kAxisMax))) : 0;
   };
@@ -112,7 +148,26 @@ const LightCache::Table* LightCache::find(std::uint64_t region) const {
 void LightCache::clear() {
   sums_.clear();
   tables_.clear();
+  patch_sums_.clear();
   dark_.clear();
+}
+
+void LightCache::learn_patches(const std::vector<Record*>& records) {
+  // Faded as the sums are, the new counts added; a patch with enough rays and none lit is dark.
+  for (auto it = patch_sums_.begin(); it != patch_sums_.end();) {
+    it->second.rays = fade(it->second.rays);
+    it->second.lit = fade(it->second.lit);
+    it = it->second.rays == 0 ? patch_sums_.erase(it) : std::next(it);
+  }
+  for (const Record* r : records)
+    for (const Record::PatchEntry& e : r->patches_) {
+      PatchSum& sum = patch_sums_[e.patch];
+      sum.rays = saturating_add(sum.rays, e.rays);
+      sum.lit = saturating_add(sum.lit, e.lit << kLitShift);
+    }
+  dark_.clear();
+  for (const auto& [patch, sum] : patch_sums_)
+    if (sum.lit == 0 && sum.rays >= kDarkRays) dark_.insert(patch);
 }
 
 void LightCache::learn(std::vector<Record*> records) {
@@ -142,11 +197,10 @@ void LightCache::learn(std::vector<Record*> records) {
         sums.insert(at, {e.sum, e.count, e.light, e.lit});
       }
     }
-  // Each region's table: its kMaxLights lights of the largest mean (ties by index); a region
-  // with enough rays and nothing seen is dark.
+  learn_patches(records);
+  // Each region's table: its kMaxLights lights of the largest mean (ties by index).
   tables_.clear();
   tables_.reserve(sums_.size());
-  dark_.clear();
   std::vector<std::pair<double, std::uint32_t>> order;
   for (const auto& [region, sums] : sums_) {
     order.clear();
@@ -157,10 +211,7 @@ void LightCache::learn(std::vector<Record*> records) {
       if (s.sum > 0)
         order.push_back({static_cast<double>(s.sum) / static_cast<double>(s.count), s.light});
     }
-    if (order.empty()) {
-      if (rays >= kDarkRays) dark_.insert(region);
-      continue;
-    }
+    if (order.empty()) continue;
     const std::size_t keep = std::min<std::size_t>(order.size(), kMaxLights);
     std::partial_sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(keep), order.end(),
                       [](const auto& a, const auto& b) {

@@ -219,9 +219,10 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, AreaR
   const bool learn = learned != nullptr;
   const std::uint64_t region = learn ? cache_.region(p, nrm, in.texels.object[i]) : 0;
   const LightCache::Table* table = learn ? cache_.table_for(region, culled) : nullptr;
-  // Fewer samples where the region has seen no light (LightCache::samples_in).
+  // Fewer samples where the texel's patch has seen no light (LightCache::samples_in).
+  const std::uint64_t patch = learn ? cache_.patch(p, nrm, in.texels.object[i]) : 0;
   const int n =
-      learn ? cache_.samples_in(region, in.params.direct_samples) : in.params.direct_samples;
+      learn ? cache_.samples_in(patch, in.params.direct_samples) : in.params.direct_samples;
   Rng rng = texel_rng(in.params, i, in.update, kDirect, 0);
   constexpr int kBatch = 16;
   Uninitialized<LightSampler::ShadowSample, kBatch> sample;
@@ -229,6 +230,7 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, AreaR
   bool lit[kBatch];
   glm::vec3 sum(0.0f);
   std::uint64_t rays = 0;
+  std::uint32_t lit_rays = 0;
   for (int s0 = 0; s0 < n; s0 += kBatch) {
     const int m = std::min(kBatch, n - s0);
     lights_->direct_samples(*rays_, culled ? &front : nullptr, p, nrm, ng, rng, s0, m, n,
@@ -255,13 +257,15 @@ glm::vec3 EmbreeBackend::area_direct(const PassInput& in, std::uint32_t i, AreaR
     if (learn)  // what each ray brought, not divided by the pick's probability
       for (int k = 0; k < count; ++k) {
         const LightSampler::ShadowSample& t = sample[which[k]];
-        learned->add(region, static_cast<std::uint32_t>(t.triangle),
-                     blocked[k] ? 0.0f : luminance(lights_->triangle_emitted(t)));
+        const float brought = blocked[k] ? 0.0f : luminance(lights_->triangle_emitted(t));
+        learned->add(region, static_cast<std::uint32_t>(t.triangle), brought);
+        lit_rays += brought > 0.0f ? 1u : 0u;
       }
     rays += static_cast<std::uint64_t>(count);
     for (int s = 0; s < m; ++s)
       if (lit[s]) sum += weight[s];
   }
+  if (learn) learned->add_patch(patch, static_cast<std::uint32_t>(rays), lit_rays);
   counts.traced += rays;
   if (packets) counts.packed += rays;
   return sum / static_cast<float>(n);
