@@ -89,6 +89,17 @@ TEST(LightCache, PatchesNoLightReachesAreDarkInsideALitRegion) {
   EXPECT_EQ(c.patch(lit_p, up, 2), c.patch(lit_p + glm::vec3(0.9f * patch, 0, 0), up, 2));
   EXPECT_NE(c.patch(lit_p, up, 2), c.patch(lit_p, up, 3));
   EXPECT_NE(c.patch(lit_p, up, 2), c.patch(lit_p, -up, 2));
+  // A small scene's regions (an 8 m box: 33 cm) are not split under kMinPatchEdge: its patches
+  // are its regions; a 16 m box's 67 cm regions split in two.
+  const LightCache small(box(glm::vec3(0.0f), glm::vec3(8.0f)), 10, 1.0f);
+  const glm::vec3 q(1.01f, 0.5f, 1.01f), q_quarter = q + glm::vec3(0.3f / 4.0f, 0.0f, 0.0f);
+  ASSERT_EQ(small.region(q, up), small.region(q_quarter, up));
+  EXPECT_EQ(small.patch(q, up), small.patch(q_quarter, up));
+  const LightCache middle(box(glm::vec3(0.0f), glm::vec3(16.0f)), 10, 1.0f);
+  const glm::vec3 m(2.01f, 0.5f, 2.01f);
+  ASSERT_EQ(middle.region(m, up), middle.region(m + glm::vec3(0.6f, 0, 0), up));
+  EXPECT_EQ(middle.patch(m, up), middle.patch(m + glm::vec3(0.3f, 0, 0), up));
+  EXPECT_NE(middle.patch(m, up), middle.patch(m + glm::vec3(0.6f, 0, 0), up));
 
   LightCache cache(box(glm::vec3(0.0f), glm::vec3(24.0f)), 10, 1.0f);
   const std::uint64_t region = cache.region(lit_p, up, 2);

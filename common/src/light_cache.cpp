@@ -22,6 +22,8 @@ constexpr int kForget = 3;
 // for about 80 passes (as a light's fixed-point sum keeps it in a region's table) rather than
 // the next pass only.
 constexpr int kLitShift = 16;
+// 1 / LightCache::kMinPatchEdge.
+constexpr float kMinPatchInv = 1.0f / LightCache::kMinPatchEdge;
 
 // x less its 2^-kForget part, rounded up, so that every count reaches 0 (and its entry goes)
 // once nothing adds to it.
@@ -126,7 +128,10 @@ std::uint64_t LightCache::region(glm::vec3 p, glm::vec3 n, std::uint32_t object)
 }
 
 std::uint64_t LightCache::patch(glm::vec3 p, glm::vec3 n, std::uint32_t object) const {
-  return key(p, n, object, inv_cell_ * static_cast<float>(kPatchSplit));
+  // kPatchSplit patches along a region's edge, fewer where they would be under kMinPatchEdge.
+  const float split =
+      std::clamp(std::floor(kMinPatchInv / inv_cell_), 1.0f, static_cast<float>(kPatchSplit));
+  return key(p, n, object, inv_cell_ * split);
 }
 
 std::uint64_t LightCache::key(glm::vec3 p, glm::vec3 n, std::uint32_t object,

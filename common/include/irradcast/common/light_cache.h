@@ -18,12 +18,12 @@
 // (EmbreeBackend::scene_changed).
 //
 // Where no light reaches, every shadow ray ends occluded whatever the pick; the direct pass spends
-// fewer samples there (samples_in). That test is kept on patches, cubes kPatchSplit times finer
-// than a region's (the same normal direction and object): a region's table is better learned from
-// many texels, but a region that light reaches in part (a floor with a table on it, a wall behind
-// a couch) holds texels no light reaches (on rooms:6, before the patches, 6.5 % of the texels in
-// regions with a table saw no light and traced 15 % of the shadow rays, all occluded). A patch from
-// which many rays and no light came back is dark.
+// fewer samples there (samples_in). That test is kept on patches, cubes up to kPatchSplit times
+// finer than a region's (the same normal direction and object): a region's table is better learned
+// from many texels, but a region that light reaches in part (a floor with a table on it, a wall
+// behind a couch) holds texels no light reaches (on rooms:6, before the patches, 6.5 % of the
+// texels in regions with a table saw no light and traced 15 % of the shadow rays, all occluded). A
+// patch from which many rays and no light came back is dark.
 #pragma once
 
 #include <algorithm>
@@ -47,8 +47,12 @@ class LightCache {
   static constexpr int kMaxLights = 32;
   // Regions along the scene's largest extent.
   static constexpr int kRegionsAcross = 24;
-  // Patches (of the dark test) along a region's edge.
+  // Patches (of the dark test) along a region's edge, at most: fewer where a patch would be under
+  // kMinPatchEdge metres (a small scene's regions are small: rooms:2's 34 cm would give 8.5 cm
+  // patches, about two texels at 16 texels a metre, which take several updates to gather
+  // kDarkRays rays; docs/bench/engine.md, "Dark patches").
   static constexpr int kPatchSplit = 4;
+  static constexpr float kMinPatchEdge = 0.25f;
   // The mixture's share of picks by the hierarchy, where a region has a table (measured:
   // docs/bench/engine.md, "Many lights").
   static constexpr float kTreeShare = 0.25f;
@@ -136,7 +140,8 @@ class LightCache {
   // a cube). A 64-bit hash of the three: two regions that collide share a table, which costs
   // efficiency, not correctness (a pick's probability is that of the table it used).
   std::uint64_t region(glm::vec3 p, glm::vec3 n, std::uint32_t object = 0) const;
-  // The point's patch: as region(), on a grid kPatchSplit times finer.
+  // The point's patch: as region(), on a grid kPatchSplit times finer, or as many times as keeps
+  // its edge at least kMinPatchEdge (1 to kPatchSplit).
   std::uint64_t patch(glm::vec3 p, glm::vec3 n, std::uint32_t object = 0) const;
   // Its table; null where nothing has been learned.
   const Table* find(std::uint64_t region) const;
