@@ -1,8 +1,10 @@
 // The engine's threads (its own and the TBB workers that help it) run niced, so the network
 // threads come first.
 #include <gtest/gtest.h>
+#include <tbb/parallel_for.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -11,9 +13,9 @@
 #include <vector>
 
 #include "irradcast/common/builtin.h"
-#include "irradcast/service/engine_host.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/progress.h"
+#include "irradcast/service/engine_host.h"
 #include "irradcast/service/thread_priority.h"
 
 using namespace irradcast;
@@ -88,4 +90,41 @@ TEST(ThreadPriority, ThreadNamesShowInProc) {
     EXPECT_TRUE(found);
   });
   t.join();
+}
+
+// An engine thread's arena outlives it: the next one of the same nice value takes it over
+// (destroying an observed TBB arena could leak TBB's observer proxy, caught by LeakSanitizer),
+// and two engines at once each have their own.
+TEST(ThreadPriority, ArenasAreReusedOneAfterAnotherAndApartWhenConcurrent) {
+  const auto parallel_sum = [] {
+    std::atomic<long> sum = 0;
+    tbb::parallel_for(0, 10000, [&](int i) { sum += i; });
+    return sum.load();
+  };
+  // 11 has no other user in this test program: the counts below are this test's own.
+  const std::size_t before = NiceArena::arenas_made();
+  for (int i = 0; i < 20; ++i) {
+    NiceArena arena(11);
+    long sum = 0;
+    arena.execute([&] { sum = parallel_sum(); });
+    EXPECT_EQ(sum, 49995000);
+  }
+  EXPECT_EQ(NiceArena::arenas_made(), before + 1) << "one after another: one arena";
+
+  std::vector<std::thread> engines;
+  std::atomic<int> inside = 0;
+  std::atomic<long> total = 0;
+  for (int e = 0; e < 2; ++e) {
+    engines.emplace_back([&] {
+      NiceArena arena(11);
+      arena.execute([&] {
+        ++inside;
+        while (inside.load() < 2) std::this_thread::yield();  // both arenas alive at once
+        total += parallel_sum();
+      });
+    });
+  }
+  for (std::thread& t : engines) t.join();
+  EXPECT_EQ(total.load(), 2 * 49995000L);
+  EXPECT_EQ(NiceArena::arenas_made(), before + 2) << "two at once: a second arena";
 }

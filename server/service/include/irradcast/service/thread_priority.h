@@ -4,8 +4,8 @@
 // delayed by a running update (Linux: nice is per thread; elsewhere these do nothing).
 #pragma once
 
+#include <cstddef>
 #include <functional>
-#include <memory>
 
 namespace irradcast {
 
@@ -19,7 +19,8 @@ bool set_thread_nice(int nice);
 // A TBB arena whose threads run at `nice` while they work in it: the engine runs its updates
 // in one (EngineHost), so the TBB workers that help it are niced too. (A worker keeps its nice
 // value after it leaves: raising a thread's priority again needs privileges. In the server all
-// TBB work is the engine's.)
+// TBB work is the engine's.) The arena itself is kept for the process and handed to the next
+// NiceArena of the same nice value (see thread_priority.cpp for why it is never destroyed).
 class NiceArena {
  public:
   explicit NiceArena(int nice);
@@ -29,9 +30,13 @@ class NiceArena {
 
   void execute(const std::function<void()>& work);
 
- private:
+  // How many arenas this process has made: one per NiceArena alive at the same time.
+  static std::size_t arenas_made();
+
   struct Impl;
-  std::unique_ptr<Impl> impl_;
+
+ private:
+  Impl* impl_ = nullptr;  // the pool's
 };
 
 }  // namespace irradcast
