@@ -33,3 +33,35 @@ err "$OUT/leak_fixed/report.json" "rooms:2 unlit room, range 0.05, relocation + 
 err "$OUT/leak_seed/report.json" "rooms:2 unlit room, range 0.05, seed probes"
 python3 docs/png_montage.py "$IMG/rooms2_leaks_seed_fixed_reference.png" \
   "$OUT/leak_seed/view.png" "$OUT/leak_fixed/view.png" "$OUT/leak_fixed/reference.png"
+
+# Noise and bias of the probes by probe-map resolution (docs/ENGINE.md): the sky-lit Sponza's
+# gallery and view up, three seeds each at 8 x 8 and 12 x 12 maps, and the unbiased mode; each
+# panel the mean of its views over the seed-1 reference (docs/bias_map.py). ~12 min on 2 cores.
+# (The Sponza is read from $IRRADCAST_TESTDATA or ../shared/testdata.)
+if [ -d "${IRRADCAST_TESTDATA:-../shared/testdata}/dabrovic-sponza" ]; then
+  mean() { python3 -c "import json,sys; print(sys.argv[2], json.load(open(sys.argv[1]))['timings_s']['lightmaps'])" "$1" "$2"; }
+  for view in gallery up; do
+    case $view in
+      gallery) CAM="eye=-10,1.6,-5.6:target=10,1.6,-5.6:fov=60" ;;
+      up) CAM="eye=0,1.6,0:target=0.5,20,0:fov=70" ;;
+    esac
+    S="--scene sponza --width 200 --height 150 --updates 16 --camera $CAM"
+    $BAKE --quiet $S --out "$OUT/$view-8-1" --reference 128
+    groups=()
+    for cfg in 8 12 inf; do
+      files=()
+      for seed in 1 2 3; do
+        dir="$OUT/$view-$cfg-$seed"
+        if [ "$cfg" = inf ]; then extra="--tracing-range inf"; else extra="--probe-resolution $cfg"; fi
+        [ -f "$dir/view.exr" ] || $BAKE --quiet $S $extra --seed $seed --out "$dir"
+        mean "$dir/report.json" "$view $cfg seed $seed lightmap seconds:"
+        files+=("$dir/view.exr")
+      done
+      groups+=("$(IFS=,; echo "${files[*]}")")
+    done
+    python3 docs/bias_map.py --mean "$OUT/$view-8-1/reference.exr" ${groups[@]//,/ }
+    python3 docs/bias_map.py "$OUT/$view-bias.png" "$OUT/$view-8-1/reference.exr" "${groups[@]}"
+    python3 docs/png_montage.py "$IMG/sponza_${view}_bias_by_probe_resolution.png" \
+      "$OUT/$view-8-1/reference.png" "$OUT/$view-bias.png"
+  done
+fi
