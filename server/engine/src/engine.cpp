@@ -8,6 +8,7 @@
 #include <cmath>
 #include <utility>
 
+#include "dilation_plan.h"
 #include "indirect_method.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
@@ -90,6 +91,11 @@ std::string Engine::method_summary() const {
 }
 
 void Engine::build_texels(const std::vector<TexelGBuffer>& gbuffers) {
+  dilation_.resize(gbuffers.size());
+  tbb::parallel_for(std::size_t(0), gbuffers.size(), [&](std::size_t o) {
+    const TexelGBuffer& g = gbuffers[o];
+    dilation_[o] = DilationPlan(g.width, g.height, g.kind);
+  });
   texels_ = SurfaceTexels{};
   std::size_t total = 0;
   for (const auto& g : gbuffers) total += g.valid_count();
@@ -160,9 +166,8 @@ void Engine::to_lightmaps(const std::vector<glm::vec3>& values, std::vector<Ligh
   tbb::parallel_for(std::size_t(0), texels_.size(), [&](std::size_t i) {
     maps[texels_.object[i]].texels[texels_.texel[i]] = values[i];
   });
-  tbb::parallel_for(std::size_t(0), maps.size(), [&](std::size_t o) {
-    dilate(maps[o].texels, maps[o].width, maps[o].height, (*gbuffers_)[o].kind);
-  });
+  tbb::parallel_for(std::size_t(0), maps.size(),
+                    [&](std::size_t o) { dilation_[o].apply(maps[o].texels); });
 }
 
 UpdateStats Engine::update() {

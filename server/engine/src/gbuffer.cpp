@@ -8,9 +8,9 @@
 #include <limits>
 #include <string>
 
-#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "dilation_plan.h"
 #include "irradcast/common/cutout.h"
 #include "irradcast/common/error.h"
 
@@ -289,74 +289,14 @@ void rasterize_gbuffer(const World& world, const Atlas& atlas, std::vector<Texel
   });
 }
 
-namespace {
-
-// Calls f(j) with the index of each texel of the 3x3 block around (x, y) that lies in the
-// width x height image, the centre included, row by row.
-template <class F>
-void for_each_neighbour(int x, int y, int width, int height, F f) {
-  for (int dy = -1; dy <= 1; ++dy)
-    for (int dx = -1; dx <= 1; ++dx) {
-      const int nx = x + dx, ny = y + dy;
-      if (nx < 0 || ny < 0 || nx >= width || ny >= height) continue;
-      f(static_cast<std::size_t>(ny) * width + nx);
-    }
-}
-
-}  // namespace
-
 void dilate(std::vector<glm::vec3>& texels, int width, int height,
             const std::vector<TexelKind>& valid, int rings) {
   const std::size_t size =
       static_cast<std::size_t>(std::max(0, width)) * static_cast<std::size_t>(std::max(0, height));
-  if (texels.size() != size || valid.size() != size)
+  if (texels.size() != size)
     throw Error("dilate: buffer sizes do not match the " + std::to_string(width) + "x" +
                 std::to_string(height) + " lightmap");
-  if (size == 0 || rings == 0) return;
-  std::vector<std::uint8_t> state(size, 0);  // 0 empty, 1 filled, 2 queued
-  for (std::size_t i = 0; i < size; ++i) state[i] = holds_estimate(valid[i]) ? 1 : 0;
-  std::vector<std::uint32_t> frontier, next;
-  auto push_neighbours = [&](int x, int y, std::vector<std::uint32_t>& out) {
-    for_each_neighbour(x, y, width, height, [&](std::size_t j) {
-      if (state[j] != 0) return;
-      state[j] = 2;
-      out.push_back(static_cast<std::uint32_t>(j));
-    });
-  };
-  for (int y = 0; y < height; ++y)
-    for (int x = 0; x < width; ++x)
-      if (state[static_cast<std::size_t>(y) * width + x] == 1) push_neighbours(x, y, frontier);
-  std::vector<glm::vec3> values;
-  for (int ring = 0; !frontier.empty() && (rings < 0 || ring < rings); ++ring) {
-    // Average of the filled 8-neighbours, as first + mean difference so that equal neighbours
-    // reproduce their value exactly.
-    values.resize(frontier.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, frontier.size(), 1024),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t k = r.begin(); k < r.end(); ++k) {
-                          int x = static_cast<int>(frontier[k] % width);
-                          int y = static_cast<int>(frontier[k] / width);
-                          glm::vec3 first(0.0f), diff(0.0f);
-                          int count = 0;
-                          for_each_neighbour(x, y, width, height, [&](std::size_t j) {
-                            if (state[j] != 1) return;
-                            if (count++ == 0)
-                              first = texels[j];
-                            else
-                              diff += texels[j] - first;
-                          });
-                          values[k] = count > 1 ? first + diff / static_cast<float>(count) : first;
-                        }
-                      });
-    for (std::size_t k = 0; k < frontier.size(); ++k) {
-      texels[frontier[k]] = values[k];
-      state[frontier[k]] = 1;
-    }
-    next.clear();
-    for (std::uint32_t i : frontier)
-      push_neighbours(static_cast<int>(i % width), static_cast<int>(i / width), next);
-    frontier.swap(next);
-  }
+  DilationPlan(width, height, valid, rings).apply(texels);
 }
 
 }  // namespace irradcast

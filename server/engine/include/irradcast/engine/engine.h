@@ -25,6 +25,7 @@ namespace irradcast {
 
 struct DenoiseStats;   // denoise.h
 class IndirectMethod;  // the engine's own (server/engine/src/indirect_method.h)
+class DilationPlan;    // likewise (dilation_plan.h)
 
 // One pass's cost as the backend reported it.
 using PassTiming = PassResult;
@@ -131,6 +132,8 @@ class Engine {
   SurfaceTexels texels_;
   Probes probes_;  // the grid of cells; placed and weighed by the method that reads probes
   std::vector<std::uint32_t> unit_texels_, unit_offsets_;
+  // Per object: its lightmap's gap fill, from the G-buffer's texel kinds (made with the texels).
+  std::vector<DilationPlan> dilation_;
   std::uint32_t updates_ = 0;
   std::uint64_t generation_ = 0;  // PassInput::generation
   // Running means: [0] direct, [k] bounce k. A texel's means count samples_[i] samples; before
