@@ -48,6 +48,22 @@ std::uint64_t direction_of(glm::vec3 n) {
   return static_cast<std::uint64_t>(2 * axis + (n[axis] < 0.0f ? 1 : 0));
 }
 
+// Sorts v by `less`, then merges each run of elements that are the `same` into its first
+// (`merge`); returns how many are left.
+template <class T, class Less, class Same, class Merge>
+std::size_t merge_runs(std::vector<T>& v, Less less, Same same, Merge merge) {
+  std::sort(v.begin(), v.end(), less);
+  std::size_t out = 0;
+  for (std::size_t k = 0; k < v.size(); ++k) {
+    if (out > 0 && same(v[out - 1], v[k]))
+      merge(v[out - 1], v[k]);
+    else
+      v[out++] = v[k];
+  }
+  v.resize(out);
+  return out;
+}
+
 }  // namespace
 
 float LightCache::Table::pmf(std::uint32_t index) const {
@@ -86,40 +102,34 @@ void LightCache::Record::add_patch(std::uint64_t patch, std::uint32_t rays, std:
 }
 
 void LightCache::Record::compact() {
-  std::sort(entries_.begin(), entries_.end(), [](const Entry& a, const Entry& b) {
-    return a.region != b.region ? a.region < b.region : a.light < b.light;
-  });
-  std::size_t out = 0;
-  for (std::size_t k = 0; k < entries_.size(); ++k) {
-    const Entry& e = entries_[k];
-    if (out > 0 && entries_[out - 1].region == e.region && entries_[out - 1].light == e.light) {
-      Entry& m = entries_[out - 1];
-      m.sum = saturating_add(m.sum, e.sum);
-      m.count += e.count;
-      m.lit = saturating_add32(m.lit, e.lit);
-    } else {
-      entries_[out++] = e;
-    }
-  }
-  entries_.resize(out);
-  std::sort(patches_.begin(), patches_.end(),
-            [](const PatchEntry& a, const PatchEntry& b) { return a.patch < b.patch; });
-  std::size_t patches = 0;
-  for (const PatchEntry& e : patches_) {
-    if (patches > 0 && patches_[patches - 1].patch == e.patch) {
-      patches_[patches - 1].rays += e.rays;
-      patches_[patches - 1].lit += e.lit;
-    } else {
-      patches_[patches++] = e;
-    }
-  }
-  patches_.resize(patches);
+  const std::size_t out = merge_runs(
+      entries_,
+      [](const Entry& a, const Entry& b) {
+        return a.region != b.region ? a.region < b.region : a.light < b.light;
+      },
+      [](const Entry& a, const Entry& b) { return a.region == b.region && a.light == b.light; },
+      [](Entry& m, const Entry& e) {
+        m.sum = saturating_add(m.sum, e.sum);
+        m.count += e.count;
+        m.lit = saturating_add32(m.lit, e.lit);
+      });
+  const std::size_t patches = merge_runs(
+      patches_, [](const PatchEntry& a, const PatchEntry& b) { return a.patch < b.patch; },
+      [](const PatchEntry& a, const PatchEntry& b) { return a.patch == b.patch; },
+      [](PatchEntry& m, const PatchEntry& e) {
+        m.rays += e.rays;
+        m.lit += e.lit;
+      });
   compact_at_ = std::max(kCompactAt, 2 * std::max(out, patches));
 }
 
 LightCache::LightCache(const Bounds& bounds, std::size_t lights, float unit)
     : origin_(bounds.lo),
       inv_cell_(static_cast<float>(kRegionsAcross) / std::max(bounds.max_extent(), 1e-20f)),
+      // kPatchSplit patches along a region's edge, fewer where they would be under
+      // kMinPatchEdge.
+      inv_patch_(inv_cell_ * std::clamp(std::floor(kMinPatchInv / inv_cell_), 1.0f,
+                                        static_cast<float>(kPatchSplit))),
       lights_(lights),
       unit_(unit > 0.0f && std::isfinite(unit) ? unit : 1.0f) {}
 
@@ -128,10 +138,7 @@ std::uint64_t LightCache::region(glm::vec3 p, glm::vec3 n, std::uint32_t object)
 }
 
 std::uint64_t LightCache::patch(glm::vec3 p, glm::vec3 n, std::uint32_t object) const {
-  // kPatchSplit patches along a region's edge, fewer where they would be under kMinPatchEdge.
-  const float split =
-      std::clamp(std::floor(kMinPatchInv / inv_cell_), 1.0f, static_cast<float>(kPatchSplit));
-  return key(p, n, object, inv_cell_ * split);
+  return key(p, n, object, inv_patch_);
 }
 
 std::uint64_t LightCache::key(glm::vec3 p, glm::vec3 n, std::uint32_t object,

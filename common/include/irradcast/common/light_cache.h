@@ -208,7 +208,8 @@ class LightCache {
   void learn_patches(const std::vector<Record*>& records);
 
   glm::vec3 origin_{0.0f};
-  float inv_cell_ = 1.0f;
+  float inv_cell_ = 1.0f;   // regions per metre
+  float inv_patch_ = 1.0f;  // patches per metre (patch())
   std::size_t lights_ = 0;
   float unit_ = 1.0f;
   // Per region: each light's summed luminance (fixed point) and count of samples, by light.
