@@ -16,6 +16,19 @@ namespace {
 constexpr int kDx[8] = {-1, 0, 1, -1, 1, -1, 0, 1};
 constexpr int kDy[8] = {-1, -1, -1, 0, 0, 1, 1, 1};
 
+// Calls f(b, j) for each neighbour b (0..7, row by row, the centre left out) of texel i that lies
+// in the width x height map, j its index.
+template <class F>
+void for_each_neighbour(std::uint32_t i, int width, int height, F f) {
+  const auto w = static_cast<std::uint32_t>(width);
+  const int x = static_cast<int>(i % w), y = static_cast<int>(i / w);
+  for (int b = 0; b < 8; ++b) {
+    const int nx = x + kDx[b], ny = y + kDy[b];
+    if (nx < 0 || ny < 0 || nx >= width || ny >= height) continue;
+    f(b, static_cast<std::size_t>(ny) * static_cast<std::size_t>(width) + nx);
+  }
+}
+
 }  // namespace
 
 DilationPlan::DilationPlan(int width, int height, const std::vector<TexelKind>& valid, int rings)
@@ -30,16 +43,11 @@ DilationPlan::DilationPlan(int width, int height, const std::vector<TexelKind>& 
   std::vector<std::uint32_t> frontier, next;
   // Queues the empty neighbours of texel i (row by row), as dilate() always has.
   auto push_neighbours = [&](std::uint32_t i, std::vector<std::uint32_t>& out) {
-    const int x = static_cast<int>(i % static_cast<std::uint32_t>(width_));
-    const int y = static_cast<int>(i / static_cast<std::uint32_t>(width_));
-    for (int b = 0; b < 8; ++b) {
-      const int nx = x + kDx[b], ny = y + kDy[b];
-      if (nx < 0 || ny < 0 || nx >= width_ || ny >= height_) continue;
-      const std::size_t j = static_cast<std::size_t>(ny) * width_ + nx;
-      if (state[j] != 0) continue;
+    for_each_neighbour(i, width_, height_, [&](int, std::size_t j) {
+      if (state[j] != 0) return;
       state[j] = 2;
       out.push_back(static_cast<std::uint32_t>(j));
-    }
+    });
   };
   for (std::size_t i = 0; i < size; ++i)
     if (state[i] == 1) push_neighbours(static_cast<std::uint32_t>(i), frontier);
@@ -50,16 +58,12 @@ DilationPlan::DilationPlan(int width, int height, const std::vector<TexelKind>& 
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, frontier.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t k = r.begin(); k < r.end(); ++k) {
-                          const auto w = static_cast<std::uint32_t>(width_);
-                          const int x = static_cast<int>(frontier[k] % w);
-                          const int y = static_cast<int>(frontier[k] / w);
                           std::uint8_t mask = 0;
-                          for (int b = 0; b < 8; ++b) {
-                            const int nx = x + kDx[b], ny = y + kDy[b];
-                            if (nx < 0 || ny < 0 || nx >= width_ || ny >= height_) continue;
-                            if (state[static_cast<std::size_t>(ny) * width_ + nx] == 1)
-                              mask |= static_cast<std::uint8_t>(1u << b);
-                          }
+                          for_each_neighbour(frontier[k], width_, height_,
+                                             [&](int bit, std::size_t j) {
+                                               if (state[j] == 1)
+                                                 mask |= static_cast<std::uint8_t>(1u << bit);
+                                             });
                           sources_[first + k] = mask;
                         }
                       });
