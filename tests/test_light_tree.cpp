@@ -157,23 +157,35 @@ TEST_P(LightTreeSizes, APointsRememberedWalksAreTheTreesBitForBit) {
 
 INSTANTIATE_TEST_SUITE_P(Lights, LightTreeSizes, ::testing::Values(1, 10, 1200));
 
-// The walk picks each of 20 lights as often as pmf() says (within 5 standard deviations).
+// The walk picks each of 20 lights as often as pmf() says (within 5 standard deviations), and
+// nothing as often as the lights' probabilities leave: a walk can enter a node whose bounds might
+// light p (its cone of normals, merged from its lights', spans a direction towards p) while none
+// of its lights can, and then picks nothing (as pbrt-v4's does; those lights bring nothing, so
+// the estimate stays unbiased). On this scene a merged cone does so at this point in a clang
+// build, whose split of the lights differs from GCC's in the last bits.
 TEST(LightTree, PicksEachLightAsOftenAsItsProbability) {
   const PreparedScene s = many_lights(10, 3);
   const LightTree tree(s.lights().emissive_triangles(), s.lights().pick_pdf());
   const glm::vec3 p(0.5f, 0.0f, -1.0f), n(0.0f, 1.0f, 0.0f);
   const int draws = 200000;
   std::vector<int> count(s.lights().emissive_triangles().size(), 0);
+  int none = 0;
   for (int k = 0; k < draws; ++k) {
     std::uint32_t i;
     float pmf;
-    ASSERT_TRUE(tree.sample(p, n, (static_cast<float>(k) + 0.5f) / draws, i, pmf));
-    ++count[i];
+    if (tree.sample(p, n, (static_cast<float>(k) + 0.5f) / draws, i, pmf))
+      ++count[i];
+    else
+      ++none;
   }
+  double picked = 0.0;
   for (std::uint32_t i = 0; i < count.size(); ++i) {
     const double expect = draws * static_cast<double>(tree.pmf(p, n, i));
     EXPECT_NEAR(count[i], expect, 5.0 * std::sqrt(expect) + 2.0) << "light " << i;
+    picked += expect;
   }
+  EXPECT_GT(picked, 0.5 * draws);
+  EXPECT_NEAR(none, draws - picked, 5.0 * std::sqrt(draws - picked) + 2.0);
 }
 
 // With 2,400 emissive triangles (over kMaxFront) LightSampler picks by the hierarchy; its

@@ -14,8 +14,12 @@
 
 #include "irradcast/common/hit_shader.h"
 
+#if defined(__clang__)
+#pragma clang attribute push(__attribute__((target("avx512f"))), apply_to = function)
+#else
 #pragma GCC push_options
 #pragma GCC target("avx512f")
+#endif
 
 namespace irradcast {
 namespace {
@@ -295,4 +299,8 @@ void HitShader::finish_avx512(const PrimaryBlock& b, const Avx512Loads& loads,
 
 }  // namespace irradcast
 
+#if defined(__clang__)
+#pragma clang attribute pop
+#else
 #pragma GCC pop_options
+#endif

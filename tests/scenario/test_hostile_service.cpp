@@ -21,6 +21,7 @@
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/progress.h"
+#include "irradcast/common/sanitizer.h"
 #include "irradcast/common/scene_edit.h"
 #include "irradcast/service/engine_host.h"
 #include "irradcast/service/net_server.h"
@@ -377,7 +378,7 @@ TEST(HostileService, ClientsThatNeverReadAreClosed) {
 // Out of file descriptors the accept loop pauses (one warning, not a spin), and accepts again
 // once descriptors are free. The server runs as its own process with a limit of 64 files.
 TEST(HostileService, AcceptPausesWhenOutOfDescriptors) {
-#if defined(__SANITIZE_ADDRESS__)
+#if IRRADCAST_ASAN
   // UBSan's vptr check needs a pipe to test memory: in a process out of descriptors it reports
   // every virtual call. The normal build runs this test.
   GTEST_SKIP() << "a sanitized server cannot run out of file descriptors";

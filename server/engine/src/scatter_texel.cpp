@@ -27,7 +27,6 @@ struct ScatterTexel::Texel {
 namespace {
 
 using Batch = ScatterTexel::Batch;
-constexpr int kBatch = ScatterTexel::kBatch;
 constexpr std::size_t kAhead = 4;  // how many texels ahead run() requests a texel's data
 
 // The hit's lightmap coordinates, with the two lightmap rows its bilinear lookup reads requested

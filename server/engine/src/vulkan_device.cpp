@@ -1,7 +1,9 @@
 #include "irradcast/engine/vulkan_device.h"
 
 #include <vulkan/vulkan.h>
-#if defined(__SANITIZE_ADDRESS__)
+
+#include "irradcast/common/sanitizer.h"
+#if IRRADCAST_ASAN
 #include <sanitizer/lsan_interface.h>
 // Mesa's lavapipe (Debian 12's mesa-vulkan-drivers 22.3.6-1+deb12u2) leaks 128 bytes each time
 // it enumerates its devices, inside the driver, which the loader unloads before LeakSanitizer
