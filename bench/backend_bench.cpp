@@ -6,8 +6,8 @@
 // compilation) apart, and the reference path tracer's lightmaps on each backend; writes JSON
 // and a PNG bar chart (docs/BENCHMARKS.md, "Backends").
 #include <tbb/global_control.h>
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include "irradcast/common/cli.h"
 
 #include <algorithm>
 #include <chrono>

@@ -13,7 +13,7 @@
 //     plain and denoised after --few updates, plain after --many, the reference).
 //   irradcast-bench-denoise --out docs/images --json docs/images/denoise_bench.json
 // The reference halves are cached in --cache (keyed by scene, density, samples and seeds).
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <cmath>
 #include <cstdio>

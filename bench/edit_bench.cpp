@@ -9,8 +9,8 @@
 // network and the scene download a restarted server would also need). Writes JSON and a PNG
 // plot (docs/BENCHMARKS.md, "Scene edits").
 #include <tbb/global_control.h>
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include "irradcast/common/cli.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>

@@ -12,8 +12,8 @@
 // full image (p50 over users), bytes the server sent, and the CPU of the server's network
 // threads ("irradcast-io", from /proc/self/task) per MB sent; medians over rounds and ratios to
 // plain. docs/BENCHMARKS.md ("Hostile-input costs") has a run.
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include "irradcast/common/cli.h"
 
 #include <unistd.h>
 

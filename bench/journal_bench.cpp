@@ -5,8 +5,8 @@
 // and compaction time. The host is not started, so only the acknowledgement path is timed; the
 // engine applies the edits between rounds (step()). The folder (--dir, default OUT/state) decides
 // what an fsync costs: run it on the disk a server's --state-dir would use.
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include "irradcast/common/cli.h"
 
 #include <algorithm>
 #include <chrono>

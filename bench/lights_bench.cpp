@@ -11,7 +11,7 @@
 // (docs/bench/engine.md, "Many lights"). With --oracle, also the floor of the occluded share:
 // each texel's own pick in proportion to what each light brings it.
 //   irradcast-bench-lights --scenes rooms:6,rooms:6:trim,rooms:12:trim --out out/lights
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <algorithm>
 #include <chrono>

@@ -7,7 +7,7 @@
 // (composed views next to a path-traced reference).
 //   irradcast-bench-methods --scenes cornell,rooms:2 --updates 24 --out out/methods
 #include <tbb/global_control.h>
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <algorithm>
 #include <chrono>

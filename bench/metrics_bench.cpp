@@ -11,7 +11,7 @@
 // Uses only the endpoint's constructor, start() and port(), so the same file measures an older
 // endpoint too. Numbers: docs/BENCHMARKS.md, "Metrics endpoint".
 #include <sys/resource.h>
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <asio.hpp>
 

@@ -6,7 +6,7 @@
 // the median time per update, the rays per update (direct pass and all), and each variant's
 // time as a ratio to emitters only, as a table and JSON (docs/BENCHMARKS.md, "Sky and sun").
 //   irradcast-bench-sky --rounds 5 --out out/sky
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <cstdio>
 #include <memory>

@@ -7,12 +7,12 @@
 #include <cmath>
 
 #include "irradcast/common/builtin.h"
-#include "irradcast/service/engine_host.h"
 #include "irradcast/common/error.h"
 #include "irradcast/common/log.h"
 #include "irradcast/common/progress.h"
 #include "irradcast/common/sampling.h"
 #include "irradcast/common/scene_edit.h"
+#include "irradcast/service/engine_host.h"
 
 using namespace irradcast;
 
@@ -21,11 +21,11 @@ namespace {
 constexpr std::uint32_t kUpdates = 16;
 
 EngineHostOptions options(std::uint64_t seed, BackendKind backend = BackendKind::Embree,
-                          Method method = Method::Cells) {
+                          Method method = Method::Cells, float texels_per_scene = 64.0f) {
   Progress::set_enabled(false);
   log::set_level(log::Level::Warn);
   EngineHostOptions o;
-  o.atlas.texels_per_scene = 64.0f;
+  o.atlas.texels_per_scene = texels_per_scene;
   o.tiles.tile_size = 16;
   // Publish every change, so published() holds the engine's values.
   o.tiles.change_threshold = 0.0f;
@@ -90,9 +90,9 @@ class EditConverges : public ::testing::TestWithParam<EditCase> {};
 // Edits a converged host, runs it to convergence again and compares it with a fresh bake of the
 // edited scene, against the control of a second fresh bake with another seed.
 void check_converges(const char* name, const std::string& json, BackendKind backend,
-                     Method method = Method::Cells) {
+                     Method method = Method::Cells, float texels_per_scene = 64.0f) {
   const SceneEdit edit = edit_of(json);
-  EngineHost edited(make_cornell_box(), "cornell", options(1, backend, method));
+  EngineHost edited(make_cornell_box(), "cornell", options(1, backend, method, texels_per_scene));
   run_to_idle(edited);
   const std::vector<Lightmap> before = edited.tiles().published();
   edited.submit_edit(edit);
@@ -103,9 +103,9 @@ void check_converges(const char* name, const std::string& json, BackendKind back
 
   Scene scene = make_cornell_box();
   apply_edit(scene, edit);
-  EngineHost fresh(scene, "cornell", options(1, backend, method));
+  EngineHost fresh(scene, "cornell", options(1, backend, method, texels_per_scene));
   run_to_idle(fresh);
-  EngineHost control(scene, "cornell", options(2, backend, method));
+  EngineHost control(scene, "cornell", options(2, backend, method, texels_per_scene));
   run_to_idle(control);
   const std::vector<Lightmap> truth = fresh.tiles().published();
   const std::vector<Lightmap> other = control.tiles().published();
@@ -138,7 +138,7 @@ TEST(EngineEdit, VulkanBackendFollowsAnEdit) {
                   R"({"ops": [{"op": "move", "node": "tall_block", "by": [-0.1, 0, -0.12]},
                               {"op": "emission", "material": "light", "color": [17, 12, 4],
                                "strength": 0.6}]})",
-                  BackendKind::Vulkan);
+                  BackendKind::Vulkan, Method::Cells, 32.0f);
 }
 
 // The other methods (docs/METHODS.md) follow an edit too: VPLs the moved block now occludes

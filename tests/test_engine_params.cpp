@@ -3,7 +3,7 @@
 // parameters included, gives the published tiles another epoch.
 #include <gtest/gtest.h>
 
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <algorithm>
 #include <initializer_list>

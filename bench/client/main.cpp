@@ -14,8 +14,8 @@
 // along the path; several: ms per frame per scene, 1.5 x raw marked) and (--images) the image
 // pair with and without SSAO (docs/CLIENT_PASSES.md).
 #include <tbb/global_control.h>
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include "irradcast/common/cli.h"
 
 #include <algorithm>
 #include <chrono>

@@ -4,7 +4,7 @@
 // --texels-per-metre.
 #pragma once
 
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <string>
 

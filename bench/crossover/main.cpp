@@ -19,7 +19,7 @@
 // time a new viewer takes to get a converged first image instead (join.cpp).
 // This file: the options and main; scene_run.cpp measures, report.cpp prints and plots
 // (crossover.h).
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <algorithm>
 #include <cstdio>

@@ -7,8 +7,8 @@
 //     against the scene's lightmaps' bytes (every tile, RGB9E5 + zstd, as a viewer downloads it).
 // The engine's lightmaps first (--updates updates); dynamic objects change nothing of them.
 #include <tbb/global_control.h>
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include "irradcast/common/cli.h"
 
 #include <atomic>
 #include <cmath>

@@ -9,8 +9,8 @@
 // presence (docs/DYNAMIC.md#presence; the server runs with --presence): every user's camera
 // walking at 10 updates a second, first without avatars ("cameras"), then with each user shown
 // as one and sent the nearest 32 others' ("avatars").
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include "irradcast/common/cli.h"
 
 #include <chrono>
 #include <cmath>

@@ -19,7 +19,7 @@
 // Prints a table, writes JSON and two PNG plots (see docs/BENCHMARKS.md). This file: the options,
 // the pass report and main; passes.cpp and scaling.cpp run the two parts (engine_bench.h).
 #include <embree3/rtcore.h>
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <algorithm>
 #include <cstdio>

@@ -14,8 +14,8 @@
 // Prints a table, writes JSON and two PNG plots (see docs/BENCHMARKS.md).
 // With --gateways 0,1,2,4 it measures the users spread over irradcast-gateways fed through NATS
 // instead (bench/fanout/gateways.cpp); bench/fanout/fanout_common.cpp holds what both modes share.
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include "irradcast/common/cli.h"
 
 #include <algorithm>
 #include <chrono>

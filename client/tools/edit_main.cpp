@@ -10,7 +10,7 @@
 // --stream [FILE] sends poses of dynamic nodes as they come, one edit per line
 // (docs/DYNAMIC.md#poses). An edit that only moves dynamic nodes makes no revision: it prints
 // "poses N applied".
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <chrono>
 #include <csignal>

@@ -5,7 +5,7 @@
 // process can drive; their JSON reports add up.
 #include <sys/resource.h>
 #include <unistd.h>
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <cstdio>
 #include <fstream>

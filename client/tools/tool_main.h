@@ -4,7 +4,7 @@
 // reporting.
 #pragma once
 
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <functional>
 #include <string>

@@ -2,8 +2,8 @@
 // keeps its tile cache current, and composes its own viewpoint: primary rays, lightmap lookup,
 // tone mapping. Headless: writes the final frame to a PNG or EXR file. Optional client passes
 // (docs/CLIENT_PASSES.md): --ssao, --reproject, and --camera-path to move along a path.
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include "irradcast/common/cli.h"
 
 #include <chrono>
 #include <cstdio>

@@ -2,8 +2,8 @@
 // composes a view from them and, with --reference, renders the same view with the reference path
 // tracer and reports the error between the two.
 #include <tbb/global_control.h>
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+#include "irradcast/common/cli.h"
 
 #include <algorithm>
 #include <chrono>

@@ -3,7 +3,7 @@
 // (engine_params.inc, through for_each_param); the atlas and backend options are the tools' own.
 #pragma once
 
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <cstring>
 #include <map>

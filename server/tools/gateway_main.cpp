@@ -3,7 +3,7 @@
 // (NatsGateway), and the same Server as irradcast-server serves them (protocol, resume, limits,
 // TLS, metrics). Viewers' cameras and edits go to the origin through NATS. Keeps serving what it
 // has while NATS or the origin is away. Stops cleanly on SIGINT / SIGTERM. docs/DISTRIBUTION.md.
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <csignal>
 #include <cstdio>

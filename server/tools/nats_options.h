@@ -3,7 +3,7 @@
 // both programs' command lines.
 #pragma once
 
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <string>
 

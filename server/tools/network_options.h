@@ -3,7 +3,7 @@
 // make, the metrics endpoint with a body function, and main()'s signal and error handling.
 #pragma once
 
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <algorithm>
 #include <chrono>

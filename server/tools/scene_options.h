@@ -5,7 +5,7 @@
 // package see an ordinary light.
 #pragma once
 
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <cctype>
 #include <cmath>

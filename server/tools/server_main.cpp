@@ -1,7 +1,7 @@
 // irradcast-server: runs the GI engine on a scene continuously and streams its irradiance tiles
 // to any number of clients (docs/PROTOCOL.md). Stops cleanly on SIGINT / SIGTERM.
 #include <tbb/global_control.h>
-#include <CLI/CLI.hpp>
+#include "irradcast/common/cli.h"
 
 #include <csignal>
 #include <cstdio>
