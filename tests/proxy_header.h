@@ -22,7 +22,8 @@ inline std::string proxy_v2(const std::string& source, std::uint16_t port,
   } else {
     const auto b = a.to_v6().to_bytes();
     addresses.assign(b.begin(), b.end());
-    addresses += std::string(15, '\0') + '\x01';  // destination ::1
+    addresses.append(15, '\0');  // destination ::1
+    addresses += '\x01';
   }
   addresses += static_cast<char>(port >> 8);
   addresses += static_cast<char>(port & 0xff);
