@@ -216,10 +216,17 @@ void LightCache::learn(std::vector<Record*> records) {
   std::vector<std::pair<double, std::uint32_t>> order;
   for (const auto& [region, sums] : sums_) {
     order.clear();
-    std::uint64_t rays = 0, lit = 0;
+    // The lit share as the mean over the region's lights of the share of each one's rays that
+    // brought light: what a pick that ignores the table would see, however often the table
+    // picked each light (the share of all rays would grow with the table's skill, until the
+    // table switched itself off: table_for()).
+    double lit_rates = 0.0;
+    std::size_t sampled = 0;
     for (const Sum& s : sums) {
-      rays = saturating_add(rays, s.count);
-      lit = saturating_add(lit, s.lit);
+      if (s.count > 0) {
+        lit_rates += std::min(1.0, static_cast<double>(s.lit) / static_cast<double>(s.count));
+        ++sampled;
+      }
       if (s.sum > 0)
         order.push_back({static_cast<double>(s.sum) / static_cast<double>(s.count), s.light});
     }
@@ -240,7 +247,7 @@ void LightCache::learn(std::vector<Record*> records) {
     for (std::size_t k = keep; k < order.size(); ++k) rest += order[k].first;
     t.rest = static_cast<float>(rest);
     t.total = total + t.rest;
-    t.lit_share = rays > 0 ? static_cast<float>(static_cast<double>(lit) / rays) : 1.0f;
+    t.lit_share = sampled > 0 ? static_cast<float>(lit_rates / static_cast<double>(sampled)) : 1.0f;
     if (t.count > 0 && total > 0.0f) tables_.emplace(region, t);
   }
 }

@@ -86,7 +86,8 @@ class LightCache {
     float pmf(std::uint32_t index) const;
     // The share of the table's picks that go to the hierarchy (rest / total).
     float rest_share() const { return rest / total; }
-    // The share of the region's rays (toward any light) that brought light.
+    // The mean over the lights the region's rays went toward of the share of each one's rays
+    // that brought light (independent of how often each was picked).
     float lit_share = 1.0f;
   };
 
