@@ -178,6 +178,33 @@ TEST(LightCache, TablesDoNotDependOnTheOrderOfTheSamples) {
   EXPECT_GT(full, 0) << "some regions saw more lights than a table holds";
 }
 
+// The gate of the front lists' mixture (table_for) follows how much of each light the region
+// sees, not how well its table already picks: a region whose rays mostly went, by its table, to
+// the one light it sees keeps the table (the share of all its rays that brought light, 100 of
+// 115, would have turned it off), and a region that sees every light unoccluded (a furnace)
+// loses it.
+TEST(LightCache, TheFrontListsGateDoesNotFollowTheTablesOwnPicks) {
+  const Bounds b = box(glm::vec3(0.0f), glm::vec3(10.0f));
+  LightCache cache(b, 4, 1.0f);
+  const std::uint64_t room = cache.region(glm::vec3(1.0f), glm::vec3(0, 1, 0));
+  const std::uint64_t furnace = cache.region(glm::vec3(9.0f), glm::vec3(0, 1, 0));
+  ASSERT_NE(room, furnace);
+  LightCache::Record r(cache.unit());
+  for (int k = 0; k < 100; ++k) r.add(room, 0, 1.0f);  // the light it sees, picked by the table
+  for (std::uint32_t light = 1; light < 4; ++light)
+    for (int k = 0; k < 5; ++k) r.add(room, light, 0.0f);  // the others, behind walls
+  for (std::uint32_t light = 0; light < 4; ++light)
+    for (int k = 0; k < 20; ++k) r.add(furnace, light, 1.0f);
+  cache.learn({&r});
+  ASSERT_NE(cache.find(room), nullptr);
+  ASSERT_NE(cache.find(furnace), nullptr);
+  EXPECT_NEAR(cache.find(room)->lit_share, 0.25f, 1e-6f);
+  EXPECT_EQ(cache.table_for(room, true), cache.find(room));
+  EXPECT_FLOAT_EQ(cache.find(furnace)->lit_share, 1.0f);
+  EXPECT_EQ(cache.table_for(furnace, true), nullptr);
+  EXPECT_EQ(cache.table_for(furnace, false), cache.find(furnace));  // the hierarchy's mixture
+}
+
 // At points all over the lights' box, with a table of a few of the lights (some the hierarchy
 // never picks there), or of more than a table keeps: each light is picked as often as the
 // probability the pick returns for it, which is the mixture's. The probabilities sum to at most
