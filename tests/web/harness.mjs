@@ -49,9 +49,10 @@ const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 const running = new Set();
 process.on('exit', () => { for (const p of running) p.kill('SIGKILL'); });
 
-// irradcast-server on loopback with a TCP port and an HTTP port; resolves once GET / answers.
-export async function startServer(exe, args, name = 'server') {
-  const port = await freePort(), http = await freePort();
+// irradcast-server on loopback with a TCP port and an HTTP port (free ones unless `ports` names
+// them: { port, http }, a server started again where another was); resolves once GET / answers.
+export async function startServer(exe, args, name = 'server', ports = {}) {
+  const port = ports.port ?? await freePort(), http = ports.http ?? await freePort();
   const log = path.join(tmp, `${name}.log`);
   const out = createWriteStream(log);
   const proc = spawn(exe, ['--bind', '127.0.0.1', '--port', String(port), '--http-port', String(http), ...args],
@@ -116,6 +117,18 @@ export async function browser(o) {
     args: ['--headless=new', ...chromiumArgs], protocolTimeout: 600000 });
 }
 
+// What a page that did not converge was waiting for (main.js frame()'s conditions), for the
+// failure's message.
+function pageState() {
+  const irr = window.irradcast;
+  if (!irr) return `no viewer: ${document.body.innerText}`;
+  const { conn, state } = irr;
+  return JSON.stringify({ text: document.body.innerText, hidden: document.hidden, phase: conn.phase,
+    socket: conn.ws && conn.ws.readyState, status: state.status, held: conn.tilesHeld(), counters: conn.counters,
+    dirty: state.dirty, view: !!state.view, statsAsked: state.statsAsked, stats: state.stats },
+    (_, v) => (typeof v === 'bigint' ? String(v) : v));
+}
+
 // Opens the page and waits for "irradcast: converged"; page errors fail the test.
 export async function openConverged(b, url, width, height, timeout = 60000) {
   const page = await b.newPage();
@@ -126,7 +139,7 @@ export async function openConverged(b, url, width, height, timeout = 60000) {
   try {
     await page.waitForFunction(() => document.title === 'irradcast: converged', { timeout, polling: 100 });
   } catch (e) {
-    const state = await page.evaluate(() => document.body.innerText).catch(() => '?');
+    const state = await page.evaluate(pageState).catch(() => '?');
     throw new Error(`${url} did not converge: ${e.message}; page: ${state}; errors: ${problems.join('; ')}`);
   }
   if (problems.length) throw new Error(`${url}: page errors: ${problems.join('; ')}`);

@@ -11,6 +11,7 @@
 //   edits   another client's edit (irradcast-edit) shows up in the page, the page's own edit
 //           needs the control token typed into the overlay; mouse and keyboard move the camera
 //   tabs    16 tabs at once all converge
+//   restart the server restarts under an open page, which reconnects and converges again
 import assert from 'node:assert/strict';
 import net from 'node:net';
 import { writeFileSync } from 'node:fs';
@@ -226,6 +227,37 @@ async function tabs(o) {
   }
 }
 
+// The server restarts under an open page (a deployment, a crash): the page reconnects by itself,
+// asks for stats again and converges on the new server. The server is down for 2 s, so the
+// page's twice-a-second stats timer fires while it has no connection, and the reply to a request
+// in flight when the connection went never comes: neither may leave the page waiting for it.
+async function restart(o) {
+  const first = await startServer(o.server, SERVER, 'server-1');
+  const b = await browser(o);
+  let second = null;
+  try {
+    const page = await openConverged(b, first.url + query({ width: 64, height: 48, ui: 0, converge: 0 }), 64, 48);
+    await first.stop();
+    await new Promise((r) => setTimeout(r, 2000));
+    second = await startServer(o.server, SERVER, 'server-2', { port: first.port, http: first.http });
+    await page.waitForFunction(() => window.irradcast.conn.counters.connections === 2 &&
+      window.irradcast.conn.phase === 'streaming', { timeout: 60000, polling: 100 });
+    const asked = await page.evaluate(() => window.irradcast.conn.counters.stats);
+    // Twice a second: 3 replies take 1.5 s; 60 s is for the sanitizer build beside a compile.
+    await page.waitForFunction((n) => window.irradcast.conn.counters.stats >= n + 3, { timeout: 60000, polling: 100 }, asked)
+      .catch(async (e) => { throw new Error(`no stats after the reconnection: ${e.message}; page: ${await page.evaluate(() =>
+        JSON.stringify({ counters: window.irradcast.conn.counters, statsAsked: window.irradcast.state.statsAsked }))}`); });
+    await page.waitForFunction(() => document.title === 'irradcast: converged', { timeout: 60000, polling: 100 });
+    const held = await page.evaluate(() => window.irradcast.conn.tilesHeld());
+    assert.ok(held.total > 0 && held.held === held.total, 'the page lost tiles in the restart');
+    console.log(`restart: reconnected, ${await page.evaluate(() => window.irradcast.conn.counters.stats) - asked} stats ` +
+      `since, ${held.total} tiles held`);
+  } finally {
+    await b.close();
+    if (second) await second.stop();
+  }
+}
+
 // The mean level of the Cornell box's short block in the default view (its lower right).
 function region(img) {
   let sum = 0, n = 0;
@@ -416,7 +448,7 @@ async function presence(o) {
   }
 }
 
-const CASES = { image, errors, edits, tabs, dynamic, sun, lamps, presence };
+const CASES = { image, errors, edits, tabs, restart, dynamic, sun, lamps, presence };
 const o = options(process.argv);
 try {
   if (!o.cases.length || o.cases.some((c) => !CASES[c])) throw new Error(`cases: ${Object.keys(CASES).join(', ')}`);

@@ -25,7 +25,8 @@ export class Connection {
     this.volume = null;        // the probe volume held (volume.js)
     this.versions = null;      // per lightmap, per tile: version held (0 = none)
     this.epoch = 0;
-    this.counters = { bytes: 0, tiles: 0, frames: 0, edits: 0, volumes: 0, poses: 0, avatars: 0, connections: 0, byEncoding: [0, 0, 0] };
+    this.counters = { bytes: 0, tiles: 0, frames: 0, edits: 0, volumes: 0, poses: 0, avatars: 0, stats: 0, connections: 0,
+      byEncoding: [0, 0, 0] };
     this.backoff = 250;
     this.connect();
   }
@@ -57,6 +58,7 @@ export class Connection {
     };
     this.ws.onclose = (e) => {
       clearInterval(this.timer);
+      this.phase = 'closed';  // until the next connection's Welcome: nothing is sent
       this.h.status(`disconnected (${e.code}${e.reason ? ' ' + e.reason : ''}); reconnecting`);
       setTimeout(() => this.connect(), this.backoff);
       this.backoff = Math.min(this.backoff * 2, 5000);
@@ -68,8 +70,11 @@ export class Connection {
     try { this.ws.close(1002, 'protocol error'); } catch (_) { /* closed already */ }
   }
 
+  // Whether the message went out: not while the connection is down.
   send(obj) {
-    if (this.ws.readyState === WebSocket.OPEN) this.ws.send(encode(obj));
+    if (this.ws.readyState !== WebSocket.OPEN) return false;
+    this.ws.send(encode(obj));
+    return true;
   }
 
   hello() {
@@ -98,7 +103,9 @@ export class Connection {
         if (this.phase !== 'streaming') throw new Error('Avatars before the subscription');
         ++this.counters.avatars;
         return this.h.avatars(env.avatars);
-      case 'stats': return this.h.stats(env.stats);
+      case 'stats':
+        ++this.counters.stats;
+        return this.h.stats(env.stats);
       case 'error': {
         const name = ERROR_NAMES[env.error.code] || env.error.code;
         return this.h.error(`server: ${name}: ${env.error.message}`);

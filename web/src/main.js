@@ -93,7 +93,12 @@ function handlers(ctx) {
         .filter((_, i) => model.nodes[i].mesh >= 0 || model.nodes[i].light >= 0));
       state.dirty = true;
     },
-    subscribed() { if (state.camera) state.camera.changed = true; },  // the server learns the camera again
+    // A new connection: the server learns the camera again, and a stats request of the last one
+    // has no reply coming.
+    subscribed() {
+      if (state.camera) state.camera.changed = true;
+      state.statsAsked = 0;
+    },
     tile(lightmap, x0, y0, w, h, words) {
       state.view.applyTile(lightmap, x0, y0, w, h, words);
       unconverge(state);
@@ -131,7 +136,7 @@ function handlers(ctx) {
         ctx.conn.fail(e.message);
       }
     },
-    stats(s) { state.stats = s; state.pendingStats = false; },
+    stats(s) { state.stats = s; state.statsAsked = 0; },
     status(text) { state.status = text; },
     error(text) { overlay.error(text); console.warn(`irradcast: ${text}`); },
   };
@@ -166,8 +171,7 @@ function frame(ctx, now) {
   }
   const cam = state.camera;
   if (cam && cam.changed && now - ctx.cameraSent > 100 && conn.phase === 'streaming') {
-    conn.send(cam.message());
-    cam.changed = false;
+    if (conn.send(cam.message())) cam.changed = false;
     ctx.cameraSent = now;
     state.dirty = true;
   }
@@ -216,7 +220,7 @@ function main() {
   renderer.outputColorSpace = THREE.LinearSRGBColorSpace;  // the shaders encode sRGB themselves
   document.body.appendChild(renderer.domElement);
   const state = ctx.state = { status: 'connecting', converged: false, stats: null, dirty: true, view: null, camera: null,
-    pendingStats: false };
+    statsAsked: 0 };  // statsAsked: when the pending stats request went out (0: none)
   ctx.overlay = new Overlay(params, (change) => {
     if ('exposure' in change) {
       ctx.exposure = change.exposure;
@@ -235,12 +239,13 @@ function main() {
     handlers(ctx));
   window.irradcast = { conn, state, formatCamera: () => state.camera && formatCamera(state.camera.pose, state.camera.distance) };
   holdVirtualTime(state);
-  // Stats twice a second, for the overlay and convergence.
+  // Stats twice a second, for the overlay and convergence: one request at a time, asked again
+  // when its reply is 5 s late (the connection it went out on may be gone, and the reply with it).
   setInterval(() => {
-    if (conn.phase === 'streaming' && !state.pendingStats) {
-      state.pendingStats = true;
-      conn.send({ stats_request: {} });
-    }
+    const now = performance.now();
+    if (conn.phase === 'streaming' && (!state.statsAsked || now - state.statsAsked > 5000) &&
+        conn.send({ stats_request: {} }))
+      state.statsAsked = now;
   }, 500);
   ctx.keys = attachControls(renderer.domElement, () => state.camera);
   // Frames by requestAnimationFrame; a hidden tab gets none, so it draws by a timer instead (4 a
