@@ -220,7 +220,9 @@ async function tabs(o) {
       openConverged(b, server.url + query({ width: 64, height: 48, ui: 0, converge: 0 }), 64, 48, 180000)));
     const held = await Promise.all(pages.map((p) => p.evaluate(() => window.irradcast.conn.tilesHeld())));
     for (const h of held) assert.ok(h.total > 0 && h.held === h.total, 'a tab without every tile');
-    console.log(`tabs: ${pages.length} converged, ${held[0].total} tiles each, after ${((Date.now() - t0) / 1000).toFixed(1)} s`);
+    const connections = await Promise.all(pages.map((p) => p.evaluate(() => window.irradcast.conn.counters.connections)));
+    console.log(`tabs: ${pages.length} converged, ${held[0].total} tiles each, after ${((Date.now() - t0) / 1000).toFixed(1)} s; ` +
+      `${connections.filter((n) => n > 1).length} reconnected`);
   } finally {
     await b.close();
     await server.stop();
