@@ -17,7 +17,7 @@
 #include "irradcast/common/world.h"
 #include "irradcast/engine/gbuffer.h"
 
-using namespace irradcast;
+namespace irradcast::test_atlas {
 
 namespace {
 
@@ -886,3 +886,5 @@ TEST(Dilate, RingsBoundThePasses) {
   EXPECT_FLOAT_EQ(lm[4 * w + 3].x, 2.0f);
   EXPECT_FLOAT_EQ(lm[4 * w + 7].x, 4.0f);
 }
+
+}  // namespace irradcast::test_atlas

@@ -13,7 +13,7 @@
 #include "irradcast/wire/blocking_channel.h"
 #include "irradcast/wire/frame.h"
 
-namespace irradcast {
+namespace irradcast::test_blocking_channel {
 namespace {
 
 using namespace std::chrono_literals;
@@ -106,4 +106,4 @@ TEST(BlockingChannel, ARefusedConnectIsChannelLost) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_blocking_channel

@@ -20,7 +20,7 @@
 #include "irradcast/common/scene.h"
 #include "irradcast/common/world.h"
 
-using namespace irradcast;
+namespace irradcast::test_builtin_rooms {
 
 namespace {
 
@@ -581,3 +581,5 @@ TEST(Rooms, EveryRoomLitAndTrimGiveManyLights) {
     EXPECT_THROW(load_scene(bad), Error);
   }
 }
+
+}  // namespace irradcast::test_builtin_rooms

@@ -9,7 +9,7 @@
 #include "irradcast/common/world.h"
 #include "testdata.h"
 
-namespace irradcast {
+namespace irradcast::test_builtin_sponza {
 namespace {
 
 TEST(SponzaScene, LoadsTheSampleDataWithSkySunAndCamera) {
@@ -51,4 +51,4 @@ TEST(SponzaScene, MissingSampleDataIsAClearError) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_builtin_sponza

@@ -11,7 +11,7 @@
 #include "peer_table.h"
 #include "proxy_header.h"
 
-using namespace irradcast;
+namespace irradcast::test_client_address {
 
 namespace {
 
@@ -217,3 +217,5 @@ TEST(PeerTable, AProxysSessionsMoveToTheirClients) {
     EXPECT_EQ(table.move("10.0.0.1", "10.0.0.9", true), PeerTable::Admission::Ok);
   EXPECT_EQ(table.move("10.0.0.1", "10.0.0.9"), PeerTable::Admission::Banned);
 }
+
+}  // namespace irradcast::test_client_address

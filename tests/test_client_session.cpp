@@ -21,7 +21,8 @@
 #include "irradcast/wire/scene_package.h"
 #include "irradcast/wire/tile_codec.h"
 
-using namespace irradcast;
+namespace irradcast::test_client_session {
+
 using Event = ClientStep::Event;
 using Phase = ClientSession::Phase;
 
@@ -497,3 +498,5 @@ TEST(ClientSession, RejectsBadChunksScenesAndTiles) {
     EXPECT_EQ(s.counters().tiles_applied, 0u);
   }
 }
+
+}  // namespace irradcast::test_client_session

@@ -6,7 +6,7 @@
 #include "irradcast/common/error.h"
 #include "scene_builders.h"
 
-using namespace irradcast;
+namespace irradcast::test_compositor {
 
 namespace {
 
@@ -164,3 +164,5 @@ TEST(Compositor, ClientPassesShowTheSameSkyUnoccluded) {
   }
   EXPECT_NE(plain.at(0, 0), glm::vec3(0.0f));
 }
+
+}  // namespace irradcast::test_compositor

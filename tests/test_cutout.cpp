@@ -15,7 +15,8 @@
 #include "irradcast/engine/reference_lightmaps.h"
 #include "scene_builders.h"
 
-using namespace irradcast;
+namespace irradcast::test_cutout {
+
 using test::EngineSetup;
 
 namespace {
@@ -335,3 +336,5 @@ TEST(Cutout, CutOutPartsDoNotEmit) {
   EXPECT_LT(hole, 0.9 * full);
   EXPECT_GT(strip, 0.1 * full);
 }
+
+}  // namespace irradcast::test_cutout

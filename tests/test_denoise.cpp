@@ -19,7 +19,7 @@
 #include "irradcast/service/engine_host.h"
 #include "service_fixture.h"
 
-namespace irradcast {
+namespace irradcast::test_denoise {
 namespace {
 
 // An n x n grid of texels (texel size 1) on a plane through `origin` spanned by `u` and `v`,
@@ -265,4 +265,4 @@ TEST(Denoise, AHostWithItPublishesDenoisedTilesAndVersionsSettle) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_denoise

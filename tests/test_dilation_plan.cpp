@@ -14,7 +14,7 @@
 #include "irradcast/common/progress.h"
 #include "irradcast/engine/prepared_scene.h"
 
-using namespace irradcast;
+namespace irradcast::test_dilation_plan {
 
 namespace {
 
@@ -130,3 +130,5 @@ TEST(DilationPlan, RefusesValuesOfAnotherSize) {
   std::vector<glm::vec3> v(11);
   EXPECT_THROW(plan.apply(v), Error);
 }
+
+}  // namespace irradcast::test_dilation_plan

@@ -20,7 +20,7 @@
 #include "scene_builders.h"
 #include "testdata.h"
 
-using namespace irradcast;
+namespace irradcast::test_dynamic_view {
 
 namespace {
 
@@ -411,3 +411,5 @@ TEST(DynamicView, SponzaSpheresAgainstThePathTracer) {
     EXPECT_NEAR(a.mean_ratio, 1.0, c.mean_bound) << c.what;
   }
 }
+
+}  // namespace irradcast::test_dynamic_view

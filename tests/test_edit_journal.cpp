@@ -19,7 +19,7 @@
 #include "process.h"
 #include "service_fixture.h"
 
-namespace irradcast {
+namespace irradcast::test_edit_journal {
 namespace {
 
 namespace fs = std::filesystem;
@@ -300,13 +300,13 @@ TEST(EditJournal, AHostOnAnotherSceneIsRefused) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_edit_journal
 
 // The acceptance case as a user meets it: irradcast-server --state-dir, four edits through
 // irradcast-edit (a move, an albedo, an emission, a hide), then kill -9 and a restart, then
 // SIGINT and a restart: every time the server comes back at revision 4 with the same scene
 // package (a viewer's cached package stays valid), and takes edit 5 after it.
-namespace irradcast {
+namespace irradcast::test_edit_journal {
 namespace {
 
 using namespace std::chrono_literals;
@@ -371,4 +371,4 @@ TEST(EditJournal, EditsSurviveKill9AndSigintOfIrradcastServer) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_edit_journal

@@ -17,7 +17,7 @@
 #include "irradcast/common/builtin.h"
 #include "irradcast/common/scene_edit.h"
 
-using namespace irradcast;
+namespace irradcast::test_embree_backend {
 
 namespace {
 
@@ -167,3 +167,5 @@ TEST(ShadowRays, NamesAndTheDefault) {
 }
 
 }  // namespace
+
+}  // namespace irradcast::test_embree_backend

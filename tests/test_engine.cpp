@@ -20,7 +20,7 @@
 #include "irradcast/engine/texel_validity.h"
 #include "scene_builders.h"
 
-using namespace irradcast;
+namespace irradcast::test_engine {
 
 using test::EngineSetup;
 using test::mean_valid;
@@ -254,3 +254,5 @@ TEST(Engine, RejectsBadParameters) {
   EXPECT_EQ(parse_tracing_range("3m"), Length::in_metres(3.0f));
   EXPECT_THROW(parse_dispatch("triangle"), Error);
 }
+
+}  // namespace irradcast::test_engine

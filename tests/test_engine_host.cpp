@@ -14,7 +14,7 @@
 #include "irradcast/common/scene_edit.h"
 #include "irradcast/service/engine_host.h"
 
-using namespace irradcast;
+namespace irradcast::test_engine_host {
 
 namespace {
 
@@ -307,3 +307,5 @@ TEST(EngineEdit, MaxUpdatesCountsFullUpdatesAfterTheCatchUp) {
 }
 
 }  // namespace
+
+}  // namespace irradcast::test_engine_host

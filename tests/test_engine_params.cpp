@@ -23,7 +23,7 @@
 #include "irradcast/service/engine_host.h"
 #include "params_json.h"
 
-using namespace irradcast;
+namespace irradcast::test_engine_params {
 
 namespace {
 
@@ -344,3 +344,5 @@ TEST(EngineParams, DefaultsAreFractionsCappedInMetres) {
     EXPECT_THROW(ProbeGrid::cells_of(Bounds{glm::vec3(0.0f), size}, metres), Error);
   }
 }
+
+}  // namespace irradcast::test_engine_params

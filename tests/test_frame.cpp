@@ -14,6 +14,8 @@
 #include "irradcast/common/error.h"
 #include "irradcast/wire/frame.h"
 
+namespace irradcast::test_frame {
+
 using namespace irradcast::wire;
 using google::protobuf::util::MessageDifferencer;
 
@@ -175,10 +177,10 @@ std::vector<Envelope> all_messages() {
   }
   {
     Envelope e;
-    SceneEdit* m = e.mutable_scene_edit();
+    wire::SceneEdit* m = e.mutable_scene_edit();
     m->set_token("secret");
-    EditOp* op = m->add_ops();
-    op->set_kind(EditOp::SET_TRANSFORM);
+    wire::EditOp* op = m->add_ops();
+    op->set_kind(wire::EditOp::SET_TRANSFORM);
     op->set_target("tall_block");
     op->mutable_vector()->set_x(0.05f);
     op->set_value(30.0f);
@@ -547,3 +549,5 @@ TEST(Frame, ConsumedBytesAreReleased) {
     EXPECT_EQ(d.buffered(), 0u);
   }
 }
+
+}  // namespace irradcast::test_frame

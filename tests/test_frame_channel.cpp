@@ -12,7 +12,7 @@
 #include "irradcast/wire/frame_channel.h"
 #include "irradcast/wire/websocket.h"
 
-namespace irradcast {
+namespace irradcast::test_frame_channel {
 namespace {
 
 using wire::FrameChannel;
@@ -205,4 +205,4 @@ TEST(FrameChannel, ThePeersCloseFinishesTheChannel) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_frame_channel

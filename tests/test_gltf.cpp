@@ -25,7 +25,8 @@
 #include "irradcast/common/scene.h"
 #include "testdata.h"
 
-using namespace irradcast;
+namespace irradcast::test_gltf {
+
 using nlohmann::json;
 namespace fs = std::filesystem;
 
@@ -1182,3 +1183,5 @@ TEST_F(GltfTest, MaskMaterialsRoundTrip) {
   EXPECT_EQ(j["materials"][0]["alphaMode"], "MASK");
   EXPECT_FALSE(j["materials"][1].contains("alphaMode"));
 }
+
+}  // namespace irradcast::test_gltf

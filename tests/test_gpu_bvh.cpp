@@ -12,7 +12,7 @@
 #include "scene_builders.h"
 #include "testdata.h"
 
-using namespace irradcast;
+namespace irradcast::test_gpu_bvh {
 
 namespace {
 
@@ -97,3 +97,5 @@ TEST(GpuBvh, OneTriangleAndNoTriangles) {
   ASSERT_EQ(empty.nodes.size(), 1u);
   EXPECT_FALSE(empty.intersect(r).valid());
 }
+
+}  // namespace irradcast::test_gpu_bvh

@@ -19,7 +19,7 @@
 #include "scene_builders.h"
 #include "testdata.h"
 
-namespace irradcast {
+namespace irradcast::test_hit_shader {
 namespace {
 
 // A value in [0, 4) from an integer hash (lightmap texels that differ texel to texel).
@@ -185,4 +185,4 @@ TEST(HitShader, ComposeMatchesShadeAtEverySizeOfTile) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_hit_shader

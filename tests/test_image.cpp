@@ -7,7 +7,8 @@
 #include "irradcast/common/image.h"
 #include "irradcast/common/tonemap.h"
 
-using namespace irradcast;
+namespace irradcast::test_image {
+
 namespace fs = std::filesystem;
 
 TEST(Image, ExrRoundTripIsLossless) {
@@ -46,7 +47,7 @@ TEST(Image, CompareComputesRmseRelativeMseAndMeanRatio) {
   ImageError e = compare(b, a);
   EXPECT_NEAR(e.rmse, std::sqrt(2.0), 1e-9);  // half the values differ by 2
   EXPECT_NEAR(e.rel_mse, 0.5 * 4.0 / 1.01, 1e-9);
-  EXPECT_NEAR(e.mean_ratio, 2.0, 1e-9);  // (1 + 3) / (1 + 1)
+  EXPECT_NEAR(e.mean_ratio, 2.0, 1e-9);                   // (1 + 3) / (1 + 1)
   EXPECT_EQ(compare(a, ImageRGB(2, 1)).mean_ratio, 0.0);  // a black reference
   EXPECT_THROW(compare(a, ImageRGB(1, 1)), Error);
 }
@@ -90,3 +91,5 @@ TEST(Camera, SpecOverridesAndRejectsBadInput) {
   Ray r = camera_ray(p, 101, 101, 50.5f, 50.5f);
   EXPECT_NEAR(r.direction.z, -1.0f, 1e-6f);
 }
+
+}  // namespace irradcast::test_image

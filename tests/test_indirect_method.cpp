@@ -17,7 +17,8 @@
 #include "scene_builders.h"
 #include "vpl_method.h"
 
-using namespace irradcast;
+namespace irradcast::test_indirect_method {
+
 using test::EngineSetup;
 using test::mean_valid;
 
@@ -182,3 +183,5 @@ TEST(Methods, VplEditShootsEveryInvalidPathAgain) {
   for (std::size_t i = 0; i < pool.size(); ++i)
     ASSERT_EQ(pool[i].position, vpl->vpls()[i].position) << "VPL " << i;
 }
+
+}  // namespace irradcast::test_indirect_method

@@ -17,7 +17,7 @@
 #include "irradcast/wire/probe_volume_message.h"
 #include "scene_builders.h"
 
-using namespace irradcast;
+namespace irradcast::test_irradiance_volume {
 
 namespace {
 
@@ -331,3 +331,5 @@ TEST(ProbeVolumeMessage, MomentsKeepTheirPrecisionAtAnyScale) {
     EXPECT_NEAR(got.volume.depth[t].y, v.depth[t].y, 2e-3f * v.depth[t].y) << t;
   }
 }
+
+}  // namespace irradcast::test_irradiance_volume

@@ -19,7 +19,7 @@
 #include "irradcast/common/sampling.h"
 #include "scene_builders.h"
 
-using namespace irradcast;
+namespace irradcast::test_light_cache {
 
 namespace {
 
@@ -426,3 +426,5 @@ TEST(LightCache, LearningKeepsTheDirectPassUnbiasedAndLowersItsError) {
       << "the learned tables should bring most texels closer to the truth";
   EXPECT_GT(err_t / err_l, 0.8) << "the learned tables should not raise the error";
 }
+
+}  // namespace irradcast::test_light_cache

@@ -16,7 +16,7 @@
 #include "irradcast/engine/prepared_scene.h"
 #include "scene_builders.h"
 
-using namespace irradcast;
+namespace irradcast::test_light_tree {
 
 namespace {
 
@@ -226,3 +226,5 @@ TEST(LightTree, ManyLightEstimateHasTheMeanOfEveryLightSummed) {
 }
 
 }  // namespace
+
+}  // namespace irradcast::test_light_tree

@@ -12,7 +12,7 @@
 #include "irradcast/common/progress.h"
 #include "irradcast/engine/prepared_scene.h"
 
-using namespace irradcast;
+namespace irradcast::test_lights {
 
 namespace {
 
@@ -149,3 +149,5 @@ INSTANTIATE_TEST_SUITE_P(Light, DirectSampling, ::testing::Values("cornell", "ro
                          });
 
 }  // namespace
+
+}  // namespace irradcast::test_lights

@@ -28,7 +28,8 @@
 #include "irradcast/wire/frame.h"
 #include "service_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_metrics {
+
 using asio::ip::tcp;
 using namespace std::chrono_literals;
 
@@ -1236,3 +1237,5 @@ TEST(Metrics, TheNatsFamiliesHaveEveryDeclaredStatisticOnce) {
        {"irradcast_gateway_messages_total", "irradcast_gateway_edit_requests_total"})
     EXPECT_NE(gateway.find(m), std::string::npos) << m;
 }
+
+}  // namespace irradcast::test_metrics

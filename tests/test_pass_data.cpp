@@ -6,7 +6,7 @@
 
 #include "irradcast/engine/pass_data.h"
 
-namespace irradcast {
+namespace irradcast::test_pass_data {
 namespace {
 
 ProbeGrid grid_4x4x4() {
@@ -81,4 +81,4 @@ TEST(ProbeWeights, AreAPureFunctionOfPositionGridAndMask) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_pass_data

@@ -11,7 +11,7 @@
 #include "irradcast/engine/path_tracer.h"
 #include "scene_builders.h"
 
-using namespace irradcast;
+namespace irradcast::test_path_tracer {
 
 namespace {
 
@@ -184,3 +184,5 @@ TEST(PathTracer, NextEventEstimationAgreesWithPurePathTracingUnderASky) {
   cam.up = glm::normalize(glm::cross(glm::cross(cam.forward, glm::vec3(0, 1, 0)), cam.forward));
   expect_next_event_agrees_with_pure_paths(f, cam);
 }
+
+}  // namespace irradcast::test_path_tracer

@@ -13,7 +13,7 @@
 #include "irradcast/common/progress.h"
 #include "irradcast/engine/prepared_scene.h"
 
-using namespace irradcast;
+namespace irradcast::test_prepared_scene {
 
 namespace {
 
@@ -200,3 +200,5 @@ TEST(PreparedScene, AnEmptySceneIsRefusedByName) {
         << e.what();
   }
 }
+
+}  // namespace irradcast::test_prepared_scene

@@ -25,7 +25,8 @@
 #include "session_driver.h"
 #include "session_protocol.h"
 
-using namespace irradcast;
+namespace irradcast::test_presence_board {
+
 using namespace std::chrono_literals;
 
 namespace {
@@ -427,3 +428,5 @@ TEST(Presence, LoadUsersSeeEachOtherAtMostPresenceHzTimesASecond) {
   server.stop();
   host.stop();
 }
+
+}  // namespace irradcast::test_presence_board

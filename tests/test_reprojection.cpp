@@ -12,7 +12,8 @@
 #include "irradcast/common/compositor.h"
 #include "irradcast/common/error.h"
 
-using namespace irradcast;
+namespace irradcast::test_reprojection {
+
 using test::BlockOnFloor;
 using test::validate_error;
 
@@ -222,3 +223,5 @@ TEST(Reprojection, ViewerRejectsBadFlags) {
         << r.output;
   }
 }
+
+}  // namespace irradcast::test_reprojection

@@ -9,7 +9,7 @@
 
 #include "irradcast/common/sampling.h"
 
-namespace irradcast {
+namespace irradcast::test_sampling {
 namespace {
 
 TEST(Sampling, CosSin2PiMatchesTheLibraryOnTheWholeTurn) {
@@ -49,4 +49,4 @@ TEST(Sampling, FastCosineHemisphereIsTheSameMapAsCosineHemisphere) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_sampling

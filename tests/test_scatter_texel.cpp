@@ -13,7 +13,8 @@
 #include "engine_setup.h"
 #include "irradcast/common/builtin.h"
 
-using namespace irradcast;
+namespace irradcast::test_scatter_texel {
+
 using namespace irradcast::embree_sampling;
 
 namespace {
@@ -136,3 +137,5 @@ INSTANTIATE_TEST_SUITE_P(Scenes, ScatterBatch, ::testing::Values("cornell", "roo
                          });
 
 }  // namespace
+
+}  // namespace irradcast::test_scatter_texel

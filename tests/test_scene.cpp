@@ -5,7 +5,7 @@
 #include "irradcast/common/scene.h"
 #include "irradcast/common/world.h"
 
-using namespace irradcast;
+namespace irradcast::test_scene {
 
 TEST(Scene, WorldMatricesComposeDownTheHierarchy) {
   Scene s;
@@ -22,3 +22,5 @@ TEST(Scene, WorldMatricesComposeDownTheHierarchy) {
   EXPECT_FLOAT_EQ(p.y, 2.0f);
   EXPECT_EQ(s.roots.size(), 1u);
 }
+
+}  // namespace irradcast::test_scene

@@ -15,7 +15,7 @@
 #include "irradcast/wire/edit_message.h"
 #include "irradcast/wire/scene_package.h"
 
-using namespace irradcast;
+namespace irradcast::test_scene_edit {
 
 namespace {
 
@@ -436,3 +436,5 @@ TEST(SceneEdit, BadSkyOpsAreRefusedWithTheReason) {
   e.ops[0].sky_map = std::make_shared<const ImageRGB>(bad);
   EXPECT_NE(validation_error(s, e).find("not finite"), std::string::npos) << validation_error(s, e);
 }
+
+}  // namespace irradcast::test_scene_edit

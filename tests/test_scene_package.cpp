@@ -18,7 +18,7 @@
 #include "irradcast/wire/sky_message.h"
 #include "irradcast/wire/tile_codec.h"
 
-using namespace irradcast;
+namespace irradcast::test_scene_package {
 
 namespace {
 
@@ -503,3 +503,5 @@ TEST(ScenePackage, BadSkiesAreRefusedWithAClearError) {
   });
   check("alpha", [](wire::SceneData& d) { d.mutable_materials(0)->set_base_alpha(2.0f); });
 }
+
+}  // namespace irradcast::test_scene_package

@@ -16,7 +16,8 @@
 #include "irradcast/wire/frame.h"
 #include "session_protocol.h"
 
-using namespace irradcast;
+namespace irradcast::test_session_protocol {
+
 using namespace std::chrono_literals;
 
 namespace {
@@ -369,3 +370,5 @@ TEST_F(SessionProtocolTest, ByeClosesWithoutAnError) {
 }
 
 }  // namespace
+
+}  // namespace irradcast::test_session_protocol

@@ -10,7 +10,7 @@
 #include "irradcast/common/sky.h"
 #include "scene_builders.h"
 
-namespace irradcast {
+namespace irradcast::test_sky {
 namespace {
 
 // A map with a bright blob, a dimmer band at the horizon and a black lower half.
@@ -166,4 +166,4 @@ TEST(Sky, MapSkyIrradianceMatchesNumericalIntegration) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_sky

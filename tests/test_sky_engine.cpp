@@ -18,7 +18,8 @@
 #include "scene_builders.h"
 #include "scene_options.h"
 
-using namespace irradcast;
+namespace irradcast::test_sky_engine {
+
 using test::EngineSetup;
 
 namespace {
@@ -436,3 +437,5 @@ TEST(SkyEngine, SceneOptionsParseAndRefuseBadValues) {
   std::filesystem::remove(big);
   std::filesystem::remove(tiny);
 }
+
+}  // namespace irradcast::test_sky_engine

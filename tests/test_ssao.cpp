@@ -9,7 +9,8 @@
 #include "irradcast/common/compositor.h"
 #include "irradcast/common/error.h"
 
-using namespace irradcast;
+namespace irradcast::test_ssao {
+
 using test::BlockOnFloor;
 using test::validate_error;
 
@@ -217,3 +218,5 @@ TEST(Ssao, RejectsBadParameters) {
   o.ssao_params.radius = -0.1f;
   EXPECT_THROW(ClientPasses{o}, Error);
 }
+
+}  // namespace irradcast::test_ssao

@@ -9,7 +9,7 @@
 #include "irradcast/engine/texel_validity.h"
 #include "scene_builders.h"
 
-using namespace irradcast;
+namespace irradcast::test_texel_validity {
 
 namespace {
 
@@ -90,3 +90,5 @@ TEST(TexelValidity, RejectsBadOptions) {
   std::vector<TexelGBuffer> wrong(1);
   EXPECT_THROW(mark_hidden_texels(*s.rays, wrong), Error);
 }
+
+}  // namespace irradcast::test_texel_validity

@@ -18,7 +18,8 @@
 #include "irradcast/service/engine_host.h"
 #include "irradcast/service/thread_priority.h"
 
-using namespace irradcast;
+namespace irradcast::test_thread_priority {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -128,3 +129,5 @@ TEST(ThreadPriority, ArenasAreReusedOneAfterAnotherAndApartWhenConcurrent) {
   EXPECT_EQ(total.load(), 2 * 49995000L);
   EXPECT_EQ(NiceArena::arenas_made(), before + 2) << "two at once: a second arena";
 }
+
+}  // namespace irradcast::test_thread_priority

@@ -21,7 +21,8 @@
 #include "irradcast/wire/frame.h"
 #include "irradcast/wire/tile_codec.h"
 
-using namespace irradcast;
+namespace irradcast::test_tile_codec {
+
 using wire::TileRect;
 
 namespace {
@@ -460,3 +461,5 @@ TEST(TileCodec, BytesPerTexelOfASmoothLightmap) {
     EXPECT_LT(bpt, enc == wire::TILE_HALF_ZSTD ? 2.0 : 1.5);
   }
 }
+
+}  // namespace irradcast::test_tile_codec

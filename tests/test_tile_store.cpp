@@ -4,7 +4,7 @@
 #include "irradcast/service/send_queue.h"
 #include "irradcast/service/tile_store.h"
 
-using namespace irradcast;
+namespace irradcast::test_tile_store {
 
 namespace {
 
@@ -196,3 +196,5 @@ TEST(TileStore, RejectsARefreshRatioBelowOne) {
   o.refresh_ratio = 0.5f;
   EXPECT_THROW(TileStore({{8, 8}}, o), Error);
 }
+
+}  // namespace irradcast::test_tile_store

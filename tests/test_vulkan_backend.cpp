@@ -19,7 +19,8 @@
 #include "scene_builders.h"
 #include "vulkan_backend.h"
 
-using namespace irradcast;
+namespace irradcast::test_vulkan_backend {
+
 using test::EngineSetup;
 
 namespace {
@@ -495,3 +496,5 @@ TEST(BackendChoice, BakeFallsBackWithoutADriverAndVulkanFailsClearly) {
 }
 
 }  // namespace
+
+}  // namespace irradcast::test_vulkan_backend

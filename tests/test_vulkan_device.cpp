@@ -7,7 +7,7 @@
 #include "irradcast/common/error.h"
 #include "irradcast/engine/vulkan_device.h"
 
-using namespace irradcast;
+namespace irradcast::test_vulkan_device {
 
 TEST(Vulkan, FindsADeviceWithComputeOnThisMachine) {
   const std::vector<VulkanDeviceInfo> devices = list_vulkan_devices();
@@ -60,3 +60,5 @@ TEST(Vulkan, ListDevicesNamesVulkanAndEmbreeAndSaysWhyVulkanIsMissing) {
   EXPECT_NE(none.output.find("--backend auto: embree (no Vulkan GPU)"), std::string::npos)
       << none.output;
 }
+
+}  // namespace irradcast::test_vulkan_device

@@ -17,7 +17,8 @@
 #include "scene_builders.h"
 #include "vulkan_backend.h"
 
-using namespace irradcast;
+namespace irradcast::test_vulkan_sky {
+
 using test::EngineSetup;
 
 namespace {
@@ -386,3 +387,5 @@ TEST(VulkanCutOut, AMaskPlaneLetsThroughExactlyItsHoles) {
 }
 
 }  // namespace
+
+}  // namespace irradcast::test_vulkan_sky

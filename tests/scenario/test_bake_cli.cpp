@@ -12,6 +12,8 @@
 #include "cli.h"
 #include "irradcast/common/image.h"
 
+namespace irradcast::test_bake_cli {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -192,3 +194,5 @@ TEST(BakeCli, SkyAndSunLightASceneFromTheCommandLine) {
     EXPECT_NE(help.output.find(opt), std::string::npos) << opt;
   fs::remove_all(out);
 }
+
+}  // namespace irradcast::test_bake_cli

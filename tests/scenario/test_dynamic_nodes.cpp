@@ -23,7 +23,8 @@
 #include "scene_builders.h"
 #include "service_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_dynamic_nodes {
+
 using test::cornell_with_prop;
 using test::move;
 namespace fs = std::filesystem;
@@ -318,3 +319,5 @@ TEST(DynamicNodes, ViewersGetTheProbeVolume) {
   std::printf("viewer's volume / path tracer at the centre: %.4f\n", got / expected);
   EXPECT_NEAR(got / expected, 1.0, 0.1);
 }
+
+}  // namespace irradcast::test_dynamic_nodes

@@ -28,7 +28,8 @@
 #include "scene_builders.h"
 #include "service_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_edit_service {
+
 using asio::ip::tcp;
 using namespace std::chrono_literals;
 
@@ -499,3 +500,5 @@ TEST(EditService, FileSkyEditsAreRefusedWithoutASkyFolder) {
   // A colour needs no file: accepted.
   EXPECT_EQ(host.submit_edit(parse_edit_json(R"({"op": "sky", "color": [1, 1, 1]})")), 1u);
 }
+
+}  // namespace irradcast::test_edit_service

@@ -22,7 +22,8 @@
 #include "process.h"
 #include "service_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_failover {
+
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
@@ -327,3 +328,5 @@ TEST(Failover, EditorMovesToTheNextServerBetweenEdits) {
   EXPECT_NE(edit.output().find("trying the next server"), std::string::npos) << edit.output();
   fs::remove(script);
 }
+
+}  // namespace irradcast::test_failover

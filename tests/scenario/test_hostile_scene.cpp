@@ -35,7 +35,8 @@
 #include "irradcast/service/engine_host.h"
 #include "scene_builders.h"
 
-using namespace irradcast;
+namespace irradcast::test_hostile_scene {
+
 using nlohmann::json;
 namespace fs = std::filesystem;
 
@@ -541,3 +542,5 @@ TEST_F(HostileScene, EditParentScaleTimesChildScaleMustStayFinite) {
 }
 
 }  // namespace
+
+}  // namespace irradcast::test_hostile_scene

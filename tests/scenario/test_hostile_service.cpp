@@ -31,7 +31,8 @@
 #include "irradcast/wire/transport.h"
 #include "service_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_hostile_service {
+
 using asio::ip::tcp;
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
@@ -482,3 +483,5 @@ TEST(HostileService, TlsOnTheProtocolPort) {
   server.stop();
   EXPECT_GE(closed(server, CloseReason::Tls), 1u);
 }
+
+}  // namespace irradcast::test_hostile_service

@@ -20,7 +20,8 @@
 #include "irradcast/service/net_server.h"
 #include "service_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_load {
+
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 
@@ -262,3 +263,5 @@ TEST(CameraPath, OrbitAndRandomWalkStayInsideTheBoundsAndDifferPerUser) {
   // An orbit comes back to where it started after its period.
   EXPECT_NEAR(glm::length(o1.at(0.0).eye - o1.at(10.0).eye), 0.0f, 1e-4f);
 }
+
+}  // namespace irradcast::test_load

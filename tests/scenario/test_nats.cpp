@@ -27,7 +27,8 @@
 #include "irradcast_nats.pb.h"
 #include "nats_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_nats {
+
 using namespace std::chrono_literals;
 
 namespace {
@@ -625,3 +626,5 @@ TEST(NatsPrograms, TheGatewayProgramServesWhatTheOriginProgramComputes) {
             std::string::npos)
       << bad.output;
 }
+
+}  // namespace irradcast::test_nats

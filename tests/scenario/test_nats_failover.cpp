@@ -16,7 +16,8 @@
 #include "irradcast/common/scene_edit.h"
 #include "nats_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_nats_failover {
+
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
@@ -87,3 +88,5 @@ TEST(NatsFailover, KillingAGatewayMovesAFailoverViewerToTheOtherWhichConverges) 
   v.close();
   direct.close();
 }
+
+}  // namespace irradcast::test_nats_failover

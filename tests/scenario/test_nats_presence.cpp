@@ -19,7 +19,8 @@
 #include "irradcast_nats.pb.h"
 #include "nats_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_nats_presence {
+
 using namespace std::chrono_literals;
 
 namespace {
@@ -218,3 +219,5 @@ TEST(NatsPresence, ForgedAvatarsAreLeftOutOrRefused) {
   jsCtx_Destroy(js);
   natsConnection_Destroy(nc);
 }
+
+}  // namespace irradcast::test_nats_presence

@@ -23,7 +23,7 @@
 #include "irradcast_nats.pb.h"
 #include "nats_fixture.h"
 
-namespace irradcast {
+namespace irradcast::test_nats_security {
 namespace {
 
 namespace fs = std::filesystem;
@@ -286,9 +286,9 @@ TEST(NatsSecurity, TlsIsNeverDowngraded) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_nats_security
 
-namespace irradcast {
+namespace irradcast::test_nats_security {
 namespace {
 
 // What NATS's permissions cannot stop on an open NATS (or with a stolen credential) is bounded
@@ -397,4 +397,4 @@ TEST(NatsHardening, AnOriginHoldsTheCamerasOfAtMostMaxGatewaysGateways) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_nats_security

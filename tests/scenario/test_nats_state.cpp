@@ -11,7 +11,7 @@
 #include "irradcast/common/scene_edit.h"
 #include "nats_fixture.h"
 
-namespace irradcast {
+namespace irradcast::test_nats_state {
 namespace {
 
 namespace fs = std::filesystem;
@@ -96,4 +96,4 @@ TEST(NatsState, ARestartedOriginKeepsItsEditsAndNoOriginRollsTheStreamBack) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_nats_state

@@ -25,7 +25,8 @@
 #include "session_driver.h"
 #include "session_protocol.h"
 
-using namespace irradcast;
+namespace irradcast::test_poses {
+
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 
@@ -429,3 +430,5 @@ TEST(Poses, IrradcastEditStreamsLinesToTheViewers) {
   host.stop();
   fs::remove_all(dir);
 }
+
+}  // namespace irradcast::test_poses

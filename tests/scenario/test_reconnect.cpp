@@ -26,7 +26,8 @@
 #include "process.h"
 #include "service_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_reconnect {
+
 using asio::ip::tcp;
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
@@ -455,3 +456,5 @@ TEST(Reconnect, LoadUsersReconnectAfterTheServerIsKilledAndRestarted) {
   server->wait_for(10s);
   fs::remove(json);
 }
+
+}  // namespace irradcast::test_reconnect

@@ -18,7 +18,7 @@
 #include "irradcast/service/net_server.h"
 #include "service_fixture.h"
 
-namespace irradcast {
+namespace irradcast::test_scene_export {
 namespace {
 
 namespace fs = std::filesystem;
@@ -167,4 +167,4 @@ TEST(SceneExport, ABakeOfTheExportRendersWhatTheViewersSee) {
 }
 
 }  // namespace
-}  // namespace irradcast
+}  // namespace irradcast::test_scene_export

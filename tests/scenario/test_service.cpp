@@ -20,7 +20,8 @@
 #include "irradcast/wire/frame.h"
 #include "service_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_service {
+
 using asio::ip::tcp;
 using namespace std::chrono_literals;
 
@@ -294,3 +295,5 @@ TEST(Service, ViewerResumesAfterAServerRestartWithoutGettingTilesAgain) {
   host->stop();
   std::filesystem::remove_all(cache);
 }
+
+}  // namespace irradcast::test_service

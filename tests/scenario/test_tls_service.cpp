@@ -25,7 +25,8 @@
 #include "process.h"
 #include "service_fixture.h"
 
-using namespace irradcast;
+namespace irradcast::test_tls_service {
+
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 
@@ -265,3 +266,5 @@ TEST(Tls, SighupReloadsTheCertificateOfARunningServer) {
   server.signal(SIGINT);
   EXPECT_TRUE(server.wait_for(10s));
 }
+
+}  // namespace irradcast::test_tls_service

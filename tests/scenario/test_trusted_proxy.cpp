@@ -28,7 +28,8 @@
 #include "testdata.h"
 #include "websocket_client.h"
 
-using namespace irradcast;
+namespace irradcast::test_trusted_proxy {
+
 using namespace std::chrono_literals;
 using test::proxy_v2;
 using Raw = test::RawConnection;
@@ -409,3 +410,5 @@ TEST(TrustedProxy, BehindARealHaproxy) {
   server.stop();
   std::filesystem::remove_all(dir);
 }
+
+}  // namespace irradcast::test_trusted_proxy

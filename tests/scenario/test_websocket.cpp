@@ -17,7 +17,8 @@
 #include "service_fixture.h"
 #include "websocket_client.h"
 
-using namespace irradcast;
+namespace irradcast::test_websocket {
+
 using namespace std::chrono_literals;
 using test::WsConnection;
 
@@ -449,3 +450,5 @@ TEST(WebSocket, UnfinishedMessagesCountInTheBudgetOfIncompleteFrames) {
     EXPECT_EQ(server.stats().partial_bytes, 0u);
   }
 }
+
+}  // namespace irradcast::test_websocket
