@@ -3,12 +3,11 @@
 #include <cmath>
 
 #include "irradcast/common/error.h"
+#include "irradcast/common/sampling.h"
 
 namespace irradcast {
 
 namespace {
-
-constexpr float kPi = 3.14159265358979f;
 
 void check_counts(const char* what, const std::string& name, float radius, int rings,
                   int segments) {

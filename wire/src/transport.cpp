@@ -25,9 +25,9 @@ std::string openssl_reason(const std::error_code& ec) {
 }
 
 void require_readable(const std::string& file, const char* what) {
-  if (file.empty()) throw Error(std::string(what) + ": no file given");
+  if (file.empty()) throw irradcast::Error(std::string(what) + ": no file given");
   std::ifstream f(file);
-  if (!f) throw Error(std::string(what) + ": cannot read '" + file + "'");
+  if (!f) throw irradcast::Error(std::string(what) + ": cannot read '" + file + "'");
 }
 
 // "2026-12-04 15:10:00 UTC" for an ASN.1 time.
@@ -59,21 +59,21 @@ std::shared_ptr<asio::ssl::context> make_server_tls(const std::string& cert_file
   std::error_code ec;
   ctx->use_certificate_chain_file(cert_file, ec);
   if (ec)
-    throw Error("--tls-cert: '" + cert_file + "' is not a PEM certificate chain (" +
+    throw irradcast::Error("--tls-cert: '" + cert_file + "' is not a PEM certificate chain (" +
                 openssl_reason(ec) + ")");
   ctx->use_private_key_file(key_file, asio::ssl::context::pem, ec);
   if (ec)
-    throw Error("--tls-key: '" + key_file + "' is not a PEM private key (" + openssl_reason(ec) +
+    throw irradcast::Error("--tls-key: '" + key_file + "' is not a PEM private key (" + openssl_reason(ec) +
                 ")");
   if (SSL_CTX_check_private_key(ctx->native_handle()) != 1)
-    throw Error("--tls-key: '" + key_file + "' does not match the certificate in '" + cert_file +
+    throw irradcast::Error("--tls-key: '" + key_file + "' does not match the certificate in '" + cert_file +
                 "'");
   const X509* x = SSL_CTX_get0_certificate(ctx->native_handle());
   if (x && seconds_to(X509_get0_notAfter(x)) <= 0.0)
-    throw Error("--tls-cert: the certificate in '" + cert_file + "' expired on " +
+    throw irradcast::Error("--tls-cert: the certificate in '" + cert_file + "' expired on " +
                 utc_text(X509_get0_notAfter(x)) + ": renew it");
   if (x && seconds_to(X509_get0_notBefore(x)) > 0.0)
-    throw Error("--tls-cert: the certificate in '" + cert_file + "' is not valid before " +
+    throw irradcast::Error("--tls-cert: the certificate in '" + cert_file + "' is not valid before " +
                 utc_text(X509_get0_notBefore(x)) + " (is this machine's clock right?)");
   return ctx;
 }
@@ -103,7 +103,7 @@ bool ServerTls::reload() {
   std::shared_ptr<asio::ssl::context> next;
   try {
     next = make_server_tls(cert_file_, key_file_);
-  } catch (const Error& e) {
+  } catch (const irradcast::Error& e) {
     log::error(component_,
                std::string("TLS reload refused, keeping the current certificate: ") + e.what());
     return false;
@@ -135,12 +135,12 @@ std::shared_ptr<asio::ssl::context> make_client_tls(const std::string& ca_file) 
   std::error_code ec;
   if (ca_file.empty()) {
     ctx->set_default_verify_paths(ec);
-    if (ec) throw Error("TLS: cannot load the system's trusted CAs (" + openssl_reason(ec) + ")");
+    if (ec) throw irradcast::Error("TLS: cannot load the system's trusted CAs (" + openssl_reason(ec) + ")");
   } else {
     require_readable(ca_file, "--tls-ca");
     ctx->load_verify_file(ca_file, ec);
     if (ec)
-      throw Error("--tls-ca: '" + ca_file + "' is not a PEM certificate (" + openssl_reason(ec) +
+      throw irradcast::Error("--tls-ca: '" + ca_file + "' is not a PEM certificate (" + openssl_reason(ec) +
                   ")");
   }
   ctx->set_verify_mode(asio::ssl::verify_peer);
