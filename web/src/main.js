@@ -93,11 +93,13 @@ function handlers(ctx) {
         .filter((_, i) => model.nodes[i].mesh >= 0 || model.nodes[i].light >= 0));
       state.dirty = true;
     },
-    // A new connection: the server learns the camera again, and a stats request of the last one
-    // has no reply coming.
+    // A new connection: the server learns the camera again, a stats request of the last one has
+    // no reply coming, and the last one's stats say nothing of this one (convergence waits for
+    // this one's).
     subscribed() {
       if (state.camera) state.camera.changed = true;
       state.statsAsked = 0;
+      state.stats = null;
     },
     tile(lightmap, x0, y0, w, h, words) {
       state.view.applyTile(lightmap, x0, y0, w, h, words);
