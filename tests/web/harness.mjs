@@ -118,8 +118,8 @@ export async function browser(o) {
 }
 
 // What a page that did not converge was waiting for (main.js frame()'s conditions), for the
-// failure's message.
-function pageState() {
+// failure's message (page.evaluate(pageState)).
+export function pageState() {
   const irr = window.irradcast;
   if (!irr) return `no viewer: ${document.body.innerText}`;
   const { conn, state } = irr;

@@ -18,7 +18,7 @@ import { writeFileSync } from 'node:fs';
 import { spawn } from 'node:child_process';
 import { readPng, blockDifference, meanLevel } from './png.mjs';
 import { options, startServer, viewPng, browser, openConverged, query, run, Envelope, ErrorCode, tmpDir, path,
-  chromiumArgs } from './harness.mjs';
+  chromiumArgs, pageState } from './harness.mjs';
 
 // Bounds on the differences of 16 x 16 block means, 8-bit units. Rasterised and ray-traced primary
 // hits differ at edges: a silhouette that runs along a row of pixel centres is in one image and
@@ -247,8 +247,7 @@ async function restart(o) {
     const asked = await page.evaluate(() => window.irradcast.conn.counters.stats);
     // Twice a second: 3 replies take 1.5 s; 60 s is for the sanitizer build beside a compile.
     await page.waitForFunction((n) => window.irradcast.conn.counters.stats >= n + 3, { timeout: 60000, polling: 100 }, asked)
-      .catch(async (e) => { throw new Error(`no stats after the reconnection: ${e.message}; page: ${await page.evaluate(() =>
-        JSON.stringify({ counters: window.irradcast.conn.counters, statsAsked: window.irradcast.state.statsAsked }))}`); });
+      .catch(async (e) => { throw new Error(`no stats after the reconnection: ${e.message}; page: ${await page.evaluate(pageState)}`); });
     await page.waitForFunction(() => document.title === 'irradcast: converged', { timeout: 60000, polling: 100 });
     const held = await page.evaluate(() => window.irradcast.conn.tilesHeld());
     assert.ok(held.total > 0 && held.held === held.total, 'the page lost tiles in the restart');
